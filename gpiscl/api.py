@@ -1,0 +1,39 @@
+"""The Python API: load a scene, render it, get numpy images."""
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+from .host.device import Device
+from .host.integrator import RenderResult, WavefrontIntegrator
+from .host.scene import Scene, load_scene
+from .host.scene_compile import compile_scene
+
+
+def render_result(scene, spp: int | None = None, seed: int | None = None,
+                  resolution=None, device: Device | str | None = None,
+                  batch_size: int | None = None, time_limit: float | None = None,
+                  progress=None) -> RenderResult:
+    """Render a scene (path, dict or Scene); arguments override its render block."""
+    scene = load_scene(scene)
+    data = copy.deepcopy(scene.data)
+    settings = data["render"]
+    if spp is not None:
+        settings["spp"] = int(spp)
+    if seed is not None:
+        settings["seed"] = int(seed)
+    if resolution is not None:
+        data["camera"]["resolution"] = [int(resolution[0]), int(resolution[1])]
+    if not isinstance(device, Device):
+        device = Device(device)
+    integrator = WavefrontIntegrator(device, compile_scene(data), settings, batch_size)
+    return integrator.render(settings["spp"], time_limit=time_limit, progress=progress)
+
+
+def render(scene, spp: int | None = None, **kwargs) -> np.ndarray:
+    """Render and return the mean image, float32 (H, W, 3)."""
+    return render_result(scene, spp=spp, **kwargs).image.mean
+
+
+__all__ = ["Scene", "load_scene", "render", "render_result"]

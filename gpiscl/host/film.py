@@ -1,0 +1,50 @@
+"""Per-pixel sum, sum of squares and sample count, accumulated in double on the device."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pyopencl as cl
+
+
+@dataclass
+class FilmImage:
+    """Mean radiance and the standard error of that mean, per pixel and channel."""
+
+    mean: np.ndarray       # (H, W, 3) float32
+    stderr: np.ndarray     # (H, W, 3) float32
+    count: np.ndarray      # (H, W) float64
+    sum: np.ndarray        # (H, W, 3) float64
+    sum_sq: np.ndarray     # (H, W, 3) float64
+
+
+class Film:
+    def __init__(self, ctx: cl.Context, queue: cl.CommandQueue, width: int, height: int):
+        self.width, self.height = width, height
+        self.queue = queue
+        n = width * height
+        mf = cl.mem_flags
+        zeros3 = np.zeros(3 * n, np.float64)
+        self.sum = cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=zeros3)
+        self.sum_sq = cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=zeros3)
+        self.count = cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR,
+                               hostbuf=np.zeros(n, np.float64))
+
+    @property
+    def args(self) -> list:
+        return [self.sum, self.sum_sq, self.count]
+
+    def read(self) -> FilmImage:
+        h, w = self.height, self.width
+        s = np.empty((h, w, 3), np.float64)
+        q = np.empty((h, w, 3), np.float64)
+        c = np.empty((h, w), np.float64)
+        cl.enqueue_copy(self.queue, s, self.sum)
+        cl.enqueue_copy(self.queue, q, self.sum_sq)
+        cl.enqueue_copy(self.queue, c, self.count)
+        n = c[..., None]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = np.where(n > 0, s / n, 0.0)
+            var = np.where(n > 1, np.maximum(q - n * mean * mean, 0.0) / (n - 1), 0.0)
+            stderr = np.sqrt(np.where(n > 0, var / n, 0.0))
+        return FilmImage(mean.astype(np.float32), stderr.astype(np.float32), c, s, q)

@@ -1,0 +1,20 @@
+"""The Gaussian-process model: kernels, means, spectral samplers and their device layouts.
+
+numpy implementations here are the references for gp_kernel.h and gp_mean.h and for the
+scene compiler; see kernels.py, means.py and spectral.py for the pinned conventions.
+"""
+from .kernels import (KERNELS, Jet, Kernel, LocallyPeriodic, Periodic, RationalQuadratic,
+                      SquaredExponential, ThinPlate, covariance_matrix)
+from .means import (MEANS, Box, Capsule, Constant, Difference, Intersection, Mean, Plane,
+                    RoundedBox, SmoothDifference, SmoothIntersection, SmoothUnion, Sphere,
+                    Torus, Transform, Union, smooth_max, smooth_min)
+from .spectral import RandomFeatures, periodic_order_weights, sample_frequencies
+
+__all__ = [
+    "KERNELS", "Jet", "Kernel", "LocallyPeriodic", "Periodic", "RationalQuadratic",
+    "SquaredExponential", "ThinPlate", "covariance_matrix",
+    "MEANS", "Box", "Capsule", "Constant", "Difference", "Intersection", "Mean", "Plane",
+    "RoundedBox", "SmoothDifference", "SmoothIntersection", "SmoothUnion", "Sphere", "Torus",
+    "Transform", "Union", "smooth_max", "smooth_min",
+    "RandomFeatures", "periodic_order_weights", "sample_frequencies",
+]

@@ -1,0 +1,167 @@
+"""Device layouts of the GP model and packing of host objects into them.
+
+A kernel packs into one GpKernel. A mean tree packs into a postfix program of MeanNode
+records that gp_mean.h runs with a fixed-size stack:
+  * Transforms are folded into the leaves: each leaf carries its composite world-to-local
+    affine map and distance scale, so the device has no transform nodes. A smooth CSG op
+    under accumulated scale S gets blend width S k (smin is positively homogeneous), which
+    keeps the result identical to the host's node-by-node semantics.
+  * Primitive centres fold into the leaf's translation.
+  * Children are emitted deeper-first (Sethi-Ullman), with a flag when that swaps the
+    operands, so the stack never holds more than log2(leaves) + 1 entries.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..layouts import Struct
+from . import kernels as K
+from . import means as M
+
+GP_KERNEL = Struct("GpKernel", (
+    ("float4", "aniso"),            # xyz: diagonal of A
+    ("int", "kind"),
+    ("float", "sigma2"),
+    ("float", "length_scale"),      # l; of the periodic factor for locally_periodic
+    ("float", "alpha"),             # rational quadratic shape a
+    ("float", "w"),                 # periodic frequency
+    ("float", "se_length_scale"),   # locally periodic envelope
+    ("float", "radius"),            # thin-plate R
+))
+
+# Leaf parameters (local coordinates, centre folded into the map):
+#   constant  p0.x = value
+#   plane     p0.x = offset d, p0.y = scale, p0.z = min value; p1.xyz = unit normal;
+#             value max(scale (n.y - d), min)
+#   sphere    p0.x = radius          box        p1.xyz = half extents
+#   rounded_box p0.x = radius, p1.xyz = half extents
+#   torus     p0.x = major, p0.y = minor
+#   capsule   p0.xyz = a, p0.w = radius, p1.xyz = b
+MEAN_NODE = Struct("MeanNode", (
+    ("float4", "row0"),     # world -> local affine map, w = translation
+    ("float4", "row1"),
+    ("float4", "row2"),
+    ("float4", "p0"),
+    ("float4", "p1"),
+    ("int", "kind"),
+    ("int", "flags"),       # ops: MEAN_FLAG_SWAPPED if the right operand was emitted first
+    ("float", "scale"),     # leaves: distance scale of the composite transform
+    ("float", "k"),         # ops: smooth blend width, 0 = sharp
+))
+
+KERNEL_KINDS = {"squared_exponential": 0, "rational_quadratic": 1, "periodic": 2,
+                "locally_periodic": 3, "thin_plate": 4}
+MEAN_KINDS = {"constant": 0, "plane": 1, "sphere": 2, "box": 3, "rounded_box": 4,
+              "torus": 5, "capsule": 6, "union": 16, "intersection": 17, "difference": 18}
+MEAN_FLAG_SWAPPED = 1
+MEAN_STACK_DEPTH = 8    # GP_MEAN_STACK_DEPTH in gp_mean.h
+STRUCTS = (GP_KERNEL, MEAN_NODE)
+
+_F32_MAX = float(np.finfo(np.float32).max)
+
+
+def c_declarations() -> str:
+    """#defines and struct declarations that gp_kernel.h and gp_mean.h assume."""
+    lines = ["/* Generated from gpiscl/host/gp/device_layout.py: do not edit. */"]
+    lines += [f"#define GP_KERNEL_{k.upper()} {v}" for k, v in KERNEL_KINDS.items()]
+    lines += [f"#define GP_MEAN_{k.upper()} {v}" for k, v in MEAN_KINDS.items()]
+    lines.append(f"#define GP_MEAN_FIRST_OP {MEAN_KINDS['union']}")
+    lines.append(f"#define GP_MEAN_FLAG_SWAPPED {MEAN_FLAG_SWAPPED}")
+    lines.append(f"#define GP_MEAN_STACK_DEPTH {MEAN_STACK_DEPTH}")
+    return "\n".join(lines) + "\n" + "\n".join(s.c_declaration() for s in STRUCTS)
+
+
+def pack_kernel(kernel: K.Kernel) -> np.ndarray:
+    out = GP_KERNEL.zeros(1)
+    out["aniso"] = (*np.asarray(kernel.aniso, dtype=np.float64), 0.0)
+    out["kind"] = KERNEL_KINDS[kernel.kind]
+    out["sigma2"] = float(kernel.sigma) ** 2
+    for name in ("length_scale", "alpha", "w", "se_length_scale", "radius"):
+        if hasattr(kernel, name):
+            out[name] = getattr(kernel, name)
+    return out
+
+
+# --- means -----------------------------------------------------------------------------
+
+_OPS = {M.Union: "union", M.Intersection: "intersection", M.Difference: "difference"}
+
+
+def _stack_need(node) -> int:
+    if isinstance(node, M.Transform):
+        return _stack_need(node.child)
+    if type(node) in _OPS:
+        a, b = _stack_need(node.left), _stack_need(node.right)
+        return max(a, b) if a != b else a + 1
+    return 1
+
+
+def _compose(outer: np.ndarray, inner: np.ndarray) -> np.ndarray:
+    """The map y -> inner(outer(y)) of two 3x4 affine maps."""
+    return np.concatenate([inner[:, :3] @ outer[:, :3],
+                           (inner[:, :3] @ outer[:, 3] + inner[:, 3])[:, None]], axis=1)
+
+
+def _translate(m: np.ndarray, center) -> np.ndarray:
+    return _compose(m, np.concatenate([np.eye(3), -np.asarray(center, float)[:, None]], 1))
+
+
+def _leaf(node, m, scale):
+    rec = MEAN_NODE.zeros(1)
+    p0, p1 = np.zeros(4), np.zeros(4)
+    if isinstance(node, M.Constant):
+        kind, p0[0] = "constant", node.offset
+    elif isinstance(node, M.Plane):
+        n = np.asarray(node.normal, float) / np.linalg.norm(node.normal)
+        kind = "plane"
+        p0[:3] = (np.dot(n, node.point), node.scale, max(node.min_value, -_F32_MAX))
+        p1[:3] = n
+    elif isinstance(node, M.Sphere):
+        kind, m, p0[0] = "sphere", _translate(m, node.center), node.radius
+    elif isinstance(node, M.RoundedBox):
+        kind, m = "rounded_box", _translate(m, node.center)
+        p0[0], p1[:3] = node.radius, node.half_extents
+    elif isinstance(node, M.Box):
+        kind, m, p1[:3] = "box", _translate(m, node.center), node.half_extents
+    elif isinstance(node, M.Torus):
+        kind, m = "torus", _translate(m, node.center)
+        p0[:2] = node.major, node.minor
+    elif isinstance(node, M.Capsule):
+        kind = "capsule"
+        p0[:3], p0[3], p1[:3] = node.a, node.radius, node.b
+    else:
+        raise TypeError(f"no device form for mean {type(node).__name__}")
+    rec["kind"] = MEAN_KINDS[kind]
+    rec["row0"], rec["row1"], rec["row2"] = m
+    rec["p0"], rec["p1"], rec["scale"] = p0, p1, scale
+    return rec
+
+
+def _emit(node, m, scale, out):
+    if isinstance(node, M.Transform):
+        _emit(node.child, _compose(m, node.world_to_object), scale * node.distance_scale, out)
+        return
+    if type(node) in _OPS:
+        swapped = _stack_need(node.right) > _stack_need(node.left)
+        first, second = (node.right, node.left) if swapped else (node.left, node.right)
+        _emit(first, m, scale, out)
+        _emit(second, m, scale, out)
+        rec = MEAN_NODE.zeros(1)
+        rec["kind"] = MEAN_KINDS[_OPS[type(node)]]
+        rec["flags"] = MEAN_FLAG_SWAPPED if swapped else 0
+        rec["k"] = max(node.k, 0.0) * scale
+        out.append(rec)
+        return
+    out.append(_leaf(node, m, scale))
+
+
+def pack_mean(mean: M.Mean) -> np.ndarray:
+    """The postfix MeanNode program of a mean tree (raises if it needs too deep a stack)."""
+    need = _stack_need(mean)
+    if need > MEAN_STACK_DEPTH:
+        raise ValueError(f"mean CSG tree needs a stack of {need} entries; the device "
+                         f"evaluator holds {MEAN_STACK_DEPTH} (about 2^{MEAN_STACK_DEPTH - 1}"
+                         " leaves in a balanced tree): rebalance the unions")
+    out = []
+    _emit(mean, np.eye(3, 4), 1.0, out)
+    return np.concatenate(out)

@@ -1,0 +1,261 @@
+"""Stationary covariance kernels on R^3 with closed-form derivative covariances.
+
+Conventions (pinned here, in gp_kernel.h and in the docs):
+  r = b - a for k(a, b);  A = diag(aniso);  s = r^T A r.
+  squared_exponential  k = sigma^2 exp(-s / (2 l^2))   (Rasmussen & Williams, the authors'
+                       code; the supplemental's Eq. 16 drops the 2, which is a typo)
+  rational_quadratic   k = sigma^2 (1 + s / (2 a l^2))^(-a)   -> SE as a -> infinity
+  periodic             k = sigma^2 exp(-(2/l^2) sum_i sin^2(pi w sqrt(A_ii) r_i)),
+                       a product of 1-D periodic kernels, one per axis. The supplemental's
+                       exp(-2 sin^2(pi w |r|) / l^2) of the Euclidean distance is not
+                       positive semidefinite in 3-D (200 random points in a cube give an
+                       eigenvalue near -14): it is valid only on collinear points, e.g.
+                       values along one ray, and fails once gradients or other rays are
+                       conditioned on. The product form is PD, has an exact discrete
+                       spectrum (spectral.py), has no sqrt(s) (the reference's NaN at s = 0)
+                       and agrees with the Euclidean form to second order at r = 0, so the
+                       gradient variances are the same: 4 pi^2 w^2 sigma^2 A / l^2.
+  locally_periodic     periodic(l, w) * exp(-s / (2 l_se^2)), one sigma^2.
+  thin_plate           k = sigma^2 (2 rho^3 - 3 R rho^2 + R^3), rho = sqrt(s) <= R, and 0
+                       beyond R. (R - rho)^2 (2 rho + R) has a double root at R, so the zero
+                       extension is C^1; second derivatives jump there. Not PD in 3-D in
+                       general: 300 points filling a ball of diameter R (in the metric of
+                       A) gave negative eigenvalues; balls of diameter <= 0.8 R passed.
+                       Keep R at least twice the domain diameter. At rho = 0 the
+                       derivative covariances use their exact limits (no sqrt(0) NaN).
+
+Every kernel returns the local jet of k as a function of r:
+  k(r),  grad k(r) = G,  Hess k(r) = alpha g g^T + diag(D)
+from which all covariances of values and directional derivatives follow:
+  cov(f(a), f(b)) = k                  cov(d_u f(a), f(b)) = -u.G
+  cov(f(a), d_v f(b)) = v.G            cov(d_u f(a), d_v f(b)) = -(alpha (u.g)(v.g) + u.D.v)
+For kernels of s alone, G = 2 k'(s) A r, g = A r, alpha = 4 k''(s), D = 2 k'(s) diag(A).
+For the product kernels, k = sigma^2 exp(-h(r)) with a separable h, so
+G = -k grad h, g = grad h, alpha = k, D = -k diag(Hess h).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+
+class Jet(NamedTuple):
+    k: np.ndarray       # (...)
+    G: np.ndarray       # (..., 3) gradient of k with respect to r
+    alpha: np.ndarray   # (...)    Hess k = alpha g g^T + diag(D)
+    g: np.ndarray       # (..., 3)
+    D: np.ndarray       # (..., 3)
+
+
+def _vec(x) -> np.ndarray:
+    return np.asarray(x, dtype=np.float64)
+
+
+class Kernel:
+    """Shared covariance logic; subclasses provide jet(r) and value(r)."""
+
+    kind = ""
+    _positive = ("sigma", "length_scale", "alpha", "w", "se_length_scale", "radius")
+
+    def __post_init__(self):
+        for name in self._positive:
+            if hasattr(self, name) and not float(getattr(self, name)) > 0.0:
+                raise ValueError(f"{self.kind}: {name} must be positive, got "
+                                 f"{getattr(self, name)}")
+        aniso = np.asarray(self.aniso, dtype=np.float64)
+        if aniso.shape != (3,) or not np.all(aniso > 0.0):
+            raise ValueError(f"{self.kind}: aniso must be three positive numbers, got "
+                             f"{self.aniso}")
+
+    @property
+    def variance(self) -> float:
+        """k(0), the marginal variance (sigma^2 R^3 for thin-plate)."""
+        return float(self.value(np.zeros(3)))
+
+    @property
+    def _a(self) -> np.ndarray:
+        return _vec(self.aniso)
+
+    def jet(self, r) -> Jet:
+        raise NotImplementedError
+
+    def value(self, r) -> np.ndarray:
+        return self.jet(r).k
+
+    def cov(self, a, b):
+        """cov(f(a), f(b))."""
+        return self.value(_vec(b) - _vec(a))
+
+    def cov_dv(self, a, u, b):
+        """cov(d_u f(a), f(b))."""
+        j = self.jet(_vec(b) - _vec(a))
+        return -np.sum(_vec(u) * j.G, axis=-1)
+
+    def cov_vd(self, a, b, v):
+        """cov(f(a), d_v f(b))."""
+        j = self.jet(_vec(b) - _vec(a))
+        return np.sum(_vec(v) * j.G, axis=-1)
+
+    def cov_dd(self, a, u, b, v):
+        """cov(d_u f(a), d_v f(b))."""
+        j = self.jet(_vec(b) - _vec(a))
+        u, v = _vec(u), _vec(v)
+        return -(j.alpha * np.sum(u * j.g, -1) * np.sum(v * j.g, -1)
+                 + np.sum(u * j.D * v, -1))
+
+    def gradient_variance(self) -> np.ndarray:
+        """Var(d_i f) per axis: the diagonal of -Hess k(0)."""
+        return -self.jet(np.zeros(3)).D
+
+
+class _RadialKernel(Kernel):
+    """Kernels of s = r^T A r alone: subclasses give (k, 2 k'(s), 4 k''(s))."""
+
+    def _radial(self, s):
+        raise NotImplementedError
+
+    def value(self, r):
+        r = _vec(r)
+        return self._radial(np.sum(self._a * r * r, axis=-1))[0]
+
+    def jet(self, r):
+        r = _vec(r)
+        a = self._a
+        ar = a * r
+        k, dk2, ddk4 = self._radial(np.sum(ar * r, axis=-1))
+        return Jet(k, dk2[..., None] * ar, ddk4, ar, dk2[..., None] * a)
+
+
+class _LogSeparableKernel(Kernel):
+    """k = sigma^2 exp(-h(r)), h a sum of per-axis terms: subclasses give h, grad h, diag Hess h."""
+
+    def _h(self, r):
+        raise NotImplementedError
+
+    def jet(self, r):
+        h, dh, hh = self._h(_vec(r))
+        k = float(self.sigma) ** 2 * np.exp(-h)
+        return Jet(k, -k[..., None] * dh, k, dh, -k[..., None] * hh)
+
+    def _periodic_h(self, r, length_scale, w):
+        c = np.pi * w * np.sqrt(self._a)
+        cr = c * r
+        # sin^2 rather than (1 - cos)/2: no cancellation at small lags
+        h = (2.0 / length_scale**2) * np.sum(np.sin(cr) ** 2, axis=-1)
+        dh = (2.0 / length_scale**2) * c * np.sin(2.0 * cr)
+        hh = (4.0 / length_scale**2) * c * c * np.cos(2.0 * cr)
+        return h, dh, hh
+
+
+@dataclass(frozen=True)
+class SquaredExponential(_RadialKernel):
+    sigma: float = 1.0
+    length_scale: float = 1.0
+    aniso: tuple = (1.0, 1.0, 1.0)
+    kind = "squared_exponential"
+
+    def _radial(self, s):
+        l2 = self.length_scale**2
+        k = float(self.sigma) ** 2 * np.exp(-s / (2.0 * l2))
+        return k, -k / l2, k / (l2 * l2)
+
+
+@dataclass(frozen=True)
+class RationalQuadratic(_RadialKernel):
+    sigma: float = 1.0
+    length_scale: float = 1.0
+    alpha: float = 1.0
+    aniso: tuple = (1.0, 1.0, 1.0)
+    kind = "rational_quadratic"
+
+    def _radial(self, s):
+        l2, al = self.length_scale**2, self.alpha
+        x = s / (2.0 * al * l2)
+        # log1p keeps the a -> infinity limit (SE) accurate
+        k = float(self.sigma) ** 2 * np.exp(-al * np.log1p(x))
+        base = 1.0 + x
+        return k, -k / (l2 * base), k * (al + 1.0) / (al * l2 * l2 * base * base)
+
+
+@dataclass(frozen=True)
+class ThinPlate(_RadialKernel):
+    sigma: float = 1.0
+    radius: float = 1.0
+    aniso: tuple = (1.0, 1.0, 1.0)
+    kind = "thin_plate"
+
+    def _radial(self, s):
+        R, v = self.radius, float(self.sigma) ** 2
+        rho = np.sqrt(s)
+        inside = rho < R
+        # factored form of 2 rho^3 - 3 R rho^2 + R^3: no cancellation near rho = R
+        k = np.where(inside, v * (R - rho) ** 2 * (2.0 * rho + R), 0.0)
+        dk2 = np.where(inside, 6.0 * v * (rho - R), 0.0)
+        # 4 k'' = 6 sigma^2 / rho multiplies (u.Ar)(v.Ar) = O(rho^2): the exact limit at
+        # rho = 0 is 0, where the reference's sqrt(s) gave NaN
+        safe = np.where(rho > 0.0, rho, 1.0)
+        ddk4 = np.where(inside & (rho > 0.0), 6.0 * v / safe, 0.0)
+        return k, dk2, ddk4
+
+
+@dataclass(frozen=True)
+class Periodic(_LogSeparableKernel):
+    sigma: float = 1.0
+    length_scale: float = 1.0
+    w: float = 2.0 * np.pi      # frequency: period 1 / (w sqrt(A_ii)) along axis i
+    aniso: tuple = (1.0, 1.0, 1.0)
+    kind = "periodic"
+
+    def _h(self, r):
+        return self._periodic_h(r, self.length_scale, self.w)
+
+
+@dataclass(frozen=True)
+class LocallyPeriodic(_LogSeparableKernel):
+    sigma: float = 1.0
+    length_scale: float = 1.0       # of the periodic factor
+    w: float = 2.0 * np.pi
+    se_length_scale: float = 1.0    # of the squared-exponential envelope
+    aniso: tuple = (1.0, 1.0, 1.0)
+    kind = "locally_periodic"
+
+    def _h(self, r):
+        h, dh, hh = self._periodic_h(r, self.length_scale, self.w)
+        a, L2 = self._a, self.se_length_scale**2
+        ar = a * r
+        return h + np.sum(ar * r, -1) / (2.0 * L2), dh + ar / L2, hh + a / L2
+
+
+KERNELS = {cls.kind: cls for cls in
+           (SquaredExponential, RationalQuadratic, Periodic, LocallyPeriodic, ThinPlate)}
+
+
+def covariance_matrix(kernel: Kernel, x1, x2=None, u1=None, u2=None):
+    """Joint covariance of observations at points x (n, 3).
+
+    u (n, 3) holds a direction per observation for directional derivatives; a row of
+    NaN, or u = None, marks a value observation.
+    """
+    x1 = _vec(x1)
+    x2 = x1 if x2 is None else _vec(x2)
+    if x2 is x1 and u2 is None:
+        u2 = u1
+    def split(x, u):
+        if u is None:
+            return np.zeros_like(x), np.zeros(len(x), bool)
+        u = _vec(u)
+        d = ~np.any(np.isnan(u), axis=-1)
+        return np.where(d[:, None], u, 0.0), d
+    u1, d1 = split(x1, u1)
+    u2, d2 = split(x2, u2)
+    j = kernel.jet(x2[None, :, :] - x1[:, None, :])
+    ug1 = np.einsum("ik,ijk->ij", u1, j.g)
+    ug2 = np.einsum("jk,ijk->ij", u2, j.g)
+    vv = j.k
+    dv = -np.einsum("ik,ijk->ij", u1, j.G)
+    vd = np.einsum("jk,ijk->ij", u2, j.G)
+    dd = -(j.alpha * ug1 * ug2 + np.einsum("ik,ijk,jk->ij", u1, j.D, u2))
+    D1, D2 = d1[:, None], d2[None, :]
+    return np.where(D1, np.where(D2, dd, dv), np.where(D2, vd, vv))

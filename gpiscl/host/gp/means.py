@@ -1,0 +1,256 @@
+"""Mean functions: signed distances, positive outside, each with an analytic gradient.
+
+All evaluate vectorised over points x of shape (..., 3) and return (value (...),
+gradient (..., 3)). Primitives follow iq's distance functions. Where a distance is not
+differentiable (a sphere's centre, a capsule's axis, a torus's core circle or axis) the
+gradient is 0, a valid subgradient; the mean never supplies normals there in practice.
+
+Smooth CSG uses iq's polynomial smooth minimum with blend width k (k <= 0: sharp):
+  h = clamp(1/2 + (b - a) / (2k), 0, 1),  smin = h a + (1 - h) b - k h (1 - h)
+d smin / dh vanishes wherever h is not clamped, so grad smin = h grad a + (1 - h) grad b
+exactly. smax(a, b) = -smin(-a, -b); difference(a, b) = smax(a, -b).
+Smooth results are distance bounds, not exact distances (as in iq's formulas).
+
+Transform(child, object_to_world) evaluates s * child(T^-1 x). For a rigid or uniformly
+scaled T this is the exact world distance. For a general affine T the distance is not
+preserved; s = smallest singular value of T's linear part makes the result a lower bound
+(|grad| <= 1, safe for sphere tracing, same zero set and sign), and the true distance lies
+between it and sigma_max / sigma_min times it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+def _vec(x) -> np.ndarray:
+    return np.asarray(x, dtype=np.float64)
+
+
+def _norm_and_dir(v):
+    n = np.linalg.norm(v, axis=-1)
+    safe = np.where(n > 0.0, n, 1.0)
+    return n, np.where((n > 0.0)[..., None], v / safe[..., None], 0.0)
+
+
+class Mean:
+    def value_and_gradient(self, x):
+        raise NotImplementedError
+
+    def value(self, x):
+        return self.value_and_gradient(x)[0]
+
+    def gradient(self, x):
+        return self.value_and_gradient(x)[1]
+
+
+@dataclass(frozen=True)
+class Constant(Mean):
+    offset: float = 0.0
+
+    def value_and_gradient(self, x):
+        x = _vec(x)
+        return np.full(x.shape[:-1], float(self.offset)), np.zeros_like(x)
+
+
+@dataclass(frozen=True)
+class Plane(Mean):
+    """max(scale * n . (x - point), min_value); n is normalised (the reference's 'linear')."""
+    point: tuple = (0.0, 0.0, 0.0)
+    normal: tuple = (1.0, 0.0, 0.0)
+    scale: float = 1.0
+    min_value: float = -np.inf
+
+    def __post_init__(self):
+        if not np.linalg.norm(self.normal) > 0.0:
+            raise ValueError("plane: the normal must be a non-zero vector")
+
+    def value_and_gradient(self, x):
+        x = _vec(x)
+        n = _vec(self.normal) / np.linalg.norm(self.normal)
+        v = self.scale * np.sum(n * (x - _vec(self.point)), axis=-1)
+        clamped = v < self.min_value
+        g = np.where(clamped[..., None], 0.0, self.scale * n * np.ones_like(x))
+        return np.maximum(v, self.min_value), g
+
+
+@dataclass(frozen=True)
+class Sphere(Mean):
+    center: tuple = (0.0, 0.0, 0.0)
+    radius: float = 1.0
+
+    def value_and_gradient(self, x):
+        n, d = _norm_and_dir(_vec(x) - _vec(self.center))
+        return n - self.radius, d
+
+
+def _box(p, half):
+    """iq's sdBox with its gradient, box centred at the origin."""
+    q = np.abs(p) - half
+    outside = np.maximum(q, 0.0)
+    out_len, out_dir = _norm_and_dir(outside)
+    qmax = np.max(q, axis=-1)
+    # numpy's argmax takes the first maximum: gp_mean.h breaks ties in the same order
+    axis = np.argmax(q, axis=-1)
+    inside_dir = np.eye(3)[axis]
+    sign = np.copysign(1.0, p)
+    is_out = (qmax > 0.0)[..., None]
+    return out_len + np.minimum(qmax, 0.0), sign * np.where(is_out, out_dir, inside_dir)
+
+
+@dataclass(frozen=True)
+class Box(Mean):
+    half_extents: tuple = (1.0, 1.0, 1.0)
+    center: tuple = (0.0, 0.0, 0.0)
+
+    def value_and_gradient(self, x):
+        return _box(_vec(x) - _vec(self.center), _vec(self.half_extents))
+
+
+@dataclass(frozen=True)
+class RoundedBox(Mean):
+    """A box of the given outer half extents with edges rounded by radius."""
+    half_extents: tuple = (1.0, 1.0, 1.0)
+    radius: float = 0.1
+    center: tuple = (0.0, 0.0, 0.0)
+
+    def __post_init__(self):
+        if not 0.0 <= self.radius <= min(self.half_extents):
+            raise ValueError(f"rounded_box: radius {self.radius} must lie in "
+                             f"[0, smallest half extent {min(self.half_extents)}]")
+
+    def value_and_gradient(self, x):
+        v, g = _box(_vec(x) - _vec(self.center), _vec(self.half_extents) - self.radius)
+        return v - self.radius, g
+
+
+@dataclass(frozen=True)
+class Torus(Mean):
+    """Ring of radius `major` in the xz-plane around the y axis, tube radius `minor`."""
+    major: float = 1.0
+    minor: float = 0.25
+    center: tuple = (0.0, 0.0, 0.0)
+
+    def value_and_gradient(self, x):
+        p = _vec(x) - _vec(self.center)
+        rho, radial = _norm_and_dir(p[..., [0, 2]])
+        q = np.stack([rho - self.major, p[..., 1]], axis=-1)
+        qn, qd = _norm_and_dir(q)
+        g = np.stack([qd[..., 0] * radial[..., 0], qd[..., 1], qd[..., 0] * radial[..., 1]], -1)
+        return qn - self.minor, g
+
+
+@dataclass(frozen=True)
+class Capsule(Mean):
+    a: tuple = (0.0, -0.5, 0.0)
+    b: tuple = (0.0, 0.5, 0.0)
+    radius: float = 0.25
+
+    def value_and_gradient(self, x):
+        a, ba = _vec(self.a), _vec(self.b) - _vec(self.a)
+        pa = _vec(x) - a
+        bb = np.dot(ba, ba)     # a == b degenerates to a sphere
+        h = np.clip(np.sum(pa * ba, axis=-1) / (bb if bb > 0 else 1.0), 0.0, 1.0)
+        # the closest-point parameter h is stationary, so it carries no gradient term
+        n, d = _norm_and_dir(pa - h[..., None] * ba)
+        return n - self.radius, d
+
+
+def smooth_min(a, ga, b, gb, k):
+    """Polynomial smooth minimum of two (value, gradient) pairs; k <= 0 is min."""
+    if k <= 0.0:
+        pick = (a <= b)
+        return np.where(pick, a, b), np.where(pick[..., None], ga, gb)
+    h = np.clip(0.5 + 0.5 * (b - a) / k, 0.0, 1.0)
+    return h * a + (1.0 - h) * b - k * h * (1.0 - h), h[..., None] * ga + (1.0 - h[..., None]) * gb
+
+
+def smooth_max(a, ga, b, gb, k):
+    v, g = smooth_min(-a, -ga, -b, -gb, k)
+    return -v, -g
+
+
+@dataclass(frozen=True)
+class Union(Mean):
+    left: Mean
+    right: Mean
+    k: float = 0.0      # blend width; 0 is the sharp min
+
+    def value_and_gradient(self, x):
+        return smooth_min(*self.left.value_and_gradient(x), *self.right.value_and_gradient(x),
+                          self.k)
+
+
+@dataclass(frozen=True)
+class Intersection(Mean):
+    left: Mean
+    right: Mean
+    k: float = 0.0
+
+    def value_and_gradient(self, x):
+        return smooth_max(*self.left.value_and_gradient(x), *self.right.value_and_gradient(x),
+                          self.k)
+
+
+@dataclass(frozen=True)
+class Difference(Mean):
+    """left minus right."""
+    left: Mean
+    right: Mean
+    k: float = 0.0
+
+    def value_and_gradient(self, x):
+        vb, gb = self.right.value_and_gradient(x)
+        return smooth_max(*self.left.value_and_gradient(x), -vb, -gb, self.k)
+
+
+def SmoothUnion(left, right, k):
+    return Union(left, right, k)
+
+
+def SmoothIntersection(left, right, k):
+    return Intersection(left, right, k)
+
+
+def SmoothDifference(left, right, k):
+    return Difference(left, right, k)
+
+
+def _affine(m) -> np.ndarray:
+    m = _vec(m)
+    if m.shape == (4, 4):
+        m = m[:3]
+    if m.shape != (3, 4):
+        raise ValueError(f"an affine transform is a 3x4 or 4x4 matrix, got shape {m.shape}")
+    return m
+
+
+@dataclass(frozen=True, eq=False)
+class Transform(Mean):
+    """child placed by object_to_world (3x4 or 4x4: world = L local + t)."""
+    child: Mean
+    object_to_world: np.ndarray = field(default_factory=lambda: np.eye(3, 4))
+
+    @property
+    def world_to_object(self) -> np.ndarray:
+        m = _affine(self.object_to_world)
+        inv = np.linalg.inv(m[:, :3])
+        return np.concatenate([inv, -(inv @ m[:, 3])[:, None]], axis=1)
+
+    @property
+    def distance_scale(self) -> float:
+        """Smallest singular value of the linear part (1 for rigid transforms)."""
+        return float(np.linalg.svd(_affine(self.object_to_world)[:, :3], compute_uv=False)[-1])
+
+    def value_and_gradient(self, x):
+        w2o, s = self.world_to_object, self.distance_scale
+        y = _vec(x) @ w2o[:, :3].T + w2o[:, 3]
+        v, g = self.child.value_and_gradient(y)
+        return s * v, s * (g @ w2o[:, :3])
+
+
+MEANS = {"constant": Constant, "plane": Plane, "linear": Plane, "sphere": Sphere,
+         "box": Box, "rounded_box": RoundedBox, "torus": Torus, "capsule": Capsule,
+         "union": Union, "intersection": Intersection, "difference": Difference,
+         "transform": Transform}

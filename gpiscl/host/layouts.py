@@ -1,0 +1,204 @@
+"""One definition of every struct and SoA queue shared by host and device.
+
+Each layout yields both a numpy dtype (host) and C text (device), so the two cannot
+drift apart; tests/test_layouts.py checks the offsets on the device itself.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+# C type name -> (numpy base dtype, element count, alignment in bytes)
+_C_TYPES = {
+    "int": (np.int32, 1, 4),
+    "uint": (np.uint32, 1, 4),
+    "float": (np.float32, 1, 4),
+    "double": (np.float64, 1, 8),
+    "float4": (np.float32, 4, 16),
+    "int4": (np.int32, 4, 16),
+    "uint4": (np.uint32, 4, 16),
+}
+
+
+@dataclass(frozen=True)
+class Struct:
+    """A C struct with natural OpenCL alignment; fields are (C type, name) pairs."""
+
+    name: str
+    fields: tuple
+
+    @property
+    def dtype(self) -> np.dtype:
+        names, formats, offsets = [], [], []
+        offset, max_align = 0, 4
+        for ctype, fname in self.fields:
+            base, count, align = _C_TYPES[ctype]
+            offset = -(-offset // align) * align
+            names.append(fname)
+            formats.append((base, (count,)) if count > 1 else base)
+            offsets.append(offset)
+            offset += np.dtype(base).itemsize * count
+            max_align = max(max_align, align)
+        size = -(-offset // max_align) * max_align
+        return np.dtype({"names": names, "formats": formats, "offsets": offsets,
+                         "itemsize": size})
+
+    def c_declaration(self) -> str:
+        body = "\n".join(f"    {ctype} {fname};" for ctype, fname in self.fields)
+        return f"typedef struct {{\n{body}\n}} {self.name};\n"
+
+    def zeros(self, n: int) -> np.ndarray:
+        return np.zeros(n, dtype=self.dtype)
+
+
+@dataclass(frozen=True)
+class Queue:
+    """A structure-of-arrays work queue: one device buffer per field.
+
+    The C side gets a macro listing the kernel parameters in a fixed order, so kernels
+    and the host's argument lists come from this one description.
+    """
+
+    name: str
+    fields: tuple  # (C type, field name)
+
+    def c_declaration(self) -> str:
+        params = ", ".join(f"__global {ctype}* restrict P##_{fname}"
+                           for ctype, fname in self.fields)
+        return f"#define {self.name.upper()}_PARAMS(P) {params}\n"
+
+    def numpy_dtype(self, fname: str) -> np.dtype:
+        ctype = dict((f, c) for c, f in self.fields)[fname]
+        base, count, _ = _C_TYPES[ctype]
+        return np.dtype((base, (count,))) if count > 1 else np.dtype(base)
+
+
+# --- structs --------------------------------------------------------------------------
+
+CAMERA = Struct("Camera", (
+    ("float4", "position"),
+    ("float4", "forward"),    # unit vector towards look_at
+    ("float4", "right"),      # scaled by tan(fov/2) * aspect
+    ("float4", "up"),         # scaled by tan(fov/2)
+    ("int", "width"),
+    ("int", "height"),
+))
+
+# Every surface primitive in one array so one BVH covers them all.
+# sphere: p0 = (center, radius); rectangle: p0 = corner, p1 = edge u, p2 = edge v;
+# disk: p0 = (center, radius), p1 = unit normal; triangle: p0, p1, p2 = vertices.
+PRIMITIVE = Struct("Primitive", (
+    ("float4", "p0"),
+    ("float4", "p1"),
+    ("float4", "p2"),
+    ("int", "kind"),
+    ("int", "material"),
+    ("int", "light"),        # index into the light array if emissive, else -1
+    ("int", "medium"),       # GPIS object enclosed by this proxy, else -1
+))
+
+MATERIAL = Struct("Material", (
+    ("float4", "albedo"),
+    ("int", "kind"),
+))
+
+# Lights: the meaning of the vectors depends on kind (see lights.h).
+LIGHT = Struct("Light", (
+    ("float4", "radiance"),  # radiance, intensity (point) or in-cone radiance (sun)
+    ("float4", "p0"),
+    ("float4", "p1"),
+    ("float4", "p2"),
+    ("int", "kind"),
+    ("int", "primitive"),    # area lights: the primitive that carries the emission
+    ("float", "area"),
+    ("float", "cos_max"),    # sun: cosine of the angular radius
+))
+
+BVH_NODE = Struct("BvhNode", (
+    ("float4", "lo"),
+    ("float4", "hi"),
+    ("int", "left_or_first"),  # inner: index of left child (right = left + 1); leaf: first prim
+    ("int", "count"),          # 0 for inner nodes
+))
+
+# Per-launch constants of the integrator.
+RENDER_PARAMS = Struct("RenderParams", (
+    ("uint", "seed"),
+    ("int", "max_depth"),
+    ("int", "rr_start_depth"),
+    ("float", "rr_max_survival"),
+    ("int", "num_lights"),
+    ("int", "env_light"),      # index of the environment map light, or -1
+    ("int", "num_pixels"),
+    ("int", "bounce"),         # wavefront iteration: one key of the random numbers
+    ("int", "sample_base"),    # first sample index of this batch's first path
+    ("int", "path_base"),      # first path id of this batch
+    ("int", "num_paths"),      # paths in this batch
+    ("int", "env_width"),
+    ("int", "env_height"),
+    ("int", "nee"),            # 1: next-event estimation with MIS; 0: BSDF sampling only
+))
+
+# --- queues ---------------------------------------------------------------------------
+
+PATH_STATE = Queue("path", (
+    ("int", "pixel"),
+    ("int", "sample"),
+    ("float4", "beta"),       # throughput
+    ("float4", "radiance"),   # radiance gathered so far
+    ("float4", "prev_pos"),   # last scattering vertex, for emitter pdfs (w = bsdf pdf, 0 = delta)
+    ("int", "depth"),         # scattering events so far
+    ("int", "medium"),        # GPIS object the ray travels in, or -1
+))
+
+RAY_QUEUE = Queue("ray", (
+    ("float4", "o"),          # w = tmin
+    ("float4", "d"),          # w = tmax
+    ("int", "path"),
+    ("float", "hit_t"),
+    ("int", "hit_prim"),
+))
+
+INDEX_QUEUE = Queue("index", (
+    ("int", "ray"),
+))
+
+SHADOW_QUEUE = Queue("shadow", (
+    ("float4", "o"),
+    ("float4", "d"),          # w = distance to the light sample
+    ("float4", "contribution"),
+    ("int", "path"),
+))
+
+# --- enumerations shared with the device (emitted as #defines) ----------------------
+
+PRIM_KINDS = {"sphere": 0, "rectangle": 1, "disk": 2, "triangle": 3}
+MATERIAL_KINDS = {"diffuse": 0, "mirror": 1, "null": 2}
+LIGHT_KINDS = {"environment": 0, "environment_map": 1, "point": 2, "sphere": 3,
+               "rectangle": 4, "directional": 5}
+# Device-side counters; the host reads only rays_out between bounces.
+COUNTERS = {"rays_out": 0, "hits": 1, "escaped": 2, "shadow": 3, "nan_paths": 4,
+            "killed": 5}
+NUM_COUNTERS = 8
+
+
+def _defines() -> str:
+    lines = []
+    for prefix, table in (("PRIM", PRIM_KINDS), ("MATERIAL", MATERIAL_KINDS),
+                          ("LIGHT", LIGHT_KINDS), ("COUNT", COUNTERS)):
+        lines += [f"#define {prefix}_{k.upper()} {v}" for k, v in table.items()]
+    lines.append(f"#define NUM_COUNTERS {NUM_COUNTERS}")
+    return "\n".join(lines) + "\n"
+
+
+STRUCTS = (CAMERA, PRIMITIVE, MATERIAL, LIGHT, BVH_NODE, RENDER_PARAMS)
+QUEUES = (PATH_STATE, RAY_QUEUE, INDEX_QUEUE, SHADOW_QUEUE)
+
+
+def c_header() -> str:
+    """The device-side declarations of every shared layout."""
+    parts = ["/* Generated from gpiscl/host/layouts.py: do not edit. */\n", _defines()]
+    parts += [s.c_declaration() for s in STRUCTS]
+    parts += [q.c_declaration() for q in QUEUES]
+    return "\n".join(parts)

@@ -1,0 +1,26 @@
+/* From: the finished paths of a batch.  To: the film. One work-item per pixel adds its
+ * paths in sample order, in double, so the image does not depend on batch size.
+ * Non-finite path radiance is counted (COUNT_NAN_PATHS) and recorded as zero. */
+__kernel void accumulate(__constant RenderParams* params, PATH_PARAMS(path),
+                         __global int* counters, __global double* film_sum,
+                         __global double* film_sum_sq, __global double* film_count)
+{
+    int pixel = get_global_id(0);
+    if (pixel >= params->num_pixels) return;
+    /* paths of this pixel in the batch: ids path_base + i with id % num_pixels == pixel */
+    int first = pixel - params->path_base % params->num_pixels;
+    if (first < 0) first += params->num_pixels;
+    for (int i = first; i < params->num_paths; i += params->num_pixels) {
+        float3 L = path_radiance[i].xyz;
+        if (!is_finite3(L)) {
+            atomic_inc(&counters[COUNT_NAN_PATHS]);
+            L = (float3)(0.0f);
+        }
+        double3 Ld = convert_double3(L);
+        double3 s = vload3(pixel, film_sum) + Ld;
+        double3 q = vload3(pixel, film_sum_sq) + Ld * Ld;
+        vstore3(s, pixel, film_sum);
+        vstore3(q, pixel, film_sum_sq);
+        film_count[pixel] += 1.0;
+    }
+}

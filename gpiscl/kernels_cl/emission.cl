@@ -1,0 +1,22 @@
+/* From: hit queue.  To: radiance emitted by area lights that rays hit, weighted by MIS
+ * against light sampling from the previous vertex. */
+__kernel void emission(__constant RenderParams* params, PATH_PARAMS(path), RAY_PARAMS(in),
+                       INDEX_PARAMS(hits), __global int* counters,
+                       __global const Primitive* prims, __global const Light* lights)
+{
+    int i = get_global_id(0);
+    if (i >= counters[COUNT_HITS]) return;
+    int r = hits_ray[i];
+    __global const Primitive* prim = &prims[in_hit_prim[r]];
+    if (prim->light < 0) return;
+    int p = in_path[r];
+    float3 o = in_o[r].xyz, d = in_d[r].xyz;
+    float3 x = o + in_hit_t[r] * d;
+    float4 prev = path_prev_pos[p];
+    float pdf_light;
+    float3 Le = area_light_radiance(&lights[prim->light], prev.xyz, x,
+                                    primitive_normal(prim, x), d, &pdf_light);
+    float w = (prev.w > 0.0f && params->nee)
+                  ? power_heuristic(prev.w, pdf_light / params->num_lights) : 1.0f;
+    path_radiance[p] += (float4)(w * path_beta[p].xyz * Le, 0.0f);
+}

@@ -1,0 +1,26 @@
+/* From: escaped queue.  To: radiance of the lights at infinity added to each path,
+ * weighted by MIS against light sampling. The path ends here. */
+__kernel void escaped_rays(__constant RenderParams* params, PATH_PARAMS(path),
+                           RAY_PARAMS(in), INDEX_PARAMS(escaped), __global int* counters,
+                           __global const Light* lights, __global const float4* env_texels,
+                           __global const float* env_marginal,
+                           __global const float* env_conditional)
+{
+    int i = get_global_id(0);
+    if (i >= counters[COUNT_ESCAPED]) return;
+    int r = escaped_ray[i];
+    int p = in_path[r];
+    EnvMap m = {env_texels, env_marginal, env_conditional, params->env_width,
+                params->env_height};
+    float3 d = in_d[r].xyz;
+    float pdf_bsdf = path_prev_pos[p].w;
+    float3 L = (float3)(0.0f);
+    for (int k = 0; k < params->num_lights; ++k) {
+        float pdf_light;
+        float3 Le = infinite_light_radiance(&lights[k], m, d, &pdf_light);
+        float w = (pdf_bsdf > 0.0f && params->nee)
+                      ? power_heuristic(pdf_bsdf, pdf_light / params->num_lights) : 1.0f;
+        L += w * Le;
+    }
+    path_radiance[p] += (float4)(path_beta[p].xyz * L, 0.0f);
+}

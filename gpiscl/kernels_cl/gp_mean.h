@@ -1,0 +1,143 @@
+/* GP mean functions: signed distances (positive outside) with analytic gradients.
+ * gpiscl/host/gp/means.py is the reference; device_layout.pack_mean flattens a mean tree
+ * into the postfix MeanNode program run here:
+ *   - leaves carry their composite world-to-local map and distance scale (transforms are
+ *     folded in), so value = scale * prim(M x + t), gradient = scale * M^T grad prim;
+ *   - ops pop two (value, gradient) entries and push one; GP_MEAN_STACK_DEPTH entries
+ *     (8) cover any tree of up to 128 leaves, because the host emits the child needing the
+ *     deeper stack first (flag GP_MEAN_FLAG_SWAPPED restores the operand order). The host
+ *     rejects deeper trees; a malformed program here yields NaN, never a stack overrun.
+ * Stack entries are float4: xyz = gradient, w = value, so blending and negation treat
+ * value and gradient alike. Means are evaluated in float: they enter covariance-free
+ * formulas (occupancy, conditioning right-hand sides) where float is ample.
+ */
+#ifndef GP_MEAN_SPACE
+#define GP_MEAN_SPACE __global
+#endif
+
+/* length and direction; direction 0 at the origin (a valid subgradient of |v|) */
+inline float gp_norm_dir3(float3 v, float3* d)
+{
+    float n = length(v);
+    *d = n > 0.0f ? v / n : (float3)(0.0f);
+    return n;
+}
+
+inline float gp_norm_dir2(float2 v, float2* d)
+{
+    float n = length(v);
+    *d = n > 0.0f ? v / n : (float2)(0.0f);
+    return n;
+}
+
+/* iq's sdBox; inside, ties between axes go to the first (x, then y), as on the host */
+inline float gp_sd_box(float3 p, float3 extent, float3* g)
+{
+    float3 q = fabs(p) - extent;
+    float3 dir;
+    float out_len = gp_norm_dir3(fmax(q, (float3)(0.0f)), &dir);
+    float qmax = fmax(q.x, fmax(q.y, q.z));
+    if (!(qmax > 0.0f)) {
+        if (q.x >= q.y && q.x >= q.z) dir = (float3)(1.0f, 0.0f, 0.0f);
+        else if (q.y >= q.z) dir = (float3)(0.0f, 1.0f, 0.0f);
+        else dir = (float3)(0.0f, 0.0f, 1.0f);
+    }
+    *g = copysign((float3)(1.0f), p) * dir;
+    return out_len + fmin(qmax, 0.0f);
+}
+
+inline float gp_mean_leaf(GP_MEAN_SPACE const MeanNode* n, float3 x, float3* grad)
+{
+    float3 r0 = n->row0.xyz, r1 = n->row1.xyz, r2 = n->row2.xyz;
+    float3 y = (float3)(dot(r0, x) + n->row0.w, dot(r1, x) + n->row1.w,
+                        dot(r2, x) + n->row2.w);
+    float4 p0 = n->p0, p1 = n->p1;
+    float3 g = (float3)(0.0f);
+    float v = 0.0f;
+    switch (n->kind) {
+    case GP_MEAN_CONSTANT:
+        v = p0.x;
+        break;
+    case GP_MEAN_PLANE:
+        v = p0.y * (dot(p1.xyz, y) - p0.x);
+        if (v < p0.z) v = p0.z;          /* clamped: flat */
+        else g = p0.y * p1.xyz;
+        break;
+    case GP_MEAN_SPHERE:
+        v = gp_norm_dir3(y, &g) - p0.x;
+        break;
+    case GP_MEAN_BOX:
+        v = gp_sd_box(y, p1.xyz, &g);
+        break;
+    case GP_MEAN_ROUNDED_BOX:
+        v = gp_sd_box(y, p1.xyz - p0.x, &g) - p0.x;
+        break;
+    case GP_MEAN_TORUS: {
+        float2 radial, qd;
+        float rho = gp_norm_dir2(y.xz, &radial);
+        v = gp_norm_dir2((float2)(rho - p0.x, y.y), &qd) - p0.y;
+        g = (float3)(qd.x * radial.x, qd.y, qd.x * radial.y);
+        break;
+    }
+    case GP_MEAN_CAPSULE: {
+        float3 pa = y - p0.xyz, ba = p1.xyz - p0.xyz;
+        /* the closest-point parameter is stationary: it adds no gradient term */
+        float bb = dot(ba, ba);      /* a == b degenerates to a sphere */
+        float h = clamp(dot(pa, ba) / (bb > 0.0f ? bb : 1.0f), 0.0f, 1.0f);
+        v = gp_norm_dir3(pa - h * ba, &g) - p0.w;
+        break;
+    }
+    default:
+        v = NAN;
+    }
+    *grad = n->scale * (g.x * r0 + g.y * r1 + g.z * r2);
+    return n->scale * v;
+}
+
+/* iq's polynomial smooth minimum of (gradient, value) pairs; k <= 0 is the sharp min.
+ * d/dh of the blend vanishes where h is unclamped, so blending gradients is exact. */
+inline float4 gp_smooth_min(float4 a, float4 b, float k)
+{
+    if (!(k > 0.0f)) return a.w <= b.w ? a : b;
+    float h = clamp(0.5f + 0.5f * (b.w - a.w) / k, 0.0f, 1.0f);
+    float4 r = h * a + (1.0f - h) * b;
+    r.w -= k * h * (1.0f - h);
+    return r;
+}
+
+inline float gp_mean_eval(GP_MEAN_SPACE const MeanNode* nodes, int count, float3 x,
+                          float3* grad)
+{
+    float4 stack[GP_MEAN_STACK_DEPTH];
+    int top = 0;
+    for (int i = 0; i < count; ++i) {
+        GP_MEAN_SPACE const MeanNode* n = nodes + i;
+        if (n->kind < GP_MEAN_FIRST_OP) {
+            if (top >= GP_MEAN_STACK_DEPTH) { top = -1; break; }
+            float3 g;
+            float v = gp_mean_leaf(n, x, &g);
+            stack[top++] = (float4)(g, v);
+            continue;
+        }
+        if (top < 2) { top = -1; break; }
+        float4 b = stack[--top], a = stack[top - 1];
+        if (n->flags & GP_MEAN_FLAG_SWAPPED) { float4 t = a; a = b; b = t; }
+        float4 r;
+        if (n->kind == GP_MEAN_UNION) r = gp_smooth_min(a, b, n->k);
+        else if (n->kind == GP_MEAN_INTERSECTION) r = -gp_smooth_min(-a, -b, n->k);
+        else r = -gp_smooth_min(-a, b, n->k);      /* difference: smax(a, -b) */
+        stack[top - 1] = r;
+    }
+    if (top != 1) {
+        *grad = (float3)(NAN);
+        return NAN;
+    }
+    *grad = stack[0].xyz;
+    return stack[0].w;
+}
+
+inline float gp_mean_value(GP_MEAN_SPACE const MeanNode* nodes, int count, float3 x)
+{
+    float3 g;
+    return gp_mean_eval(nodes, count, x, &g);
+}

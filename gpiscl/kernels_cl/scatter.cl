@@ -1,0 +1,88 @@
+/* From: hit queue.  To: for each surface hit, a shadow ray towards a sampled light
+ * (next-event estimation, MIS-weighted) and a continuation ray in ray queue `out`.
+ * Null (pass-through) surfaces forward the ray unchanged and switch the medium. */
+__kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PARAMS(in),
+                      RAY_PARAMS(out), INDEX_PARAMS(hits), SHADOW_PARAMS(shadow),
+                      __global int* counters, __global const Primitive* prims,
+                      __global const Material* materials, __global const Light* lights,
+                      __global const float4* env_texels, __global const float* env_marginal,
+                      __global const float* env_conditional)
+{
+    int i = get_global_id(0);
+    if (i >= counters[COUNT_HITS]) return;
+    int r = hits_ray[i];
+    int p = in_path[r];
+    __global const Primitive* prim = &prims[in_hit_prim[r]];
+    __global const Material* mat = &materials[prim->material];
+    float3 wo = in_d[r].xyz;
+    float3 x = in_o[r].xyz + in_hit_t[r] * wo;
+    float3 ng = primitive_normal(prim, x);
+    float eps = ray_epsilon(x);
+
+    if (mat->kind == MATERIAL_NULL) {
+        if (prim->medium >= 0) path_medium[p] = (dot(wo, ng) < 0.0f) ? prim->medium : -1;
+        int k = atomic_inc(&counters[COUNT_RAYS_OUT]);
+        out_o[k] = (float4)(x, eps);
+        out_d[k] = (float4)(wo, T_INFINITY);
+        out_path[k] = p;
+        return;
+    }
+
+    int depth = path_depth[p];
+    float3 beta = path_beta[p].xyz;
+    if (depth >= params->max_depth || max3(mat->albedo.xyz) <= 0.0f) return;
+    int pixel = path_pixel[p], sample = path_sample[p], bounce = params->bounce;
+    float3 n = (dot(ng, wo) < 0.0f) ? ng : -ng;  /* shading normal on the side of wo */
+    float3 xo = x + eps * n;                      /* origin for rays leaving that side */
+
+    float3 wi;
+    float pdf_bsdf;
+    if (mat->kind == MATERIAL_DIFFUSE) {
+        /* --- next-event estimation --- */
+        if (params->nee && params->num_lights > 0) {
+            float4 ul = rng4(params->seed, pixel, sample, bounce, DIM_LIGHT);
+            int li = min((int)(ul.x * params->num_lights), params->num_lights - 1);
+            EnvMap m = {env_texels, env_marginal, env_conditional, params->env_width,
+                        params->env_height};
+            float3 wl;
+            float dist, pdf_light;
+            float3 Le = sample_light(&lights[li], m, xo, ul.yz, &wl, &dist, &pdf_light);
+            float pdf_f;
+            float3 f = diffuse_eval(mat->albedo.xyz, n, wl, &pdf_f);
+            float w = (pdf_light > 0.0f) ? power_heuristic(pdf_light, pdf_f) : 1.0f;
+            float inv_pdf = (pdf_light > 0.0f) ? 1.0f / pdf_light : 1.0f;
+            float3 c = beta * f * Le * (w * inv_pdf * params->num_lights);
+            if (max3(c) > 0.0f) {
+                int k = atomic_inc(&counters[COUNT_SHADOW]);
+                shadow_o[k] = (float4)(xo, 0.0f);
+                shadow_d[k] = (float4)(wl, dist);
+                shadow_contribution[k] = (float4)(c, 0.0f);
+                shadow_path[k] = p;
+            }
+        }
+        /* --- BSDF sampling: cosine-weighted, so f cos / pdf = albedo --- */
+        float4 ub = rng4(params->seed, pixel, sample, bounce, DIM_BSDF);
+        wi = cosine_hemisphere(ub.xy, n, &pdf_bsdf);
+        beta *= mat->albedo.xyz;
+    } else {
+        wi = wo - 2.0f * dot(wo, n) * n;
+        pdf_bsdf = 0.0f;
+        beta *= mat->albedo.xyz;
+    }
+
+    /* --- Russian roulette --- */
+    depth += 1;
+    if (depth >= params->rr_start_depth) {
+        float q = fmin(max3(beta), params->rr_max_survival);
+        float u = rng4(params->seed, pixel, sample, bounce, DIM_ROULETTE).x;
+        if (u >= q) return;
+        beta /= q;
+    }
+    path_beta[p] = (float4)(beta, 0.0f);
+    path_depth[p] = depth;
+    path_prev_pos[p] = (float4)(x, pdf_bsdf);
+    int k = atomic_inc(&counters[COUNT_RAYS_OUT]);
+    out_o[k] = (float4)(xo, 0.0f);
+    out_d[k] = (float4)(wi, T_INFINITY);
+    out_path[k] = p;
+}

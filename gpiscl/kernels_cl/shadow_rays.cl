@@ -1,0 +1,16 @@
+/* From: shadow queue.  To: the light sample's contribution added to its path when
+ * nothing opaque lies between the vertex and the light. */
+__kernel void shadow_rays(__constant RenderParams* params, PATH_PARAMS(path),
+                          SHADOW_PARAMS(shadow), __global int* counters,
+                          __global const BvhNode* nodes, __global const Primitive* prims,
+                          __global const Material* materials)
+{
+    int i = get_global_id(0);
+    if (i >= counters[COUNT_SHADOW]) return;
+    float4 o = shadow_o[i], d = shadow_d[i];
+    /* stop short of the light's own surface */
+    float tmax = (d.w >= T_INFINITY) ? T_INFINITY : d.w * (1.0f - 1e-4f) - ray_epsilon(o.xyz);
+    if (trace_bvh(nodes, prims, materials, o.xyz, d.xyz, 0.0f, &tmax, 1) >= 0) return;
+    int p = shadow_path[i];
+    path_radiance[p] += shadow_contribution[i];
+}

@@ -1,0 +1,44 @@
+"""Statistical comparisons with thresholds derived from the number of comparisons."""
+from statistics import NormalDist
+
+import numpy as np
+
+# Family-wise false-alarm rate of every statistical assertion in the suite.
+ALPHA = 1e-3
+
+
+def z_threshold(num_tests: int, alpha: float = ALPHA) -> float:
+    """Two-sided Bonferroni threshold for num_tests independent z-scores."""
+    return NormalDist().inv_cdf(1.0 - alpha / (2.0 * num_tests))
+
+
+def block_means(image, stderr, block: int):
+    """Means of block x block tiles and their standard errors (pixels independent)."""
+    h, w = image.shape[:2]
+    img = image[: h - h % block, : w - w % block]
+    se = stderr[: h - h % block, : w - w % block]
+    shape = (img.shape[0] // block, block, img.shape[1] // block, block) + img.shape[2:]
+    mean = img.reshape(shape).mean(axis=(1, 3))
+    var = (se.reshape(shape) ** 2).sum(axis=(1, 3)) / block**4
+    return mean, np.sqrt(var)
+
+
+def assert_agree(a, se_a, b, se_b=None, block=1, what="images"):
+    """z-test per element (or per block) that a and b have the same expectation."""
+    if block > 1:
+        a, se_a = block_means(a, se_a, block)
+        if se_b is not None:
+            b, se_b = block_means(b, se_b, block)
+        else:
+            b, _ = block_means(b, np.zeros_like(b), block)
+    se2 = se_a**2 + (0.0 if se_b is None else se_b**2)
+    diff = np.asarray(a - b, dtype=np.float64)
+    # elements with zero variance are deterministic: they must match to float precision
+    exact = se2 == 0
+    assert np.all(np.abs(diff[exact]) <= 1e-5 * (1 + np.abs(b[exact] if np.ndim(b) else b))), (
+        f"{what}: deterministic elements differ")
+    z = np.abs(diff[~exact]) / np.sqrt(se2[~exact])
+    if z.size:
+        t = z_threshold(z.size)
+        assert z.max() < t, f"{what}: max |z| = {z.max():.2f} over {z.size} tests (threshold {t:.2f})"
+    return z
