@@ -33,11 +33,13 @@ def test_white_furnace(device, bsdf):
     scene = {"camera": camera([0, 0, 5], [0, 0, 0]), "render": settings(32),
              "shapes": [{"type": "sphere", "center": [-0.6, 0, 0], "radius": 0.7,
                          "bsdf": {"type": bsdf, "albedo": 1.0}},
-                        {"type": "box", "min": [0.1, -0.5, -0.5], "max": [1.1, 0.5, 0.5],
+                        {"type": "box", "min": [0.3, -0.5, -0.5], "max": [1.3, 0.5, 0.5],
                          "bsdf": {"type": bsdf, "albedo": 1.0}}],
              "lights": [{"type": "environment", "radiance": 1.0}]}
     img = run(scene, device)
-    assert_agree(img.mean, img.stderr, np.ones_like(img.mean), what="furnace")
+    # Russian roulette makes rare zero-valued samples; 4x4 blocks (512 samples) keep the
+    # sample variance a trustworthy estimate for the z-test.
+    assert_agree(img.mean, img.stderr, np.ones_like(img.mean), block=4, what="furnace")
     assert abs(img.mean.mean() - 1.0) < 1e-2
 
 
@@ -72,23 +74,25 @@ def _rect_irradiance(x, corners):
 def test_area_light_on_floor_matches_lambert_polygon_formula(device, nee):
     cam = camera([0, 0.6, 2.5], [0, 0, 0], res=24)
     albedo, Le = 0.5, 4.0
-    scene = {"camera": cam, "render": settings(64 if nee else 256, nee=nee),
+    scene = {"camera": cam, "render": settings(64 if nee else 1024, nee=nee),
              "shapes": [{"type": "rectangle", "center": [0, 0, 0], "u": [8, 0, 0],
                          "v": [0, 0, -8], "bsdf": {"type": "diffuse", "albedo": albedo}}],
-             "lights": [{"type": "rectangle", "center": [0, 1, 0], "u": [0.5, 0, 0],
-                         "v": [0, 0, 0.5], "radiance": Le}]}
+             "lights": [{"type": "rectangle", "center": [0, 1, 0], "u": [1, 0, 0],
+                         "v": [0, 0, 1], "radiance": Le}]}
     img = run(scene, device)
     o, d = pixel_rays(cam, 16)
     t = hit_plane_y(o, d, 0.0)
     x = o + np.where(np.isfinite(t), t, 0)[..., None] * d
     inside = np.isfinite(t) & (np.abs(x[..., 0]) < 4) & (np.abs(x[..., 2]) < 4)
-    corners = np.array([[-.25, 1, -.25], [.25, 1, -.25], [.25, 1, .25], [-.25, 1, .25]])
+    corners = np.array([[-.5, 1, -.5], [.5, 1, -.5], [.5, 1, .5], [-.5, 1, .5]])
     E = _rect_irradiance(x.reshape(-1, 3), corners).reshape(inside.shape)
     radiance = np.where(inside, albedo / math.pi * Le * E, 0.0)
     expected = np.repeat(radiance.mean(axis=2)[..., None], 3, axis=2)
     quad_err = radiance.std(axis=2)[..., None] / 16 + 1e-7  # sub-sample grid error scale
+    # BSDF sampling alone finds the small light in few samples per pixel, so compare
+    # 4x4-pixel blocks, where the sample variance is a trustworthy estimate.
     assert_agree(img.mean, img.stderr, expected, np.broadcast_to(quad_err, expected.shape),
-                 what="area light")
+                 block=4, what="area light")
 
 
 @pytest.mark.parametrize("radius_deg", [0.0, 3.0])

@@ -17,7 +17,8 @@ KERNEL_DIR = Path(__file__).resolve().parent.parent / "kernels_cl"
 PYOPENCL_CL_DIR = Path(cl.__file__).resolve().parent / "cl"
 
 # Shared device code, always in this order; stage files follow.
-HEADERS = ("compat.h", "rng.h", "geometry.h", "bvh.h", "lights.h", "bsdf.h")
+HEADERS = ("compat.h", "rng.h", "geometry.h", "bvh.h", "lights.h", "bsdf.h", "gp_kernel.h",
+           "gp_mean.h")
 
 
 class DeviceError(RuntimeError):

@@ -122,6 +122,21 @@ BVH_NODE = Struct("BvhNode", (
     ("int", "count"),          # 0 for inner nodes
 ))
 
+# A GPIS object: a random field inside an analytic proxy (box or sphere). The proxy is
+# clipped analytically by the GPIS stage, so it needs no primitive in the BVH.
+GPIS_OBJECT = Struct("GpisObject", (
+    ("float4", "proxy_p0"),    # box: min corner; sphere: (centre, radius)
+    ("float4", "proxy_p1"),    # box: max corner
+    ("int", "proxy_kind"),     # GPIS_PROXY_*
+    ("int", "sampler"),        # GPIS_SAMPLER_*
+    ("int", "mean_first"),     # its mean program: MeanNode records [first, first+count)
+    ("int", "mean_count"),
+    ("int", "features"),       # weight space: number of random Fourier features M
+    ("int", "material"),       # micro-BSDF
+    ("int", "memory"),         # function space: GPIS_MEMORY_*
+    ("int", "samples"),        # function space: values per segment N
+))
+
 # Per-launch constants of the integrator.
 RENDER_PARAMS = Struct("RenderParams", (
     ("uint", "seed"),
@@ -138,6 +153,8 @@ RENDER_PARAMS = Struct("RenderParams", (
     ("int", "env_width"),
     ("int", "env_height"),
     ("int", "nee"),            # 1: next-event estimation with MIS; 0: BSDF sampling only
+    ("int", "num_gpis"),
+    ("int", "realization"),    # >= 0: every path uses this one GPIS realization
 ))
 
 # --- queues ---------------------------------------------------------------------------
@@ -157,7 +174,8 @@ RAY_QUEUE = Queue("ray", (
     ("float4", "d"),          # w = tmax
     ("int", "path"),
     ("float", "hit_t"),
-    ("int", "hit_prim"),
+    ("int", "hit_prim"),      # >= 0 surface, -1 none, GPIS_HIT_BASE - k: GPIS object k
+    ("float4", "hit_n"),      # GPIS hits: the sampled unit normal (outward)
 ))
 
 INDEX_QUEUE = Queue("index", (
@@ -181,24 +199,34 @@ LIGHT_KINDS = {"environment": 0, "environment_map": 1, "point": 2, "sphere": 3,
 COUNTERS = {"rays_out": 0, "hits": 1, "escaped": 2, "shadow": 3, "nan_paths": 4,
             "killed": 5}
 NUM_COUNTERS = 8
+GPIS_PROXIES = {"box": 0, "sphere": 1}
+GPIS_SAMPLERS = {"weight_space": 0, "function_space": 1}
+GPIS_MEMORIES = {"none": 0, "renewal": 1, "renewal_plus": 2, "global": 3}
+GPIS_HIT_BASE = -2
 
 
 def _defines() -> str:
     lines = []
     for prefix, table in (("PRIM", PRIM_KINDS), ("MATERIAL", MATERIAL_KINDS),
-                          ("LIGHT", LIGHT_KINDS), ("COUNT", COUNTERS)):
+                          ("LIGHT", LIGHT_KINDS), ("COUNT", COUNTERS),
+                          ("GPIS_PROXY", GPIS_PROXIES), ("GPIS_SAMPLER", GPIS_SAMPLERS),
+                          ("GPIS_MEMORY", GPIS_MEMORIES)):
         lines += [f"#define {prefix}_{k.upper()} {v}" for k, v in table.items()]
     lines.append(f"#define NUM_COUNTERS {NUM_COUNTERS}")
+    lines.append(f"#define GPIS_HIT_BASE ({GPIS_HIT_BASE})")
     return "\n".join(lines) + "\n"
 
 
-STRUCTS = (CAMERA, PRIMITIVE, MATERIAL, LIGHT, BVH_NODE, RENDER_PARAMS)
+STRUCTS = (CAMERA, PRIMITIVE, MATERIAL, LIGHT, BVH_NODE, GPIS_OBJECT, RENDER_PARAMS)
 QUEUES = (PATH_STATE, RAY_QUEUE, INDEX_QUEUE, SHADOW_QUEUE)
 
 
 def c_header() -> str:
     """The device-side declarations of every shared layout."""
+    from .gp.device_layout import c_declarations as gp_declarations  # gp builds on Struct
+
     parts = ["/* Generated from gpiscl/host/layouts.py: do not edit. */\n", _defines()]
     parts += [s.c_declaration() for s in STRUCTS]
+    parts.append(gp_declarations())
     parts += [q.c_declaration() for q in QUEUES]
     return "\n".join(parts)

@@ -1,0 +1,78 @@
+"""Image files: float32 OpenEXR (render output, environment maps) and an 8-bit PNG preview.
+
+The PNG writer needs only zlib and struct so previews work without Pillow.
+"""
+from __future__ import annotations
+
+import struct
+import zlib
+
+import numpy as np
+import OpenEXR
+
+
+def write_exr(path, rgb, extra=None) -> None:
+    """Write rgb (H,W,3) as float32 channels R, G, B plus extra {name: (H,W)} channels.
+
+    ZIP compression is lossless, so a read gives back the same bits.
+    """
+    rgb = np.asarray(rgb, dtype=np.float32)
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError(f"write_exr: rgb must have shape (H, W, 3), got {rgb.shape}")
+    channels = {c: np.ascontiguousarray(rgb[..., i]) for i, c in enumerate("RGB")}
+    for name, values in (extra or {}).items():
+        values = np.ascontiguousarray(values, dtype=np.float32)
+        if values.shape != rgb.shape[:2]:
+            raise ValueError(f"write_exr: channel {name!r} has shape {values.shape}, "
+                             f"expected {rgb.shape[:2]}")
+        if name in channels:
+            raise ValueError(f"write_exr: channel {name!r} given twice")
+        channels[name] = values
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    OpenEXR.File(header, channels).write(str(path))
+
+
+def read_exr(path) -> dict:
+    """All channels of an EXR file as {name: (H,W) float32} (half channels are widened)."""
+    f = OpenEXR.File(str(path), separate_channels=True)
+    return {name: np.asarray(ch.pixels, dtype=np.float32)
+            for name, ch in f.channels().items()}
+
+
+def read_exr_rgb(path) -> np.ndarray:
+    channels = read_exr(path)
+    missing = [c for c in "RGB" if c not in channels]
+    if missing:
+        raise ValueError(f"{path}: EXR file lacks channel(s) {', '.join(missing)} "
+                         f"(has {', '.join(sorted(channels)) or 'none'})")
+    return np.stack([channels[c] for c in "RGB"], axis=-1)
+
+
+def tonemap_srgb8(rgb, exposure: float = 0.0) -> np.ndarray:
+    """Linear radiance -> 8-bit sRGB: scale by 2**exposure, clamp, encode, round."""
+    x = np.asarray(rgb, dtype=np.float64) * 2.0 ** exposure
+    x = np.clip(np.nan_to_num(x, nan=0.0), 0.0, 1.0)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+    return np.rint(srgb * 255.0).astype(np.uint8)
+
+
+def _png_chunk(tag: bytes, data: bytes) -> bytes:
+    return (struct.pack(">I", len(data)) + tag + data
+            + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF))
+
+
+def write_png(path, rgb_uint8) -> None:
+    """Write an (H,W,3) uint8 image as an 8-bit RGB PNG."""
+    img = np.asarray(rgb_uint8)
+    if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] != 3:
+        raise ValueError(f"write_png: expected (H, W, 3) uint8, got {img.shape} {img.dtype}")
+    h, w = img.shape[:2]
+    # every scanline starts with its filter type byte; 0 = no filter
+    raw = np.zeros((h, 1 + 3 * w), np.uint8)
+    raw[:, 1:] = img.reshape(h, 3 * w)
+    ihdr = struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)  # 8 bit, colour type 2 = RGB
+    data = (b"\x89PNG\r\n\x1a\n" + _png_chunk(b"IHDR", ihdr)
+            + _png_chunk(b"IDAT", zlib.compress(raw.tobytes(), 6))
+            + _png_chunk(b"IEND", b""))
+    with open(path, "wb") as f:
+        f.write(data)

@@ -1,0 +1,81 @@
+"""The command line as a user meets it, and the files a render writes."""
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from gpiscl import load_scene, render_result
+from gpiscl.host.imageio import read_exr
+from gpiscl.host.output import write_outputs
+from gpiscl.scenes import furnace_sphere
+
+
+def gpiscl_cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "gpiscl", *args], capture_output=True,
+                          text=True, cwd=cwd, timeout=600)
+
+
+def test_exr_round_trip_keeps_mean_and_standard_error(device, tmp_path):
+    scene = load_scene(furnace_sphere(albedo=0.5))
+    res = render_result(scene, spp=4, device=device)
+    paths = write_outputs(res.image, scene, tmp_path / "img.exr")
+    ch = read_exr(paths["exr"])
+    rgb = np.stack([ch["R"], ch["G"], ch["B"]], axis=-1)
+    np.testing.assert_array_equal(rgb, res.image.mean)
+    np.testing.assert_array_equal(ch["stderr.G"], res.image.stderr[..., 1])
+    assert paths["png"].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert load_scene(str(paths["scene"])).data == scene.data
+
+
+def test_render_command_writes_exr_png_and_resolved_scene(tmp_path):
+    scene = tmp_path / "s.json"
+    scene.write_text(json.dumps(furnace_sphere(albedo=0.5)))
+    out = tmp_path / "r" / "img.exr"
+    r = gpiscl_cli("render", str(scene), "-o", str(out), "--spp", "2", "--resolution", "8x6",
+                   "--stats")
+    assert r.returncode == 0, r.stderr
+    assert out.exists() and out.with_suffix(".png").exists()
+    resolved = json.loads((tmp_path / "r" / "img.scene.json").read_text())
+    assert resolved["camera"]["resolution"] == [8, 6] and resolved["render"]["spp"] == 2
+    assert "scatter" in r.stderr and "items/s" in r.stderr  # the --stats table
+    assert read_exr(out)["R"].shape == (6, 8)
+
+
+BAD_SCENES = [
+    ('{"lights": [{"type": "environment"}], "camera": {"fov": 200}}', "camera.fov"),
+    ('{"lights": [{"type": "environment", "radiance": -1}]}', "lights[0].radiance"),
+    ('{"lights": []}', "lights"),
+    ('{"lights": [{"type": "environment"}], "shapes": [{"type": "cone"}]}', "shapes[0].type"),
+    ('{"lights": [{"type": "environment"}], "render": {"spp": 0}}', "render.spp"),
+    ('{"lights": [{"type": "environment"}], "colour": 1}', "colour"),
+    ('{"lights": [{"type": "environment"}', "invalid JSON"),
+]
+
+
+@pytest.mark.parametrize("text,key", BAD_SCENES)
+def test_bad_scene_gives_one_line_error_and_exit_code_2(tmp_path, text, key):
+    path = tmp_path / "bad.json"
+    path.write_text(text)
+    r = gpiscl_cli("render", str(path), "-o", str(tmp_path / "x.exr"))
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert lines[0].startswith(f"error: {path}") and key in lines[0]
+    assert not (tmp_path / "x.exr").exists()
+
+
+def test_missing_scene_file_and_bad_device_are_clean_errors(tmp_path):
+    r = gpiscl_cli("render", str(tmp_path / "nope.json"))
+    assert r.returncode == 2 and "Traceback" not in r.stderr and "nope.json" in r.stderr
+    scene = tmp_path / "s.json"
+    scene.write_text(json.dumps(furnace_sphere()))
+    r = gpiscl_cli("render", str(scene), "--device", "no-such-device")
+    assert r.returncode == 2 and "no-such-device" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_devices_lists_the_default_device():
+    r = gpiscl_cli("devices")
+    assert r.returncode == 0
+    assert any(line.startswith("*") for line in r.stdout.splitlines())

@@ -1,0 +1,71 @@
+import struct
+import zlib
+
+import numpy as np
+import pytest
+
+from gpiscl.host.imageio import (read_exr, read_exr_rgb, tonemap_srgb8, write_exr,
+                                 write_png)
+
+
+def test_exr_round_trip_is_bit_exact(tmp_path):
+    rng = np.random.default_rng(1)
+    rgb = rng.standard_normal((7, 5, 3)).astype(np.float32) * 1e3
+    rgb[0, 0] = [np.inf, -0.0, 1e-40]  # inf, signed zero and a denormal survive too
+    stderr = rng.random((7, 5)).astype(np.float32)
+    path = tmp_path / "a.exr"
+    write_exr(path, rgb, {"stderr": stderr})
+    channels = read_exr(path)
+    assert set(channels) == {"R", "G", "B", "stderr"}
+    assert all(c.dtype == np.float32 for c in channels.values())
+    back = read_exr_rgb(path)
+    assert back.shape == rgb.shape
+    assert back.tobytes() == rgb.tobytes()
+    assert channels["stderr"].tobytes() == stderr.tobytes()
+
+
+def test_read_exr_rgb_requires_rgb(tmp_path):
+    import OpenEXR
+    path = tmp_path / "z.exr"
+    OpenEXR.File({"type": OpenEXR.scanlineimage}, {"Z": np.zeros((2, 3), np.float32)}).write(
+        str(path))
+    with pytest.raises(ValueError, match="lacks channel"):
+        read_exr_rgb(path)
+
+
+def _decode_png(data: bytes):
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    pos, chunks = 8, []
+    while pos < len(data):
+        (length,) = struct.unpack(">I", data[pos:pos + 4])
+        tag, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + length]
+        (crc,) = struct.unpack(">I", data[pos + 8 + length:pos + 12 + length])
+        assert crc == zlib.crc32(tag + body) & 0xFFFFFFFF
+        chunks.append((tag, body))
+        pos += 12 + length
+    assert [t for t, _ in chunks][0] == b"IHDR" and chunks[-1][0] == b"IEND"
+    w, h, depth, colour, comp, filt, interlace = struct.unpack(">IIBBBBB", chunks[0][1])
+    assert (depth, colour, comp, filt, interlace) == (8, 2, 0, 0, 0)
+    raw = zlib.decompress(b"".join(b for t, b in chunks if t == b"IDAT"))
+    rows = np.frombuffer(raw, np.uint8).reshape(h, 1 + 3 * w)
+    assert np.all(rows[:, 0] == 0)
+    return rows[:, 1:].reshape(h, w, 3)
+
+
+def test_png_decodes_to_written_pixels(tmp_path):
+    img = np.random.default_rng(2).integers(0, 256, (6, 9, 3), dtype=np.uint8)
+    path = tmp_path / "a.png"
+    write_png(path, img)
+    np.testing.assert_array_equal(_decode_png(path.read_bytes()), img)
+
+
+def test_tonemap_srgb8():
+    x = np.array([[[0.0, 1.0, 0.5], [2.0, 1e9, -1.0]]], np.float32)
+    out = tonemap_srgb8(x)
+    assert out.dtype == np.uint8 and out.shape == x.shape
+    # 0.5 -> 1.055 * 0.5**(1/2.4) - 0.055 = 0.73536 -> 187.52
+    np.testing.assert_array_equal(out, [[[0, 255, 188], [255, 255, 0]]])
+    # one stop of exposure doubles the radiance
+    np.testing.assert_array_equal(tonemap_srgb8(x / 2, exposure=1.0), out)
+    # the linear toe of the sRGB curve: 0.002 -> 12.92 * 0.002 * 255 = 6.59
+    assert tonemap_srgb8(np.full((1, 1, 3), 0.002))[0, 0, 0] == 7
