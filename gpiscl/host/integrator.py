@@ -17,8 +17,8 @@ from .film import Film, FilmImage
 from .queues import DeviceQueue
 from .scene_compile import CompiledScene
 
-STAGE_FILES = ("generate_camera_rays.cl", "intersect.cl", "escaped_rays.cl", "emission.cl",
-               "scatter.cl", "shadow_rays.cl", "accumulate.cl")
+STAGE_FILES = ("generate_camera_rays.cl", "intersect.cl", "queue_hits.cl", "escaped_rays.cl",
+               "emission.cl", "scatter.cl", "shadow_rays.cl", "accumulate.cl")
 DEFAULT_BATCH = 1 << 18
 
 
@@ -66,6 +66,7 @@ class WavefrontIntegrator:
         self.lights = to_device(device, scene.lights)
         self.env = [to_device(device, scene.env_texels), to_device(device, scene.env_marginal),
                     to_device(device, scene.env_conditional)]
+        self.gpis_objects = to_device(device, scene.gpis.objects)
         # work queues, sized for one batch
         cap = self.batch
         self.paths = DeviceQueue(ctx, layouts.PATH_STATE, cap)
@@ -102,11 +103,14 @@ class WavefrontIntegrator:
 
     def intersect(self, rays, n):
         self.program.launch("intersect", n, self.params, np.int32(n), *rays.args,
-                            *self.hits.args, *self.escaped.args, self.counters, self.nodes,
-                            self.prims, self.materials)
+                            self.nodes, self.prims, self.materials)
 
     def gpis_free_flight(self, rays, n):
         """Slot for the medium stage: GPIS objects inside null-BSDF proxies (later)."""
+
+    def queue_hits(self, rays, n):
+        self.program.launch("queue_hits", n, np.int32(n), *rays.args, *self.hits.args,
+                            *self.escaped.args, self.counters)
 
     def escaped_rays(self, rays, n):
         self.program.launch("escaped_rays", n, self.params, *self.paths.args, *rays.args,
@@ -119,7 +123,7 @@ class WavefrontIntegrator:
     def scatter(self, rays, out, n):
         self.program.launch("scatter", n, self.params, *self.paths.args, *rays.args,
                             *out.args, *self.hits.args, *self.shadow.args, self.counters,
-                            self.prims, self.materials, self.lights, *self.env)
+                            self.prims, self.materials, self.lights, *self.env, self.gpis_objects)
 
     def shadow_rays(self, n):
         self.program.launch("shadow_rays", n, self.params, *self.paths.args,
@@ -144,6 +148,7 @@ class WavefrontIntegrator:
             self._upload_params(bounce=bounce)
             self.intersect(cur, n)
             self.gpis_free_flight(cur, n)
+            self.queue_hits(cur, n)
             self.escaped_rays(cur, n)
             self.emission(cur, n)
             self.scatter(cur, nxt, n)

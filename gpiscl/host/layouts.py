@@ -135,6 +135,7 @@ GPIS_OBJECT = Struct("GpisObject", (
     ("int", "material"),       # micro-BSDF
     ("int", "memory"),         # function space: GPIS_MEMORY_*
     ("int", "samples"),        # function space: values per segment N
+    ("float", "tolerance"),    # root refinement tolerance (world units)
 ))
 
 # Per-launch constants of the integrator.

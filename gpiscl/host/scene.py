@@ -118,6 +118,8 @@ RENDER = Record({
     "seed": Field(Int(ge=0, lt=2**32), 0),
     "batch_size": Field(Nullable(Int(ge=1)), None),  # null: the integrator picks
     "nee": Field(Bool(), True),  # false: BSDF sampling only (a reference for the tests)
+    # an integer R: every path sees GPIS realization R (shows one sample of the geometry)
+    "realization": Field(Nullable(Int(ge=0, lt=2**31)), None),
     "russian_roulette": Field(Record({
         "start_depth": Field(Int(ge=0), 3),
         "max_survival": Field(Number(gt=0, le=1), 0.95),
@@ -196,6 +198,8 @@ SCENE = Record({
                                                         "(a scene without lights renders black)")),
 }, checks=[_one_environment])
 
+
+from . import gpis_schema  # noqa: E402,F401  (registers the "gpis" shape)
 
 # ---- loading
 

@@ -10,6 +10,7 @@ from . import layouts
 from .bvh import build_bvh
 from .camera import compile_camera
 from .envmap import build_envmap_tables
+from .gpis_compile import CompiledGpis, compile_gpis
 from .imageio import read_exr_rgb
 
 PRIM = layouts.PRIM_KINDS
@@ -27,6 +28,7 @@ class CompiledScene:
     env_marginal: np.ndarray
     env_conditional: np.ndarray
     env_size: tuple             # (width, height), (1, 1) when no map
+    gpis: CompiledGpis
 
     @property
     def resolution(self) -> tuple:
@@ -186,7 +188,9 @@ def compile_scene(data: dict) -> CompiledScene:
     b = _Builder()
     env = {}
     for s in data.get("shapes", []):
-        _add_shape(b, s)
+        if s["type"] != "gpis":
+            _add_shape(b, s)
+    gpis = compile_gpis([s for s in data.get("shapes", []) if s["type"] == "gpis"], b.material)
     for lt in data["lights"]:
         _add_light(b, lt, env)
     prims = np.array(b.prims, dtype=layouts.PRIMITIVE.dtype)
@@ -214,4 +218,4 @@ def compile_scene(data: dict) -> CompiledScene:
     return CompiledScene(compile_camera(data["camera"]), prims,
                          np.array(b.materials, dtype=layouts.MATERIAL.dtype), lights, nodes,
                          texels, marginal.astype(np.float32), conditional.astype(np.float32),
-                         (w, h))
+                         (w, h), gpis)

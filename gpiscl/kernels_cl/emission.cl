@@ -7,6 +7,7 @@ __kernel void emission(__constant RenderParams* params, PATH_PARAMS(path), RAY_P
     int i = get_global_id(0);
     if (i >= counters[COUNT_HITS]) return;
     int r = hits_ray[i];
+    if (in_hit_prim[r] < 0) return;  /* GPIS events do not emit */
     __global const Primitive* prim = &prims[in_hit_prim[r]];
     if (prim->light < 0) return;
     int p = in_path[r];

@@ -6,21 +6,34 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
                       __global int* counters, __global const Primitive* prims,
                       __global const Material* materials, __global const Light* lights,
                       __global const float4* env_texels, __global const float* env_marginal,
-                      __global const float* env_conditional)
+                      __global const float* env_conditional, __global const GpisObject* gpis)
 {
     int i = get_global_id(0);
     if (i >= counters[COUNT_HITS]) return;
     int r = hits_ray[i];
     int p = in_path[r];
-    __global const Primitive* prim = &prims[in_hit_prim[r]];
-    __global const Material* mat = &materials[prim->material];
+    int hp = in_hit_prim[r];
     float3 wo = in_d[r].xyz;
     float3 x = in_o[r].xyz + in_hit_t[r] * wo;
-    float3 ng = primitive_normal(prim, x);
-    float eps = ray_epsilon(x);
+    float3 ng;
+    float eps;
+    __global const Primitive* prim = 0;
+    __global const Material* mat;
+    if (hp >= 0) {
+        prim = &prims[hp];
+        mat = &materials[prim->material];
+        ng = primitive_normal(prim, x);
+        eps = ray_epsilon(x);
+    } else {
+        /* GPIS event: the stage sampled the normal. Rays leave from the root itself: the
+         * one-sided hit rule (only f >= 0 -> f < 0 counts) needs no offset. */
+        mat = &materials[gpis[GPIS_HIT_BASE - hp].material];
+        ng = in_hit_n[r].xyz;
+        eps = 0.0f;
+    }
 
     if (mat->kind == MATERIAL_NULL) {
-        if (prim->medium >= 0) path_medium[p] = (dot(wo, ng) < 0.0f) ? prim->medium : -1;
+        if (prim && prim->medium >= 0) path_medium[p] = (dot(wo, ng) < 0.0f) ? prim->medium : -1;
         int k = atomic_inc(&counters[COUNT_RAYS_OUT]);
         out_o[k] = (float4)(x, eps);
         out_d[k] = (float4)(wo, T_INFINITY);

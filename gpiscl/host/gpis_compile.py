@@ -1,0 +1,105 @@
+"""Resolved GPIS scene objects -> host GP model objects -> device arrays."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import layouts
+from .gp import kernels as K
+from .gp import means as M
+from .gp.device_layout import GP_KERNEL, MEAN_NODE, pack_kernel, pack_mean
+from .scene_schema import SceneError
+
+_KERNELS = {"squared_exponential": K.SquaredExponential, "rational_quadratic": K.RationalQuadratic,
+            "periodic": K.Periodic, "locally_periodic": K.LocallyPeriodic,
+            "thin_plate": K.ThinPlate}
+
+# Roots are refined to this fraction of the kernel's length scale: far below the scale
+# on which the realization varies, far above float32 resolution of scene coordinates.
+ROOT_TOLERANCE = 1e-4
+
+
+def build_kernel(k: dict) -> K.Kernel:
+    params = {key: (tuple(v) if isinstance(v, list) else v) for key, v in k.items()
+              if key != "type"}
+    return _KERNELS[k["type"]](**params)
+
+
+def _transform_matrix(t: dict) -> np.ndarray:
+    from .scene_compile import _euler_matrix
+    lin = _euler_matrix(t["rotate"]) @ np.diag(np.asarray(t["scale"], dtype=np.float64))
+    return np.concatenate([lin, np.asarray(t["translate"], float)[:, None]], axis=1)
+
+
+def build_mean(m: dict) -> M.Mean:
+    kind = m["type"]
+    if kind == "constant":
+        return M.Constant(offset=m["value"])
+    if kind == "plane":
+        return M.Plane(point=tuple(m["point"]), normal=tuple(m["normal"]), scale=m["scale"])
+    if kind == "sphere":
+        return M.Sphere(center=tuple(m["center"]), radius=m["radius"])
+    if kind == "box":
+        return M.Box(half_extents=tuple(m["half_extents"]), center=tuple(m["center"]))
+    if kind == "rounded_box":
+        return M.RoundedBox(half_extents=tuple(m["half_extents"]), radius=m["radius"],
+                            center=tuple(m["center"]))
+    if kind == "torus":
+        return M.Torus(major=m["major"], minor=m["minor"], center=tuple(m["center"]))
+    if kind == "capsule":
+        return M.Capsule(a=tuple(m["a"]), b=tuple(m["b"]), radius=m["radius"])
+    if kind in ("union", "intersection", "difference"):
+        cls = {"union": M.Union, "intersection": M.Intersection, "difference": M.Difference}
+        return cls[kind](build_mean(m["left"]), build_mean(m["right"]), k=m["k"])
+    if kind == "transform":
+        return M.Transform(build_mean(m["child"]), _transform_matrix(m))
+    raise AssertionError(kind)
+
+
+def kernel_length_scale(k: dict) -> float:
+    """The length on which a realization varies: root tolerances and steps scale with it."""
+    if k["type"] == "thin_plate":
+        return k["radius"]
+    if k["type"] == "locally_periodic":
+        return min(k["length_scale"] / k["w"], k["se_length_scale"])
+    if k["type"] == "periodic":
+        return k["length_scale"] / k["w"]
+    return k["length_scale"] / max(k["aniso"]) ** 0.5
+
+
+@dataclass
+class CompiledGpis:
+    objects: np.ndarray     # GpisObject records
+    kernels: np.ndarray     # GpKernel records, one per object
+    mean_nodes: np.ndarray  # MeanNode programs of all objects, concatenated
+
+
+def compile_gpis(shapes: list, material_of) -> CompiledGpis:
+    """shapes: the resolved "gpis" shapes in scene order; material_of(bsdf) -> index."""
+    objects = layouts.GPIS_OBJECT.zeros(len(shapes))
+    kernels = GP_KERNEL.zeros(len(shapes))
+    programs = []
+    first = 0
+    for i, g in enumerate(shapes):
+        o = objects[i]
+        proxy = g["proxy"]
+        o["proxy_kind"] = layouts.GPIS_PROXIES[proxy["type"]]
+        if proxy["type"] == "box":
+            o["proxy_p0"][:3], o["proxy_p1"][:3] = proxy["min"], proxy["max"]
+        else:
+            o["proxy_p0"][:] = (*proxy["center"], proxy["radius"])
+        o["sampler"] = layouts.GPIS_SAMPLERS[g["sampler"]["type"]]
+        o["features"] = g["sampler"].get("features") or 0
+        o["material"] = material_of(g["bsdf"])
+        o["tolerance"] = ROOT_TOLERANCE * kernel_length_scale(g["kernel"])
+        kernels[i] = pack_kernel(build_kernel(g["kernel"]))[0]
+        try:
+            prog = pack_mean(build_mean(g["mean"]))
+        except ValueError as exc:
+            raise SceneError("<scene>", f"gpis mean", str(exc)) from None
+        o["mean_first"], o["mean_count"] = first, len(prog)
+        first += len(prog)
+        programs.append(prog)
+    nodes = np.concatenate(programs) if programs else MEAN_NODE.zeros(0)
+    return CompiledGpis(objects, kernels, nodes)

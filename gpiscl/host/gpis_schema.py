@@ -1,0 +1,95 @@
+"""Scene declarations of GPIS objects: a random field f ~ GP(mean, kernel) inside a proxy.
+
+    {"type": "gpis", "proxy": {...}, "mean": {...}, "kernel": {...},
+     "sampler": {"type": "weight_space", "features": null}, "bsdf": {...}}
+
+Importing this module registers the "gpis" shape with the scene loader.
+"""
+from __future__ import annotations
+
+from .scene import ALBEDO, SHAPES, TRANSFORM, VEC3, _box_extent
+from .scene_schema import Field, Int, Nullable, Number, Record, Tagged, Vector
+
+DIRECTION = Vector(normalize=True)
+POSITIVE3 = Vector(broadcast=True, item=Number(gt=0))
+
+PROXIES = Tagged("proxy", {
+    "box": Record({"min": Field(VEC3), "max": Field(VEC3)}, [_box_extent]),
+    "sphere": Record({"center": Field(VEC3, [0, 0, 0]), "radius": Field(Number(gt=0))}),
+})
+
+# Means are signed distances, positive outside (gpiscl/host/gp/means.py).
+MEANS = Tagged("mean")
+MEANS.register("constant", Record({"value": Field(Number(), 0.0)}))
+MEANS.register("plane", Record({"point": Field(VEC3, [0, 0, 0]),
+                                "normal": Field(DIRECTION, [0, 1, 0]),
+                                "scale": Field(Number(gt=0), 1.0)}))
+MEANS.register("sphere", Record({"center": Field(VEC3, [0, 0, 0]),
+                                 "radius": Field(Number(gt=0), 1.0)}))
+MEANS.register("box", Record({"center": Field(VEC3, [0, 0, 0]),
+                              "half_extents": Field(POSITIVE3, 1.0)}))
+MEANS.register("rounded_box", Record({"center": Field(VEC3, [0, 0, 0]),
+                                      "half_extents": Field(POSITIVE3, 1.0),
+                                      "radius": Field(Number(gt=0), 0.1)}))
+MEANS.register("torus", Record({"center": Field(VEC3, [0, 0, 0]),
+                                "major": Field(Number(gt=0), 1.0),
+                                "minor": Field(Number(gt=0), 0.25)}))
+MEANS.register("capsule", Record({"a": Field(VEC3, [0, -0.5, 0]), "b": Field(VEC3, [0, 0.5, 0]),
+                                  "radius": Field(Number(gt=0), 0.25)}))
+for _op in ("union", "intersection", "difference"):  # k > 0: smooth blend of width k
+    MEANS.register(_op, Record({"left": Field(MEANS), "right": Field(MEANS),
+                                "k": Field(Number(ge=0), 0.0)}))
+MEANS.register("transform", Record({"child": Field(MEANS), **TRANSFORM.fields}))
+
+# Squared exponential: sigma^2 exp(-r^T A r / (2 l^2)), A = diag(aniso).
+_ANISO = Field(POSITIVE3, 1.0)
+KERNELS = Tagged("kernel", {
+    "squared_exponential": Record({"sigma": Field(Number(gt=0), 1.0),
+                                   "length_scale": Field(Number(gt=0), 1.0), "aniso": _ANISO}),
+    "rational_quadratic": Record({"sigma": Field(Number(gt=0), 1.0),
+                                  "length_scale": Field(Number(gt=0), 1.0),
+                                  "alpha": Field(Number(gt=0), 1.0), "aniso": _ANISO}),
+    "periodic": Record({"sigma": Field(Number(gt=0), 1.0),
+                        "length_scale": Field(Number(gt=0), 1.0),
+                        "w": Field(Number(gt=0), 6.283185307179586), "aniso": _ANISO}),
+    "locally_periodic": Record({"sigma": Field(Number(gt=0), 1.0),
+                                "length_scale": Field(Number(gt=0), 1.0),
+                                "w": Field(Number(gt=0), 6.283185307179586),
+                                "se_length_scale": Field(Number(gt=0), 1.0), "aniso": _ANISO}),
+    "thin_plate": Record({"sigma": Field(Number(gt=0), 1.0),
+                          "radius": Field(Number(gt=0), 1.0), "aniso": _ANISO}),
+})
+
+# Random Fourier features per realization when "features" is null: the RQ spectrum is a
+# heavy-tailed scale mixture and needs more features to reach the same covariance error.
+DEFAULT_FEATURES = {"rational_quadratic": 1024}
+DEFAULT_FEATURES_OTHER = 256
+
+SAMPLERS = Tagged("sampler", {
+    "weight_space": Record({"features": Field(Nullable(Int(ge=1, le=65536)), None)}),
+})
+
+MICRO_BSDFS = Tagged("micro-BSDF", {
+    "diffuse": Record({"albedo": Field(ALBEDO, 0.8)}),
+    "mirror": Record({"albedo": Field(ALBEDO, 1.0)}),
+})
+
+
+def _weight_space_kernel(g):
+    if g["sampler"]["type"] == "weight_space":
+        if g["kernel"]["type"] == "thin_plate":
+            return "kernel.type", ("thin_plate has no spectral density, so weight space "
+                                   "cannot sample it; use the function_space sampler")
+        if g["sampler"]["features"] is None:  # resolve "auto" so the written scene is explicit
+            g["sampler"]["features"] = DEFAULT_FEATURES.get(g["kernel"]["type"],
+                                                            DEFAULT_FEATURES_OTHER)
+    return None
+
+
+GPIS = SHAPES.register("gpis", Record({
+    "proxy": Field(PROXIES),
+    "mean": Field(MEANS),
+    "kernel": Field(KERNELS),
+    "sampler": Field(SAMPLERS, {"type": "weight_space"}),
+    "bsdf": Field(MICRO_BSDFS, {"type": "diffuse"}),
+}, checks=[_weight_space_kernel]))

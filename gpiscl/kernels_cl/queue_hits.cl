@@ -1,0 +1,10 @@
+/* From: ray queue `in` with final hits.  To: ray indices split into the hit queue
+ * (surfaces and GPIS events) and the escaped queue. */
+__kernel void queue_hits(int num_rays, RAY_PARAMS(in), INDEX_PARAMS(hits),
+                         INDEX_PARAMS(escaped), __global int* counters)
+{
+    int i = get_global_id(0);
+    if (i >= num_rays) return;
+    if (in_hit_prim[i] != -1) hits_ray[atomic_inc(&counters[COUNT_HITS])] = i;
+    else escaped_ray[atomic_inc(&counters[COUNT_ESCAPED])] = i;
+}
