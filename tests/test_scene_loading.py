@@ -43,7 +43,7 @@ def test_defaults_are_filled():
     assert data["camera"] == {"position": [0.0, 1.0, 4.0], "look_at": [0.0, 1.0, 0.0],
                               "up": [0.0, 1.0, 0.0], "fov": 40.0, "resolution": [256, 256]}
     assert data["render"] == {"spp": 16, "max_depth": 8, "seed": 0, "batch_size": None,
-                              "nee": True,
+                              "nee": True, "realization": None,
                               "russian_roulette": {"start_depth": 3, "max_survival": 0.95}}
     assert data["shapes"] == []
     assert data["lights"] == [{"type": "environment", "radiance": [1.0, 1.0, 1.0]}]
@@ -201,7 +201,7 @@ BAD = [
     ("negative_radiance", minimal(lights=[{"type": "environment", "radiance": -0.5}]),
      "lights[0].radiance", "must be >= 0"),
     ("unknown_shape_type", minimal(shapes=[{"type": "cube"}]), "shapes[0].type",
-     'unknown shape type "cube" (expected one of: sphere, rectangle, box, disk, mesh)'),
+     'unknown shape type "cube" (expected one of: sphere, rectangle, box, disk, mesh, gpis)'),
     ("unknown_bsdf_type", minimal(shapes=[{"type": "sphere", "bsdf": {"type": "glass"}}]),
      "shapes[0].bsdf.type", "expected one of: diffuse, mirror, null"),
     ("vector_length", minimal(camera={"position": [0, 1]}), "camera.position",
