@@ -38,6 +38,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("-o", "--output", default="out.exr", help="output EXR (default out.exr)")
     r.add_argument("--spp", type=_positive_int, help="samples per pixel")
     r.add_argument("--seed", type=int, help="random seed")
+    r.add_argument("--realization", type=int, metavar="R",
+                   help="render one fixed GPIS realization R for every pixel (weight space)")
     r.add_argument("--resolution", type=_resolution, help="WIDTHxHEIGHT")
     r.add_argument("--time-limit", type=float, help="stop after this many seconds")
     r.add_argument("--device", help="OpenCL device: 'P:D' indices or a name fragment")
@@ -63,11 +65,13 @@ def cmd_render(args) -> int:
     data = copy.deepcopy(scene.data)
     if args.resolution:
         data["camera"]["resolution"] = list(args.resolution)
-    for key in ("spp", "seed"):
+    for key in ("spp", "seed", "realization"):
         if getattr(args, key) is not None:
             data["render"][key] = getattr(args, key)
     if not 0 <= data["render"]["seed"] < 2**32:
         raise SceneError("<command line>", "--seed", "must be in [0, 2**32)")
+    if args.realization is not None and not 0 <= args.realization < 2**31:
+        raise SceneError("<command line>", "--realization", "must be in [0, 2**31)")
     scene = Scene(data, scene.source, scene.base_dir)
     device = Device(args.device)
     spp = data["render"]["spp"]

@@ -14,7 +14,7 @@ from .host.scene_compile import compile_scene
 def render_result(scene, spp: int | None = None, seed: int | None = None,
                   resolution=None, device: Device | str | None = None,
                   batch_size: int | None = None, time_limit: float | None = None,
-                  progress=None) -> RenderResult:
+                  progress=None, realization: int | None = None) -> RenderResult:
     """Render a scene (path, dict or Scene); arguments override its render block."""
     scene = load_scene(scene)
     data = copy.deepcopy(scene.data)
@@ -23,6 +23,8 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
         settings["spp"] = int(spp)
     if seed is not None:
         settings["seed"] = int(seed)
+    if realization is not None:
+        settings["realization"] = int(realization)
     if resolution is not None:
         data["camera"]["resolution"] = [int(resolution[0]), int(resolution[1])]
     if not isinstance(device, Device):

@@ -29,7 +29,6 @@ def test_struct_offsets_match_device(device, struct):
 
 
 def test_every_stage_kernel_is_built_once_under_its_own_name(device):
-    from gpiscl.host.device import Program
-    from gpiscl.host.integrator import STAGE_FILES
-    program = Program(device, STAGE_FILES)
+    from gpiscl.host.integrator import STAGE_FILES, stage_program
+    program = stage_program(device)
     assert sorted(program.kernels) == sorted(f[:-3] for f in STAGE_FILES)

@@ -8,6 +8,7 @@ import numpy as np
 from . import layouts
 from .gp import kernels as K
 from .gp import means as M
+from .gp.weight_space import pack_order_tables
 from .gp.device_layout import GP_KERNEL, MEAN_NODE, pack_kernel, pack_mean
 from .scene_schema import SceneError
 
@@ -73,6 +74,10 @@ class CompiledGpis:
     objects: np.ndarray     # GpisObject records
     kernels: np.ndarray     # GpKernel records, one per object
     mean_nodes: np.ndarray  # MeanNode programs of all objects, concatenated
+    order_table: np.ndarray  # weight space: periodic-order CDFs of all objects (float32)
+
+    def uses(self, sampler: str) -> bool:
+        return bool(np.any(self.objects["sampler"] == layouts.GPIS_SAMPLERS[sampler]))
 
 
 def compile_gpis(shapes: list, material_of) -> CompiledGpis:
@@ -102,4 +107,6 @@ def compile_gpis(shapes: list, material_of) -> CompiledGpis:
         first += len(prog)
         programs.append(prog)
     nodes = np.concatenate(programs) if programs else MEAN_NODE.zeros(0)
-    return CompiledGpis(objects, kernels, nodes)
+    table, t_first, t_count = pack_order_tables([build_kernel(g["kernel"]) for g in shapes])
+    objects["order_first"], objects["order_count"] = t_first, t_count
+    return CompiledGpis(objects, kernels, nodes, table)

@@ -17,9 +17,23 @@ from .film import Film, FilmImage
 from .queues import DeviceQueue
 from .scene_compile import CompiledScene
 
-STAGE_FILES = ("generate_camera_rays.cl", "intersect.cl", "queue_hits.cl", "escaped_rays.cl",
-               "emission.cl", "scatter.cl", "shadow_rays.cl", "accumulate.cl")
+STAGE_FILES = ("generate_camera_rays.cl", "intersect.cl", "gpis_weight_space.cl", "queue_hits.cl",
+               "escaped_rays.cl", "emission.cl", "scatter.cl", "gpis_shadow_weight_space.cl",
+               "shadow_rays.cl", "accumulate.cl")
+GPIS_HEADERS = ("gpis_proxy.h", "ws_features.h", "ws_intersect.h")
 DEFAULT_BATCH = 1 << 18
+
+
+def ws_defines(device: Device) -> dict:
+    """Weight-space features run WS_LANES per work-item in vector types: what makes the
+    feature loop SIMD on CPU runtimes; GPUs vectorise across work-items instead."""
+    is_cpu = bool(device.device.type & cl.device_type.CPU)
+    return {"WS_LANES": 8 if is_cpu else 1}
+
+
+def stage_program(device: Device) -> Program:
+    """The one program holding every stage kernel of the integrator."""
+    return Program(device, STAGE_FILES, defines=ws_defines(device), extra_headers=GPIS_HEADERS)
 
 
 @dataclass
@@ -29,6 +43,8 @@ class RenderStats:
     shadow_rays: int = 0
     nan_paths: int = 0
     truncated_paths: int = 0
+    killed_paths: int = 0      # GPIS hits whose sampled normal faced away from the ray
+    gpis_failed: int = 0       # GPIS root searches that could not decide (counted, no hit)
     seconds: float = 0.0
     interrupted: bool = False
     kernel_table: str = ""
@@ -37,9 +53,11 @@ class RenderStats:
         rate = self.paths / self.seconds if self.seconds > 0 else 0.0
         lines = [f"paths: {self.paths}  rays: {self.rays}  shadow rays: {self.shadow_rays}  "
                  f"time: {self.seconds:.2f} s  paths/s: {rate:.4g}"]
-        if self.nan_paths or self.truncated_paths:
+        if self.nan_paths or self.truncated_paths or self.killed_paths or self.gpis_failed:
             lines.append(f"failed paths: {self.nan_paths} non-finite (recorded as 0), "
-                         f"{self.truncated_paths} cut at the bounce limit")
+                         f"{self.truncated_paths} cut at the bounce limit, "
+                         f"{self.killed_paths} killed at a GPIS normal facing away; "
+                         f"{self.gpis_failed} undecided GPIS root searches")
         return "\n".join(lines)
 
 
@@ -57,7 +75,7 @@ class WavefrontIntegrator:
         self.width, self.height = scene.resolution
         self.num_pixels = self.width * self.height
         self.batch = int(batch_size or settings.get("batch_size") or DEFAULT_BATCH)
-        self.program = Program(device, STAGE_FILES)
+        self.program = stage_program(device)
         # scene buffers
         self.camera = to_device(device, scene.camera)
         self.nodes = to_device(device, scene.bvh_nodes)
@@ -66,7 +84,11 @@ class WavefrontIntegrator:
         self.lights = to_device(device, scene.lights)
         self.env = [to_device(device, scene.env_texels), to_device(device, scene.env_marginal),
                     to_device(device, scene.env_conditional)]
-        self.gpis_objects = to_device(device, scene.gpis.objects)
+        gpis = scene.gpis
+        self.gpis_objects = to_device(device, gpis.objects)
+        self.gpis_model = [to_device(device, gpis.kernels), to_device(device, gpis.mean_nodes),
+                           to_device(device, gpis.order_table)]
+        self.weight_space = gpis.uses("weight_space")
         # work queues, sized for one batch
         cap = self.batch
         self.paths = DeviceQueue(ctx, layouts.PATH_STATE, cap)
@@ -86,6 +108,9 @@ class WavefrontIntegrator:
         p["num_lights"], p["num_pixels"] = len(scene.lights), self.num_pixels
         p["env_width"], p["env_height"] = scene.env_size
         p["nee"] = 1 if settings.get("nee", True) else 0
+        p["num_gpis"] = len(gpis.objects)
+        realization = settings.get("realization")
+        p["realization"] = -1 if realization is None else realization
         # null surfaces do not count as bounces, so allow extra iterations for them
         self.max_iterations = 4 * settings["max_depth"] + 64
         self.stats = RenderStats()
@@ -106,7 +131,18 @@ class WavefrontIntegrator:
                             self.nodes, self.prims, self.materials)
 
     def gpis_free_flight(self, rays, n):
-        """Slot for the medium stage: GPIS objects inside null-BSDF proxies (later)."""
+        """Moves hits to the first GPIS crossing before them (the path's realization)."""
+        if self.weight_space:
+            self.program.launch("gpis_weight_space", n, self.params, np.int32(n),
+                                *self.paths.args, *rays.args, self.gpis_objects,
+                                *self.gpis_model, self.counters)
+
+    def gpis_shadow(self, n):
+        """Blocks shadow rays that cross a GPIS object of the path's realization."""
+        if self.weight_space:
+            self.program.launch("gpis_shadow_weight_space", n, self.params, *self.paths.args,
+                                *self.shadow.args, self.gpis_objects, *self.gpis_model,
+                                self.counters)
 
     def queue_hits(self, rays, n):
         self.program.launch("queue_hits", n, np.int32(n), *rays.args, *self.hits.args,
@@ -144,7 +180,7 @@ class WavefrontIntegrator:
         self.generate_camera_rays(num_paths)
         n, cur, nxt = num_paths, self.rays[0], self.rays[1]
         for bounce in range(self.max_iterations):
-            cl.enqueue_fill_buffer(queue, self.counters, np.int32(0), 0, 16)
+            cl.enqueue_fill_buffer(queue, self.counters, np.int32(0), 0, 16)  # per-bounce counters
             self._upload_params(bounce=bounce)
             self.intersect(cur, n)
             self.gpis_free_flight(cur, n)
@@ -152,6 +188,7 @@ class WavefrontIntegrator:
             self.escaped_rays(cur, n)
             self.emission(cur, n)
             self.scatter(cur, nxt, n)
+            self.gpis_shadow(n)
             self.shadow_rays(n)
             cl.enqueue_copy(queue, self.counters_host, self.counters)
             self.stats.rays += n
@@ -185,7 +222,10 @@ class WavefrontIntegrator:
             self.stats.interrupted = True
         self.device.queue.finish()
         cl.enqueue_copy(self.device.queue, self.counters_host, self.counters)
-        self.stats.nan_paths = int(self.counters_host[layouts.COUNTERS["nan_paths"]])
+        count = lambda name: int(self.counters_host[layouts.COUNTERS[name]])
+        self.stats.nan_paths = count("nan_paths")
+        self.stats.killed_paths = count("killed")
+        self.stats.gpis_failed = count("gpis_failed")
         self.stats.seconds = time.perf_counter() - start
         self.stats.kernel_table = self.program.timings.table()
         return RenderResult(self.film.read(), self.stats)

@@ -135,6 +135,8 @@ GPIS_OBJECT = Struct("GpisObject", (
     ("int", "material"),       # micro-BSDF
     ("int", "memory"),         # function space: GPIS_MEMORY_*
     ("int", "samples"),        # function space: values per segment N
+    ("int", "order_first"),    # weight space: its periodic-order CDF in the order table
+    ("int", "order_count"),
     ("float", "tolerance"),    # root refinement tolerance (world units)
 ))
 
@@ -198,7 +200,7 @@ LIGHT_KINDS = {"environment": 0, "environment_map": 1, "point": 2, "sphere": 3,
                "rectangle": 4, "directional": 5}
 # Device-side counters; the host reads only rays_out between bounces.
 COUNTERS = {"rays_out": 0, "hits": 1, "escaped": 2, "shadow": 3, "nan_paths": 4,
-            "killed": 5}
+            "killed": 5, "gpis_failed": 6}
 NUM_COUNTERS = 8
 GPIS_PROXIES = {"box": 0, "sphere": 1}
 GPIS_SAMPLERS = {"weight_space": 0, "function_space": 1}

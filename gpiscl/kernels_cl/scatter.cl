@@ -30,6 +30,10 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
         mat = &materials[gpis[GPIS_HIT_BASE - hp].material];
         ng = in_hit_n[r].xyz;
         eps = 0.0f;
+        if (!(dot(ng, wo) < 0.0f)) {  /* a crossing's gradient must face the ray */
+            atomic_inc(&counters[COUNT_KILLED]);
+            return;
+        }
     }
 
     if (mat->kind == MATERIAL_NULL) {

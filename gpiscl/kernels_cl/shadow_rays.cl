@@ -7,6 +7,7 @@ __kernel void shadow_rays(__constant RenderParams* params, PATH_PARAMS(path),
 {
     int i = get_global_id(0);
     if (i >= counters[COUNT_SHADOW]) return;
+    if (max3(shadow_contribution[i].xyz) <= 0.0f) return;  /* blocked by a GPIS stage */
     float4 o = shadow_o[i], d = shadow_d[i];
     /* stop short of the light's own surface */
     float tmax = (d.w >= T_INFINITY) ? T_INFINITY : d.w * (1.0f - 1e-4f) - ray_epsilon(o.xyz);

@@ -5,190 +5,320 @@
  *
  * Memory: features are never stored. Feature i is a pure function of
  * (realization key, object, i), regenerated from Philox whenever it is needed, so a path's
- * realization costs O(1) memory (the uint2 key) whatever M is and however many paths are
+ * realization costs O(1) memory (its uint2 key) whatever M is and however many paths are
  * in flight; the price is one Philox call (two for periodic/RQ) per feature evaluation.
- * Streams: counter (key.x, key.y, object, i), Philox key (call, WS_PHILOX_KEY1). rng.h uses
- * key word 1 = 0x6a09e667, so the two generators can never produce the same stream.
- * Realization key: (pixel, sample) of the path, or (R, 0xffffffff) for a fixed
- * realization R (no path has sample index 0xffffffff, so the two never coincide).
+ * Streams: Philox4x32-10 (Random123's, as in pyopencl's philox.cl) with counter
+ * (key.x, key.y, object, i) and key (call, WS_PHILOX_KEY1). rng.h uses key word 1 =
+ * 0x6a09e667, so the two generators never share a stream. Realization key: (pixel, sample)
+ * of the path, or (R, 0xffffffff) for a fixed realization R (no path has that sample).
  *
- * Precision: float32 is enough. Values are O(sigma) and roots are wanted to ~1e-4 l,
- * i.e. f to ~1e-4 sigma, far above float's 6e-8 relative rounding. The one place that
- * needs care is the phase theta . x: its absolute error is ~eps |theta| |x|, so the
- * realization is smooth to 1e-3 rad only while |theta| |x| < ~1e4, e.g. |x| < 50 l. Scenes
- * should keep GPIS objects within a few hundred length scales of the world origin. The
- * interval bounds account for this error explicitly (ws_affine's `round`).
+ * Speed: features are processed WS_LANES at a time in OpenCL vector types, with branch-free
+ * polynomial log/sin/cos. PoCL does not vectorise across work-items through a data-dependent
+ * loop (the root finder's), and its scalar transcendental builtins are opaque calls, so
+ * explicit lanes are what makes the feature loop SIMD. Build with -DWS_LANES=1 on GPUs.
+ * Every lane computes its own feature from its own index, so results do not depend on
+ * WS_LANES.
+ *
+ * Precision: float32 suffices. Values are O(sigma) and roots are wanted to ~1e-4 l, i.e. f
+ * to ~1e-4 sigma, far above float's 6e-8 relative rounding. What needs care is the phase
+ * theta . x + tau: its absolute error is ~eps |theta| |x|, so realizations stay smooth to
+ * 1e-3 rad while |theta| |x| < ~1e4 (|x| < ~50 l): keep GPIS objects within a few hundred
+ * length scales of the world origin. Phases are reduced mod pi/2 in three parts (exact for
+ * |phase| < 2^15), and ws_affine's `round` accounts for the phase error in its bounds.
  */
+#ifndef WS_LANES
+#define WS_LANES 8
+#endif
 #define WS_PHILOX_KEY1 0x3c6ef372u   /* SHA-256 IV word 2; rng.h uses word 0 */
 #define WS_CALL_MAIN 0u              /* 3 normals (frequency), w, tau */
 #define WS_CALL_ORDERS 1u            /* periodic orders and signs */
-#define WS_CALL_GAMMA 2u             /* first RQ gamma call; two trials per call */
-#define WS_GAMMA_CALLS 24            /* P(all 48 trials rejected) < 0.05^48 */
+#define WS_CALL_GAMMA 2u             /* first RQ gamma call; two trials per lane per call */
+#define WS_GAMMA_CALLS 24            /* P(48 trials all rejected) < 0.05^48 */
 #define WS_TWO_PI 6.28318530717958648f
 
-inline uint4 ws_philox(uint2 key, int object, int i, uint call)
+#if WS_LANES == 1
+typedef float wsf;
+typedef int wsi;
+typedef uint wsu;
+#define ws_cvt_f convert_float
+#define ws_cvt_i convert_int
+#define ws_as_f as_float
+#define ws_as_i as_int
+#define WS_IOTA 0
+#define ws_any(c) ((c) != 0)
+#define ws_lane0(v) (v)
+#define ws_hsum(v) (v)
+#else
+#define WS_CAT_(a, b) a##b
+#define WS_CAT(a, b) WS_CAT_(a, b)
+typedef WS_CAT(float, WS_LANES) wsf;
+typedef WS_CAT(int, WS_LANES) wsi;
+typedef WS_CAT(uint, WS_LANES) wsu;
+#define ws_cvt_f WS_CAT(convert_float, WS_LANES)
+#define ws_cvt_i WS_CAT(convert_int, WS_LANES)
+#define ws_as_f WS_CAT(as_float, WS_LANES)
+#define ws_as_i WS_CAT(as_int, WS_LANES)
+#define ws_any(c) any(c)
+#define ws_lane0(v) ((v).s0)
+#if WS_LANES == 4
+#define WS_IOTA ((int4)(0, 1, 2, 3))
+#define ws_hsum(v) ((v).s0 + (v).s1 + (v).s2 + (v).s3)
+#elif WS_LANES == 8
+#define WS_IOTA ((int8)(0, 1, 2, 3, 4, 5, 6, 7))
+#define ws_hsum(v) ((v).s0 + (v).s1 + (v).s2 + (v).s3 + (v).s4 + (v).s5 + (v).s6 + (v).s7)
+#elif WS_LANES == 16
+#define WS_IOTA ((int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15))
+#define ws_hsum(v) ((v).s0 + (v).s1 + (v).s2 + (v).s3 + (v).s4 + (v).s5 + (v).s6 + (v).s7 \
+                  + (v).s8 + (v).s9 + (v).sa + (v).sb + (v).sc + (v).sd + (v).se + (v).sf)
+#else
+#error "WS_LANES must be 1, 4, 8 or 16"
+#endif
+#endif
+
+/* --- branch-free float math (Cephes minimax polynomials, ~1 ulp) ----------------------- */
+
+/* natural log of a positive normal float */
+inline wsf ws_log(wsf x)
 {
-    philox4x32_ctr_t c = {{key.x, key.y, (uint)object, (uint)i}};
-    philox4x32_key_t k = {{call, WS_PHILOX_KEY1}};
-    philox4x32_ctr_t r = philox4x32(c, k);
-    return (uint4)(r.v[0], r.v[1], r.v[2], r.v[3]);
+    wsi bits = ws_as_i(x);
+    wsi e = (bits >> 23) - 126;
+    wsf m = ws_as_f((bits & 0x007fffff) | 0x3f000000);      /* [0.5, 1) */
+    wsi low = m < 0.70710678f;
+    e = select(e, e - 1, low);
+    m = select(m - 1.0f, m + m - 1.0f, low);
+    wsf z = m * m, fe = ws_cvt_f(e);
+    wsf y = (((((((( 7.0376836292e-2f * m - 1.1514610310e-1f) * m + 1.1676998740e-1f) * m
+             - 1.2420140846e-1f) * m + 1.4249322787e-1f) * m - 1.6668057665e-1f) * m
+             + 2.0000714765e-1f) * m - 2.4999993993e-1f) * m + 3.3333331174e-1f) * m * z;
+    y += -2.12194440e-4f * fe - 0.5f * z;
+    return m + y + 0.693359375f * fe;
 }
 
-/* (0, 1]: safe for log. 24 high bits, exactly representable. */
-inline float ws_u01_open(uint r) { return (float)((r >> 8) + 1u) * (1.0f / 16777216.0f); }
-
-/* [0, 1) */
-inline float ws_u01(uint r) { return (float)(r >> 8) * (1.0f / 16777216.0f); }
-
-/* Box-Muller: two independent N(0,1) from two uniform words. */
-inline float2 ws_normal2(uint r0, uint r1)
+/* sin and cos of r + q pi/2 for |r| <= pi/4 */
+inline wsf ws_sincos_quadrant(wsf r, wsi q, wsf* c)
 {
-    float rad = sqrt(-2.0f * log(ws_u01_open(r0)));
-    float s, c = sincos(WS_TWO_PI * ws_u01(r1), &s);
-    return (float2)(rad * c, rad * s);
+    wsf z = r * r;
+    wsf s0 = r + r * z * ((-1.9515295891e-4f * z + 8.3321608736e-3f) * z - 1.6666654611e-1f);
+    wsf c0 = 1.0f - 0.5f * z
+           + z * z * ((2.443315711809948e-5f * z - 1.388731625493765e-3f) * z
+                      + 4.166664568298827e-2f);
+    wsi odd = (q & 1) != 0;
+    wsf s = select(s0, c0, odd), cc = select(c0, s0, odd);
+    *c = select(cc, -cc, ((q + 1) & 2) != 0);
+    return select(s, -s, (q & 2) != 0);
 }
 
-/* The low bytes of a Philox output are unused by ws_u01*: together a fresh 32-bit word. */
-inline uint ws_low_bytes(uint4 r)
+/* sin(x), cos(x) with Cody-Waite reduction by pi/2 (three parts, exact for |x| < 2^15) */
+inline wsf ws_sincos(wsf x, wsf* c)
 {
-    return (r.x & 255u) | ((r.y & 255u) << 8) | ((r.z & 255u) << 16) | (r.w << 24);
+    wsf q = rint(x * 0.63661977236758134f);
+    wsf r = ((x - q * 1.5703125f) - q * 4.837512969970703125e-4f) - q * 7.549789948768648e-8f;
+    return ws_sincos_quadrant(r, ws_cvt_i(q), c);
 }
 
-/* Gamma(shape a, scale 1) by Marsaglia & Tsang (2000); for a < 1 the standard boost
- * G(a) = G(a + 1) U^(1/a). Each Philox call feeds two trials (normal by Box-Muller, its
- * own acceptance uniform); acceptance is >= 0.95 per trial for every shape. */
-inline float ws_gamma(float a, uint2 key, int object, int i)
+/* sin, cos of 2 pi u for u in [0, 1]: the reduction u - q/4 is exact */
+inline wsf ws_sincos_2pi(wsf u, wsf* c)
+{
+    wsf q = rint(4.0f * u);
+    return ws_sincos_quadrant(WS_TWO_PI * (u - 0.25f * q), ws_cvt_i(q), c);
+}
+
+/* --- random numbers -------------------------------------------------------------------- */
+
+/* Philox4x32-10 of counters (c0, c1, c2, c3) under key (k0, k1), in place */
+inline void ws_philox(wsu* c0, wsu* c1, wsu* c2, wsu* c3, uint k0, uint k1)
+{
+    for (int round = 0; round < 10; ++round) {
+        wsu hi0 = mul_hi(*c0, (wsu)0xD2511F53u), lo0 = *c0 * 0xD2511F53u;
+        wsu hi1 = mul_hi(*c2, (wsu)0xCD9E8D57u), lo1 = *c2 * 0xCD9E8D57u;
+        *c0 = hi1 ^ *c1 ^ k0;
+        *c1 = lo1;
+        *c2 = hi0 ^ *c3 ^ k1;
+        *c3 = lo0;
+        k0 += 0x9E3779B9u;
+        k1 += 0xBB67AE85u;
+    }
+}
+
+/* Philox words of features idx of (key, object) for one call */
+inline void ws_draw(uint2 key, int object, wsi idx, uint call, wsu* r0, wsu* r1, wsu* r2,
+                    wsu* r3)
+{
+    *r0 = (wsu)key.x;
+    *r1 = (wsu)key.y;
+    *r2 = (wsu)(uint)object;
+#if WS_LANES == 1
+    *r3 = as_uint(idx);
+#else
+    *r3 = WS_CAT(as_uint, WS_LANES)(idx);
+#endif
+    ws_philox(r0, r1, r2, r3, call, WS_PHILOX_KEY1);
+}
+
+inline wsf ws_u01(wsu r) { return ws_cvt_f(r >> 8) * (1.0f / 16777216.0f); }        /* [0,1) */
+inline wsf ws_u01_open(wsu r) { return ws_cvt_f((r >> 8) + 1) * (1.0f / 16777216.0f); } /* (0,1] */
+
+/* Box-Muller: two independent N(0,1) per lane from two words */
+inline wsf ws_normal2(wsu r0, wsu r1, wsf* second)
+{
+    wsf rad = sqrt(-2.0f * ws_log(ws_u01_open(r0)));
+    wsf c, s = ws_sincos_2pi(ws_u01(r1), &c);
+    *second = rad * s;
+    return rad * c;
+}
+
+/* The low bytes of a call's words are unused by ws_u01*: together a fresh 32-bit word. */
+inline wsu ws_low_bytes(wsu r0, wsu r1, wsu r2, wsu r3)
+{
+    return (r0 & 255u) | ((r1 & 255u) << 8) | ((r2 & 255u) << 16) | (r3 << 24);
+}
+
+/* Gamma(shape a, scale 1) per lane by Marsaglia & Tsang (2000); for a < 1 the standard
+ * boost G(a) = G(a + 1) U^(1/a), U from the accepting call's spare low bytes (independent
+ * of the acceptance test). Acceptance is >= 0.95 per trial for every shape. */
+inline wsf ws_gamma(float a, uint2 key, int object, wsi idx)
 {
     float ab = a < 1.0f ? a + 1.0f : a;
     float dd = ab - 1.0f / 3.0f, cc = rsqrt(9.0f * dd);
-    float g = dd;   /* unreachable fallback (see WS_GAMMA_CALLS) */
-    uint boost = 0u;
-    for (int call = 0; call < WS_GAMMA_CALLS; ++call) {
-        uint4 r = ws_philox(key, object, i, WS_CALL_GAMMA + (uint)call);
-        boost = ws_low_bytes(r);   /* unused by the trials: independent of acceptance */
-        float2 x = ws_normal2(r.x, r.y);
-        float v0 = 1.0f + cc * x.x, v1 = 1.0f + cc * x.y;
+    wsf g = (wsf)dd;
+    wsu boost = (wsu)0u;
+    wsi todo = (wsi)(WS_LANES == 1 ? 1 : -1);   /* all lanes pending, in "true" encoding */
+    for (int call = 0; call < WS_GAMMA_CALLS && ws_any(todo); ++call) {
+        wsu r0, r1, r2, r3;
+        ws_draw(key, object, idx, WS_CALL_GAMMA + (uint)call, &r0, &r1, &r2, &r3);
+        wsf x1, x0 = ws_normal2(r0, r1, &x1);
+        wsu low = ws_low_bytes(r0, r1, r2, r3);
+        wsf v0 = 1.0f + cc * x0, v1 = 1.0f + cc * x1;
         v0 = v0 * v0 * v0;
         v1 = v1 * v1 * v1;
-        if (v0 > 0.0f && log(ws_u01_open(r.z)) < 0.5f * x.x * x.x + dd - dd * v0 + dd * log(v0)) {
-            g = dd * v0;
-            break;
-        }
-        if (v1 > 0.0f && log(ws_u01_open(r.w)) < 0.5f * x.y * x.y + dd - dd * v1 + dd * log(v1)) {
-            g = dd * v1;
-            break;
-        }
+        wsi ok0 = (v0 > 0.0f) & (ws_log(ws_u01_open(r2))
+                                 < 0.5f * x0 * x0 + dd - dd * v0 + dd * ws_log(fmax(v0, 1e-30f)));
+        wsi ok1 = (v1 > 0.0f) & (ws_log(ws_u01_open(r3))
+                                 < 0.5f * x1 * x1 + dd - dd * v1 + dd * ws_log(fmax(v1, 1e-30f)));
+        wsi take0 = todo & ok0, take1 = todo & !ok0 & ok1;
+        g = select(g, dd * v0, take0);
+        g = select(g, dd * v1, take1);
+        boost = select(boost, low, take0 | take1);
+        todo = todo & !(take0 | take1);
     }
     if (a < 1.0f) g *= pow(ws_u01_open(boost), 1.0f / a);
     return g;
 }
 
-/* |n| ~ P(|n| = m) by the host's CDF table (weight_space.periodic_order_cdf: cdf[m] =
- * P(|n| <= m), last entry exactly 1), then a random sign. Branch-free binary search with
- * a trip count that depends only on count, so work-items stay in lockstep. */
-inline float ws_periodic_order(__global const float* cdf, int count, uint r, uint sign_bit)
+/* signed periodic order per lane: |n| from the host's CDF table (cdf[m] = P(|n| <= m),
+ * last entry exactly 1; weight_space.periodic_order_cdf), counted by a uniform-trip scan,
+ * and a random sign */
+inline wsf ws_periodic_order(__global const float* cdf, int count, wsu r, wsu sign_bit)
 {
-    float u = ws_u01(r);
-    int n = 0;
-    int s = 1;
-    while (2 * s <= count) s *= 2;
-    for (; s > 0; s >>= 1)
-        if (n + s <= count && cdf[n + s - 1] <= u) n += s;
-    return sign_bit ? -(float)n : (float)n;
+    wsf u = ws_u01(r), n = (wsf)0.0f;
+    for (int m = 0; m < count - 1; ++m)
+        n += select((wsf)0.0f, (wsf)1.0f, u >= cdf[m]);
+    return select(n, -n, sign_bit != 0u);
 }
 
-inline float3 ws_sqrt_aniso(GpKernel k)
-{
-    return sqrt(k.aniso.xyz);
-}
+/* --- features ---------------------------------------------------------------------------- */
 
-/* Feature i of realization `key` of GPIS `object`: frequency theta, phase tau, weight w.
- * order_cdf/order_count: the periodic order table of this object's kernel (unused for
- * SE and RQ). thin_plate has no spectral measure: theta is NaN. */
-inline void ws_feature(GpKernel k, __global const float* order_cdf, int order_count,
-                       uint2 key, int object, int i, float3* theta, float* tau, float* w)
+/* Features idx = i0 .. i0 + WS_LANES - 1 of realization `key` of GPIS `object`: frequency
+ * theta, phase tau, weight w (w = 0 for idx >= M, so chunks may overrun M). order_cdf /
+ * order_count: the object's periodic order table (unused by SE and RQ). The thin-plate
+ * kernel has no spectral measure: theta is NaN. */
+inline void ws_features(GpKernel k, __global const float* order_cdf, int order_count,
+                        uint2 key, int object, int i0, int M, wsf* tx, wsf* ty, wsf* tz,
+                        wsf* tau, wsf* w)
 {
-    uint4 r = ws_philox(key, object, i, WS_CALL_MAIN);
-    float2 g01 = ws_normal2(r.x, r.y), g23 = ws_normal2(r.z, r.w);
-    float3 z = (float3)(g01, g23.x);
-    uint low = ws_low_bytes(r);
-    *w = g23.y;
-    *tau = WS_TWO_PI * ws_u01(low);
-    float3 sa = ws_sqrt_aniso(k);
-    if (k.kind == GP_KERNEL_SQUARED_EXPONENTIAL) {
-        *theta = sa * z / k.length_scale;
-    } else if (k.kind == GP_KERNEL_RATIONAL_QUADRATIC) {
-        /* tau_g ~ Gamma(shape a, rate a l^2); theta = sqrt(tau_g) sqrt(A) z */
-        float gam = ws_gamma(k.alpha, key, object, i);
-        *theta = sa * z * sqrt(gam / (k.alpha * k.length_scale * k.length_scale));
-    } else if (k.kind == GP_KERNEL_PERIODIC || k.kind == GP_KERNEL_LOCALLY_PERIODIC) {
-        uint4 q = ws_philox(key, object, i, WS_CALL_ORDERS);
-        float3 n = (float3)(ws_periodic_order(order_cdf, order_count, q.x, q.w & 1u),
-                            ws_periodic_order(order_cdf, order_count, q.y, q.w & 2u),
-                            ws_periodic_order(order_cdf, order_count, q.z, q.w & 4u));
-        *theta = (WS_TWO_PI * k.w) * sa * n;
-        if (k.kind == GP_KERNEL_LOCALLY_PERIODIC) *theta += sa * z / k.se_length_scale;
-    } else {
-        *theta = (float3)(NAN);
+    wsi idx = i0 + WS_IOTA;
+    wsu r0, r1, r2, r3;
+    ws_draw(key, object, idx, WS_CALL_MAIN, &r0, &r1, &r2, &r3);
+    wsf z1, z0 = ws_normal2(r0, r1, &z1);
+    wsf wv, z2 = ws_normal2(r2, r3, &wv);
+    *w = select((wsf)0.0f, wv, idx < M);
+    *tau = WS_TWO_PI * ws_u01(ws_low_bytes(r0, r1, r2, r3));
+    float3 sa = sqrt(k.aniso.xyz);
+    float scale = 0.0f;
+    if (k.kind == GP_KERNEL_SQUARED_EXPONENTIAL) scale = 1.0f / k.length_scale;
+    else if (k.kind == GP_KERNEL_LOCALLY_PERIODIC) scale = 1.0f / k.se_length_scale;
+    else if (k.kind != GP_KERNEL_RATIONAL_QUADRATIC && k.kind != GP_KERNEL_PERIODIC)
+        scale = NAN;
+    wsf s = (wsf)scale;
+    if (k.kind == GP_KERNEL_RATIONAL_QUADRATIC)    /* tau_g ~ Gamma(a, rate a l^2) */
+        s = sqrt(ws_gamma(k.alpha, key, object, idx) / (k.alpha * k.length_scale * k.length_scale));
+    *tx = sa.x * s * z0;
+    *ty = sa.y * s * z1;
+    *tz = sa.z * s * z2;
+    if (k.kind == GP_KERNEL_PERIODIC || k.kind == GP_KERNEL_LOCALLY_PERIODIC) {
+        ws_draw(key, object, idx, WS_CALL_ORDERS, &r0, &r1, &r2, &r3);
+        float3 f = (WS_TWO_PI * k.w) * sa;
+        *tx += f.x * ws_periodic_order(order_cdf, order_count, r0, r3 & 1u);
+        *ty += f.y * ws_periodic_order(order_cdf, order_count, r1, r3 & 2u);
+        *tz += f.z * ws_periodic_order(order_cdf, order_count, r2, r3 & 4u);
     }
 }
 
-/* E[(theta . d)^2] = lambda_2 / lambda_0 along d: the spectral second moment, i.e.
- * Var(d/dt f(o + t d)) / k(0). Sets the natural step of ray marching (and Rice's rate). */
+/* Feature i alone (for debugging and tests; the hot loops use ws_features). */
+inline void ws_feature(GpKernel k, __global const float* order_cdf, int order_count,
+                       uint2 key, int object, int i, float3* theta, float* tau, float* w)
+{
+    wsf tx, ty, tz, tv, wv;
+    ws_features(k, order_cdf, order_count, key, object, i, i + 1, &tx, &ty, &tz, &tv, &wv);
+    *theta = (float3)(ws_lane0(tx), ws_lane0(ty), ws_lane0(tz));
+    *tau = ws_lane0(tv);
+    *w = ws_lane0(wv);
+}
+
+/* E[(theta . d)^2] = Var(d/dt f(o + t d)) / k(0), the spectral second moment along d:
+ * sets the natural marching step (and Rice's crossing rate). */
 inline float ws_lambda2(GpKernel k, float3 d)
 {
     float3 ad = k.aniso.xyz * d * d;
     float s = ad.x + ad.y + ad.z;
     if (k.kind == GP_KERNEL_PERIODIC || k.kind == GP_KERNEL_LOCALLY_PERIODIC) {
-        /* per axis E[n^2] = 1 / l^2 (n is Skellam(z/2, z/2), z = 1/l^2) */
+        /* per axis E[n^2] = 1/l^2: n is Skellam(z/2, z/2) with z = 1/l^2 */
         float c = WS_TWO_PI * k.w / k.length_scale;
         float v = c * c * s;
         if (k.kind == GP_KERNEL_LOCALLY_PERIODIC)
             v += s / (k.se_length_scale * k.se_length_scale);
         return v;
     }
-    return s / (k.length_scale * k.length_scale);   /* SE, and RQ since E[tau_g] = 1/l^2 */
+    return s / (k.length_scale * k.length_scale);   /* SE; RQ too since E[tau_g] = 1/l^2 */
 }
 
-inline float ws_amplitude(GpKernel k, int M)
-{
-    return sqrt(2.0f * k.sigma2 / (float)M);
-}
+inline float ws_amplitude(GpKernel k, int M) { return sqrt(2.0f * k.sigma2 / (float)M); }
 
 /* Value of the realization at x, with its analytic gradient. */
 inline float ws_eval(GpKernel k, __global const MeanNode* mean, int mean_count,
                      __global const float* order_cdf, int order_count, int M, uint2 key,
                      int object, float3 x, float3* grad)
 {
-    float v = 0.0f;
-    float3 g = (float3)(0.0f);
-    for (int i = 0; i < M; ++i) {
-        float3 th;
-        float tau, w;
-        ws_feature(k, order_cdf, order_count, key, object, i, &th, &tau, &w);
-        float s, c = sincos(dot(th, x) + tau, &s);
+    wsf v = 0.0f, gx = 0.0f, gy = 0.0f, gz = 0.0f;
+    for (int i0 = 0; i0 < M; i0 += WS_LANES) {
+        wsf tx, ty, tz, tau, w;
+        ws_features(k, order_cdf, order_count, key, object, i0, M, &tx, &ty, &tz, &tau, &w);
+        wsf c, s = ws_sincos(tx * x.x + ty * x.y + tz * x.z + tau, &c);
         v += w * c;
-        g -= (w * s) * th;
+        s *= w;
+        gx -= s * tx;
+        gy -= s * ty;
+        gz -= s * tz;
     }
     float amp = ws_amplitude(k, M);
     float3 gm;
     float mu = gp_mean_eval(mean, mean_count, x, &gm);
-    *grad = amp * g + gm;
-    return amp * v + mu;
+    *grad = amp * (float3)(ws_hsum(gx), ws_hsum(gy), ws_hsum(gz)) + gm;
+    return amp * ws_hsum(v) + mu;
 }
 
 /* Affine form of the zero-mean part along a ray segment: for every t with |t - tm| <= h,
- *   f(o + t d) - mean = f0 + f1 (t - tm) + e,   |e| <= err (+ round for float rounding).
+ *   f(o + t d) - mean = f0 + f1 (t - tm) + e,   |e| <= err (+ round, for float rounding).
  * Per feature, with c = theta.x(tm) + tau, beta = theta.d, x = beta (t - tm), |x| <= bh:
- *   cos(c + x) = cos c (1 - delta) - sin c x + sin c rho,
+ *   cos(c + x) = cos c (1 - delta) - x sin c + rho sin c,
  *   0 <= delta = 1 - cos x <= bh^2/2,  |rho| = |x - sin x| <= bh^3/6,
- * so centre cos c (1 - bh^2/4), slope -beta sin c, error |cos c| bh^2/4 + |sin c| bh^3/6
- * (half the first-order Lagrange remainder bh^2/2 near extrema, where roots graze). When
- * the trivial range [-1, 1] is narrower (bh >~ 1.5), it is used instead.
+ * so centre cos c (1 - bh^2/4), slope -beta sin c, error |cos c| bh^2/4 + |sin c| bh^3/6:
+ * half the first-order Lagrange remainder bh^2/2 near extrema (where roots graze). Where
+ * the trivial range [-1, 1] is narrower (bh >~ 1.5) it is used instead.
  * Rounding: a feature's computed phase is off by e_i ~ eps (|theta| . |x| + tau + few);
- * the M errors are independent, so they add like a random walk: round is 4 standard
- * deviations of that walk (worst-case sum would be sqrt(M) times larger and never occurs;
- * tests/test_ws_intersect.py checks containment of device evaluations exactly). */
+ * the M errors are independent, so they add like a random walk, and `round` is 4 standard
+ * deviations of it (the worst-case sum, sqrt(M) times larger, never occurs; the tests check
+ * that device point evaluations always lie inside the bounds). */
 typedef struct {
     float f0;
     float f1;
@@ -201,34 +331,30 @@ inline WsAffine ws_affine(GpKernel k, __global const float* order_cdf, int order
 {
     float3 xm = o + tm * d;
     float3 xabs = fabs(o) + (fabs(tm) + h) * fabs(d);
-    float f0 = 0.0f, f1 = 0.0f, err = 0.0f, r2 = 0.0f, w2 = 0.0f;
-    for (int i = 0; i < M; ++i) {
-        float3 th;
-        float tau, w;
-        ws_feature(k, order_cdf, order_count, key, object, i, &th, &tau, &w);
-        float beta = dot(th, d);
-        float s, c = sincos(dot(th, xm) + tau, &s);
-        float bh = fabs(beta) * h, q = 0.5f * bh * bh;
-        float A = c * (1.0f - 0.5f * q);
-        float B = -s * beta;
-        float E = 0.5f * fabs(c) * q + fabs(s) * q * bh * (1.0f / 3.0f);
-        int trivial = fabs(B) * h + E > 1.0f;
-        A = trivial ? 0.0f : A;
-        B = trivial ? 0.0f : B;
-        E = trivial ? 1.0f : E;
-        f0 += w * A;
-        f1 += w * B;
-        err += fabs(w) * E;
-        float e = 6.0f * dot(fabs(th), xabs) + 2.0f * tau + 4.0f;
+    wsf f0 = 0.0f, f1 = 0.0f, err = 0.0f, r2 = 0.0f, w2 = 0.0f;
+    for (int i0 = 0; i0 < M; i0 += WS_LANES) {
+        wsf tx, ty, tz, tau, w;
+        ws_features(k, order_cdf, order_count, key, object, i0, M, &tx, &ty, &tz, &tau, &w);
+        wsf beta = tx * d.x + ty * d.y + tz * d.z;
+        wsf c, s = ws_sincos(tx * xm.x + ty * xm.y + tz * xm.z + tau, &c);
+        wsf bh = fabs(beta) * h, q = 0.5f * bh * bh;
+        wsf A = c * (1.0f - 0.5f * q), B = -s * beta;
+        wsf E = 0.5f * fabs(c) * q + fabs(s) * q * bh * (1.0f / 3.0f);
+        wsi trivial = fabs(B) * h + E > 1.0f;
+        f0 += w * select(A, (wsf)0.0f, trivial);
+        f1 += w * select(B, (wsf)0.0f, trivial);
+        err += fabs(w) * select(E, (wsf)1.0f, trivial);
+        wsf e = 2.0f * (fabs(tx) * xabs.x + fabs(ty) * xabs.y + fabs(tz) * xabs.z)
+              + tau + 2.0f;
         r2 += w * w * e * e;
         w2 += w * w;
     }
     float amp = ws_amplitude(k, M);
     WsAffine out;
-    out.f0 = amp * f0;
-    out.f1 = amp * f1;
-    out.err = amp * err;
-    /* phase errors plus the summation's own rounding (~sqrt(M) eps per unit weight) */
-    out.round = 4.0f * amp * FLT_EPSILON * sqrt(r2 + (float)M * w2);
+    out.f0 = amp * ws_hsum(f0);
+    out.f1 = amp * ws_hsum(f1);
+    out.err = amp * ws_hsum(err);
+    /* phase errors, plus the summation's own rounding (~sqrt(M) eps per unit weight) */
+    out.round = 4.0f * amp * FLT_EPSILON * sqrt(ws_hsum(r2) + (float)M * ws_hsum(w2));
     return out;
 }

@@ -1,0 +1,434 @@
+/* Function-space GPIS free flight: progressive conditioned segments along a ray.
+ * Needs gp_kernel.h built with -DGP_REAL=double, gp_mean.h, fs_linalg.h, philox (rng.h),
+ * and the declarations of function_space_layout.c_declarations(); FS_MAX_ROWS and
+ * FS_SCRATCH_DOUBLES come from function_space_layout.defines().
+ * gpiscl/host/gp/function_space.py is the numpy reference of everything here.
+ *
+ * Conventions (sign as everywhere: f > 0 outside; a hit is the first f >= 0 -> f < 0):
+ *  - Step rule: neighbouring samples have correlation c (FsParams.step_corr, default
+ *    0.9): dt = l sqrt(-2 ln c) / sqrt(d'Ad) for SE, l sqrt(2a (c^(-1/a) - 1) / d'Ad) for
+ *    RQ, bisection on k(t d)/k(0) = c otherwise (a kernel whose correlation never drops
+ *    to c, e.g. a periodic one with large l, gets the curvature lag sqrt(2(1-c)/lambda2)).
+ *    At c = 0.9 one down-crossing in ~55 falls between two samples together with an
+ *    up-crossing and is missed (Rice vs the grid's arccos(c)/(2 pi dt)); c = 0.99: 1 in 600.
+ *  - Placement: segment k starts at the previous segment's last sample t_s (the ray's t0
+ *    for the first) and samples t_i = t_s + (i + u) dt, i < N, with one fresh offset
+ *    u in (0, 1] per segment, so no gap exceeds dt and grids of different rays never
+ *    align. The last segment squeezes dt so that its final sample is exactly t1.
+ *  - Crossing: the first sample with f < 0 whose predecessor (the start point for the
+ *    first) was >= 0 brackets the hit; `refine` bisection steps sample the midpoint
+ *    conditioned on everything (an exact draw of the same realization), then t_hit is
+ *    linear in the final bracket (error O((dt 2^-refine)^2 f'')).
+ *  - Start condition (a ray entering from free space or a surface, and every segment
+ *    start under `none`): f(x(t0)) = v0 with v0 ~ N(mu, k(0)) truncated to [0, inf)
+ *    (the authors' convention: the ray starts outside). Exact inverse-CDF sampler, so a
+ *    ray whose mean at t0 is far inside gets v0 ~ s/|a| just above 0, not an atom at 0.
+ *  - Memory models at a new ray from a vertex / at a segment end without a hit:
+ *      none          fresh start condition at the start point (forgets everything);
+ *      renewal       f(x) = 0 (vertex) or f(end) (segment end); at a vertex the slope
+ *                    along the new direction is free, and we draw it from its prior law
+ *                    truncated to >= 0: the ray leaves to the outside. Consequence: no
+ *                    re-hit atom at t = 0+ (a free slope would send ~half the rays
+ *                    straight back inside, i.e. an immediate second scattering at the
+ *                    vertex, which is what the reference's `dori` does), and the slope is
+ *                    independent of the vertex's sampled normal;
+ *      renewal_plus  value and the slope along the new direction: g . d_new at a vertex
+ *                    (g . d_new < 0, e.g. transmission, starts the ray inside), the
+ *                    conditioned d_d f at a segment end;
+ *      global        every observation of the path so far (values along all segments
+ *                    before each hit, and at each hit f = 0 plus the three gradient
+ *                    components, each derivative with its own direction), the most
+ *                    recent `cap` of them; the path's observations live in a per-path
+ *                    ring of capacity cap (FsVertex.obs_end/obs_count).
+ *  - Normal at a hit: the slope along d is the final bracket's difference quotient (< 0
+ *    by construction); the tangential components are drawn from their conditional law
+ *    given all rows, f(x_h) = 0 and that slope. Isotropic radial kernels (SE, RQ,
+ *    thin-plate with equal aniso) under none/renewal/renewal_plus have every row on the
+ *    ray, and cov(d_T f(x_h), anything on the ray) = 0, so the closed form
+ *    N(T . grad mu(x_h), -2k'(0) I_2) is used; anisotropic/product kernels and the global
+ *    model take the general conditional (four appended rows).
+ *  - Random numbers: philox4x32, key (seed, FS_PHILOX_KEY) (rng.h uses another key
+ *    word), counter (pixel, sample, bounce, stream << 28 | segment << 12 | block): one
+ *    block = two 53-bit uniforms; fixed block numbers per draw (targets by their index in
+ *    the segment, so all memory models share a fresh ray's first segment), so results
+ *    are independent of batching and queue order. `stream` separates the rays traced
+ *    from one vertex (e.g. 0 continuation, 1 light-sample shadow, 2 BSDF-sample shadow).
+ */
+typedef char fs_gp_real_must_be_double[sizeof(GP_REAL) == 8 ? 1 : -1];
+
+#ifndef FS_MAX_ROWS
+#define FS_MAX_ROWS 107
+#endif
+#ifndef FS_SCRATCH_DOUBLES
+#define FS_SCRATCH_DOUBLES (10 * FS_MAX_ROWS + FS_MAX_ROWS * (FS_MAX_ROWS + 1) / 2)
+#endif
+#ifndef FS_MAX_SEGMENTS
+#define FS_MAX_SEGMENTS 4096
+#endif
+#define FS_PHILOX_KEY 0x3c6ef372u
+#define FS_TN_TAIL 30.0            /* beyond: exact rejection tail, erfc would underflow */
+#define FS_SLOT_REFINE 512         /* normal slots: targets 0..511, then these */
+#define FS_SLOT_END 576
+#define FS_SLOT_NORMAL 578
+#define FS_U_GRID 1024             /* uniform blocks */
+#define FS_U_START 1025            /* and the 16 after it (tail rejection retries) */
+
+typedef struct { uint seed, pixel, sample, bounce, stream; } FsRng;
+typedef struct { int samples, memory, cap, refine; double step_corr; } FsParams;
+typedef struct { double3 o, d; double t0, t1; } FsRay;
+typedef struct {
+    __global FsObs* rows;
+    __global double* L;
+    __global double* e;
+    __global double* mu;
+} FsScratch;
+typedef struct {
+    int status, hit;
+    double t;               /* hit distance, or t1 */
+    double3 grad;           /* sampled gradient of f at the hit (outward, grad . d < 0) */
+    int segments, samples;  /* work done */
+    int new_first, new_end, hit_row;  /* global: rows this ray adds to the path's memory */
+} FsResult;
+
+inline FsScratch fs_scratch(__global double* base, int item)
+{
+    __global double* s = base + (size_t)item * FS_SCRATCH_DOUBLES;
+    FsScratch S;
+    S.rows = (__global FsObs*)s;
+    S.L = s + 8 * FS_MAX_ROWS;
+    S.e = S.L + FS_MAX_ROWS * (FS_MAX_ROWS + 1) / 2;
+    S.mu = S.e + FS_MAX_ROWS;
+    return S;
+}
+
+inline double2 fs_uniform2(FsRng r, uint seg, uint block)
+{
+    philox4x32_ctr_t c = {{r.pixel, r.sample, r.bounce,
+                           (r.stream << 28) | ((seg & 0xffffu) << 12) | (block & 0xfffu)}};
+    philox4x32_key_t k = {{r.seed, FS_PHILOX_KEY}};
+    philox4x32_ctr_t x = philox4x32(c, k);
+    const double s = 1.0 / 9007199254740992.0;   /* 2^-53: uniforms in [0, 1) */
+    return (double2)((double)(((ulong)x.v[0] << 21) ^ (x.v[1] >> 11)) * s,
+                     (double)(((ulong)x.v[2] << 21) ^ (x.v[3] >> 11)) * s);
+}
+
+inline double fs_normal(FsRng r, uint seg, uint slot)
+{
+    double2 u = fs_uniform2(r, seg, slot >> 1);
+    double rad = sqrt(-2.0 * log(1.0 - u.x)), ang = 2.0 * M_PI * u.y;
+    return (slot & 1) ? rad * sin(ang) : rad * cos(ang);
+}
+
+/* Upper tail Q(x) = P(Z > x), and its inverse: Abramowitz-Stegun 26.2.23 (|err| < 5e-4)
+ * polished by two Halley steps on Q(x) = q (cubic: ~1e-15 relative, tails included). */
+inline double fs_q(double x) { return 0.5 * erfc(x * M_SQRT1_2); }
+
+inline double fs_qinv(double q)
+{
+    q = clamp(q, DBL_MIN, 1.0 - DBL_EPSILON);
+    double p = fmin(q, 1.0 - q), t = sqrt(-2.0 * log(p));
+    double x = t - (2.515517 + t * (0.802853 + t * 0.010328))
+                 / (1.0 + t * (1.432788 + t * (0.189269 + t * 0.001308)));
+    if (q > 0.5) x = -x;
+    for (int it = 0; it < 2; ++it) {
+        double u = (fs_q(x) - q) * 2.5066282746310002 * exp(0.5 * x * x);
+        x += u / (1.0 - 0.5 * x * u);
+    }
+    return x;
+}
+
+/* x ~ N(mu, s^2) conditioned on x >= 0, by inverting the truncated CDF in double. The
+ * lower tail (a < 0) inverts Phi and the upper tail Q, so both stay accurate where the
+ * truncated mass is tiny; past FS_TN_TAIL standard deviations below 0, Marsaglia's tail
+ * sampler with its acceptance test (the reference dropped the test: a Rayleigh tail). */
+inline double fs_truncnorm_pos(double mu, double s, FsRng rng, uint seg, uint block)
+{
+    if (!(s > 0.0)) return fmax(mu, 0.0);
+    double a = -mu / s, z = a;
+    if (a > FS_TN_TAIL) {
+        for (uint k = 0; k < 16; ++k) {            /* acceptance > 99.8% */
+            double2 u = fs_uniform2(rng, seg, block + 1 + k);
+            double x = sqrt(a * a - 2.0 * log(1.0 - u.x));
+            if (u.y * x <= a) { z = x; break; }
+        }
+    } else {
+        double u = fs_uniform2(rng, seg, block).x;
+        z = a < 0.0 ? -fs_qinv(fs_q(-a) + u * fs_q(a))    /* Phi(z) = Phi(a) + u Q(a) */
+                    : fs_qinv(fs_q(a) * (1.0 - u));        /* Q(z) = Q(a) (1 - u) */
+    }
+    return fmax(mu + s * fmax(z, a), 0.0);
+}
+
+inline double fs_corr(GpKernel p, double3 d, double t)
+{
+    return gp_kernel_value(p, t * d) / gp_kernel_value(p, (double3)(0.0));
+}
+
+/* The lag dt with corr(f(x), f(x + dt d)) = c (stationary kernels: independent of x). */
+inline double fs_step(GpKernel p, double3 d, double c)
+{
+    double dad = dot(gp_aniso(p) * d, d), l = p.length_scale;
+    if (p.kind == GP_KERNEL_SQUARED_EXPONENTIAL) return l * sqrt(-2.0 * log(c) / dad);
+    if (p.kind == GP_KERNEL_RATIONAL_QUADRATIC) {
+        double a = p.alpha;
+        return l * sqrt(2.0 * a * (pow(c, -1.0 / a) - 1.0) / dad);
+    }
+    double3 o = (double3)(0.0);
+    double lam = gp_cov(p, o, d, 1, o, d, 1) / gp_kernel_value(p, o);
+    double lo = 0.0, hi = sqrt(2.0 * (1.0 - c) / lam);
+    int k = 0;
+    for (; k < 40 && fs_corr(p, d, hi) > c; ++k) { lo = hi; hi *= 2.0; }
+    if (k == 40) return sqrt(2.0 * (1.0 - c) / lam);
+    for (k = 0; k < 60; ++k) {
+        double mid = 0.5 * (lo + hi);
+        if (fs_corr(p, d, mid) > c) lo = mid; else hi = mid;
+    }
+    return 0.5 * (lo + hi);
+}
+
+inline FsObs fs_obs(double3 x, double3 u, int kind, double value)
+{
+    FsObs o = {x.x, x.y, x.z, u.x, u.y, u.z, value, kind, 0};
+    return o;
+}
+
+inline double3 fs_pos(__global const FsObs* o) { return (double3)(o->px, o->py, o->pz); }
+inline double3 fs_dir(__global const FsObs* o) { return (double3)(o->ux, o->uy, o->uz); }
+
+inline double fs_prior_mean(__global const MeanNode* mean, int mc, double3 x, double3 u,
+                            int kind)
+{
+    float3 g;
+    float v = gp_mean_eval(mean, mc, convert_float3(x), &g);
+    return kind == FS_OBS_DERIV ? dot(convert_double3(g), u) : (double)v;
+}
+
+/* Prior means, covariance rows and factor of rows [from, n). */
+inline int fs_factor(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
+                     int from, int n)
+{
+    for (int i = from; i < n; ++i) {
+        __global const FsObs* ri = S.rows + i;
+        double3 xi = fs_pos(ri), ui = fs_dir(ri);
+        S.mu[i] = fs_prior_mean(mean, mc, xi, ui, ri->kind);
+        __global double* Li = S.L + fs_tri(i);
+        for (int j = 0; j <= i; ++j) {
+            __global const FsObs* rj = S.rows + j;
+            Li[j] = gp_cov(p, fs_pos(rj), fs_dir(rj), rj->kind, xi, ui, ri->kind);
+        }
+    }
+    return fs_cholesky(S.L, from, n, 0);
+}
+
+/* Append one row at index i, conditioned on rows [0, i): sampled (returns the draw) or,
+ * if `observed`, whitened at `value`. */
+inline double fs_append(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
+                        int i, FsObs o, int observed, double z, int* status)
+{
+    S.rows[i] = o;
+    int st = fs_factor(p, mean, mc, S, i, i + 1);
+    if (st) { *status = st; return NAN; }
+    if (observed) { fs_whiten_row(S.L, S.e, i, o.value, S.mu[i]); return o.value; }
+    double v = fs_sample_row(S.L, S.e, i, S.mu[i], z);
+    S.rows[i].value = v;
+    return v;
+}
+
+inline void fs_frame(double3 n, double3* t, double3* b)   /* Duff et al. 2017 */
+{
+    double sign = copysign(1.0, n.z), a = -1.0 / (sign + n.z), c = n.x * n.y * a;
+    *t = (double3)(1.0 + sign * n.x * n.x * a, sign * c, -sign * n.x);
+    *b = (double3)(c, sign + n.y * n.y * a, -n.y);
+}
+
+inline int fs_isotropic_radial(GpKernel p)
+{
+    return (p.kind == GP_KERNEL_SQUARED_EXPONENTIAL || p.kind == GP_KERNEL_RATIONAL_QUADRATIC
+            || p.kind == GP_KERNEL_THIN_PLATE)
+        && p.aniso.x == p.aniso.y && p.aniso.y == p.aniso.z;
+}
+
+/* Conditioning rows [0, m) of a new ray from vertex v (v.valid == 0: fresh entry); sets
+ * the start value, whether the ray starts outside, and how many rows came from the ring. */
+inline int fs_begin(GpKernel p, __global const MeanNode* mean, int mc, FsParams prm,
+                    FsRay ray, FsVertex v, __global const FsObs* ring, FsRng rng,
+                    FsScratch S, double* f0, int* outside, int* n_old)
+{
+    double3 d = ray.d / length(ray.d), g = convert_double3(v.grad.xyz);
+    *n_old = 0;
+    *outside = 1;
+    if (v.valid && prm.memory == GPIS_MEMORY_GLOBAL && v.obs_count > 0 && ring) {
+        int cnt = min(v.obs_count, prm.cap);
+        for (int k = 0; k < cnt; ++k) S.rows[k] = ring[(v.obs_end - cnt + k) % prm.cap];
+        *n_old = cnt;
+        *f0 = v.pos.w;
+        *outside = dot(g, d) >= 0.0;
+        return cnt;
+    }
+    if (v.valid && (prm.memory == GPIS_MEMORY_RENEWAL
+                    || prm.memory == GPIS_MEMORY_RENEWAL_PLUS)) {
+        double3 x = convert_double3(v.pos.xyz);
+        double s = dot(g, d);
+        if (prm.memory == GPIS_MEMORY_RENEWAL)   /* value and slope: independent at a point */
+            s = fs_truncnorm_pos(fs_prior_mean(mean, mc, x, d, FS_OBS_DERIV),
+                                 sqrt(gp_cov(p, x, d, 1, x, d, 1)), rng, 0, FS_U_START);
+        S.rows[0] = fs_obs(x, d, FS_OBS_VALUE, v.pos.w);
+        S.rows[1] = fs_obs(x, d, FS_OBS_DERIV, s);
+        *f0 = v.pos.w;
+        *outside = s >= 0.0;
+        return 2;
+    }
+    double3 x = ray.o + ray.t0 * ray.d;
+    *f0 = fs_truncnorm_pos(fs_prior_mean(mean, mc, x, d, FS_OBS_VALUE),
+                           sqrt(gp_kernel_value(p, (double3)(0.0))), rng, 0, FS_U_START);
+    S.rows[0] = fs_obs(x, d, FS_OBS_VALUE, *f0);
+    return 1;
+}
+
+/* Free flight along [ray.t0, ray.t1] inside one GPIS object: the first crossing, or none.
+ * Shadow rays and continuation rays alike; only the continuation then calls
+ * fs_vertex_at_hit. ray.d need not be unit (t is the ray parameter). */
+inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc,
+                               FsParams prm, FsRay ray, FsVertex v,
+                               __global const FsObs* ring, FsRng rng, FsScratch S)
+{
+    FsResult res = {0, 0, ray.t1, (double3)(0.0), 0, 0, 0, 0, -1};
+    double f_prev;
+    int outside, n_old, factored = 0;
+    int m = fs_begin(p, mean, mc, prm, ray, v, ring, rng, S, &f_prev, &outside, &n_old);
+    double dlen = length(ray.d), dtc = fs_step(p, ray.d, prm.step_corr);
+    double3 dn = ray.d / dlen;
+    if (!(dtc > 0.0) || !isfinite(dtc)) { res.status = FS_STATUS_NAN; return res; }
+    double t = ray.t0, t_prev = ray.t0;
+    int seg = 0;
+    for (; seg < FS_MAX_SEGMENTS && t < ray.t1; ++seg) {
+        double rem = ray.t1 - t, u = 1.0 - fs_uniform2(rng, seg, FS_U_GRID).x, dt = dtc;
+        int n = prm.samples, last = (n - 1 + u) * dtc >= rem;
+        if (last) {
+            n = clamp((int)ceil(rem / dtc + 1.0 - u), 1, prm.samples);
+            dt = rem / (n - 1 + u);
+        }
+        if (m + n + prm.refine + 1 + FS_HIT_ROWS > FS_MAX_ROWS) {
+            res.status = FS_STATUS_ROWS;
+            return res;
+        }
+        for (int i = 0; i < n; ++i) {
+            double ti = (last && i == n - 1) ? ray.t1 : t + (i + u) * dt;
+            S.rows[m + i] = fs_obs(ray.o + ti * ray.d, dn, FS_OBS_VALUE, ti);
+        }
+        int st = fs_factor(p, mean, mc, S, factored, m + n);
+        if (st) { res.status = st; return res; }
+        for (int i = factored; i < m; ++i) fs_whiten_row(S.L, S.e, i, S.rows[i].value, S.mu[i]);
+        res.segments++;
+        int hit = -1;
+        double ta = t_prev, fa = f_prev, tb = 0.0, fb = 0.0;
+        for (int i = 0; i < n; ++i) {
+            double ti = S.rows[m + i].value;     /* t parked in value until sampled */
+            double f = fs_sample_row(S.L, S.e, m + i, S.mu[m + i], fs_normal(rng, seg, i));
+            S.rows[m + i].value = f;
+            res.samples++;
+            if (isnan(f)) { res.status = FS_STATUS_NAN; return res; }
+            if (outside && f < 0.0) { hit = i; tb = ti; fb = f; break; }
+            outside = f >= 0.0;
+            ta = ti;
+            fa = f;
+        }
+        if (hit >= 0) {
+            int row = m + hit + 1;               /* unsampled targets are overwritten */
+            for (int k = 0; k < prm.refine; ++k, ++row) {
+                double tm = 0.5 * (ta + tb);
+                double f = fs_append(p, mean, mc, S, row,
+                                     fs_obs(ray.o + tm * ray.d, dn, FS_OBS_VALUE, 0.0), 0,
+                                     fs_normal(rng, seg, FS_SLOT_REFINE + k), &res.status);
+                if (res.status) return res;
+                if (f >= 0.0) { ta = tm; fa = f; } else { tb = tm; fb = f; }
+            }
+            res.hit = 1;
+            res.t = ta + (tb - ta) * fa / (fa - fb);
+            double sd = (fb - fa) / ((tb - ta) * dlen);   /* slope per unit length */
+            double3 x = ray.o + res.t * ray.d, T, B;
+            fs_frame(dn, &T, &B);
+            double z1 = fs_normal(rng, seg, FS_SLOT_NORMAL);
+            double z2 = fs_normal(rng, seg, FS_SLOT_NORMAL + 1);
+            double q1, q2;
+            if (fs_isotropic_radial(p) && prm.memory != GPIS_MEMORY_GLOBAL) {
+                q1 = fs_prior_mean(mean, mc, x, T, FS_OBS_DERIV)
+                   + sqrt(gp_cov(p, x, T, 1, x, T, 1)) * z1;
+                q2 = fs_prior_mean(mean, mc, x, B, FS_OBS_DERIV)
+                   + sqrt(gp_cov(p, x, B, 1, x, B, 1)) * z2;
+            } else {
+                res.hit_row = row;
+                fs_append(p, mean, mc, S, row, fs_obs(x, dn, FS_OBS_VALUE, 0.0), 1, 0.0,
+                          &res.status);
+                fs_append(p, mean, mc, S, row + 1, fs_obs(x, dn, FS_OBS_DERIV, sd), 1, 0.0,
+                          &res.status);
+                q1 = fs_append(p, mean, mc, S, row + 2, fs_obs(x, T, FS_OBS_DERIV, 0.0), 0,
+                               z1, &res.status);
+                q2 = fs_append(p, mean, mc, S, row + 3, fs_obs(x, B, FS_OBS_DERIV, 0.0), 0,
+                               z2, &res.status);
+            }
+            res.grad = T * q1 + B * q2 + dn * sd;
+            res.new_first = n_old;
+            res.new_end = m + hit;
+            return res;
+        }
+        if (last) { t = ray.t1; break; }
+        /* no crossing: the next segment starts at this one's last sample */
+        int e = m + n - 1;
+        double3 xe = fs_pos(S.rows + e);
+        t = t_prev = t + (n - 1 + u) * dt;
+        f_prev = S.rows[e].value;
+        if (prm.memory == GPIS_MEMORY_GLOBAL) {
+            int drop = max(m + n - prm.cap, 0);
+            for (int i = drop; i < m + n; ++i) S.rows[i - drop] = S.rows[i];
+            n_old = max(n_old - drop, 0);
+            m = m + n - drop;
+            factored = drop ? 0 : m;   /* a kept prefix keeps its factor; e of a target is z */
+        } else if (prm.memory == GPIS_MEMORY_RENEWAL_PLUS) {
+            double s = fs_append(p, mean, mc, S, e + 1, fs_obs(xe, dn, FS_OBS_DERIV, 0.0), 0,
+                                 fs_normal(rng, seg, FS_SLOT_END), &res.status);
+            if (res.status) return res;
+            S.rows[0] = fs_obs(xe, dn, FS_OBS_VALUE, f_prev);
+            S.rows[1] = fs_obs(xe, dn, FS_OBS_DERIV, s);
+            m = 2;
+            factored = 0;
+        } else {
+            if (prm.memory != GPIS_MEMORY_RENEWAL) {   /* none: a fresh start condition */
+                f_prev = fs_truncnorm_pos(S.mu[e], sqrt(gp_kernel_value(p, (double3)(0.0))),
+                                          rng, seg + 1, FS_U_START);
+                outside = 1;
+            }
+            S.rows[0] = fs_obs(xe, dn, FS_OBS_VALUE, f_prev);
+            m = 1;
+            factored = 0;
+        }
+    }
+    if (t < ray.t1) res.status = FS_STATUS_SEGMENTS;
+    return res;
+}
+
+/* The vertex record of a continuation ray's hit. For the global model it appends this
+ * ray's observations (values before the crossing, f(x_h) = 0, the three gradient
+ * components) to the path's ring of capacity prm.cap. Call only for the continuation
+ * ray, after the previous vertex's shadow rays were traced (they read the ring). */
+inline FsVertex fs_vertex_at_hit(FsParams prm, FsRay ray, FsResult r, FsVertex prev,
+                                 __global FsObs* ring, FsScratch S)
+{
+    FsVertex v;
+    v.pos = (float4)(convert_float3(ray.o + r.t * ray.d), 0.0f);
+    v.grad = (float4)(convert_float3(r.grad), 0.0f);
+    v.valid = 1;
+    v.obs_end = prev.valid ? prev.obs_end : 0;
+    v.obs_count = prev.valid ? prev.obs_count : 0;
+    v.pad = 0;
+    if (prm.memory == GPIS_MEMORY_GLOBAL && ring && r.hit_row >= 0) {
+        int k = r.new_end - r.new_first;
+        for (int i = 0; i < k + FS_HIT_ROWS; ++i) {
+            int src = i < k ? r.new_first + i : r.hit_row + i - k;
+            ring[v.obs_end % prm.cap] = S.rows[src];
+            v.obs_end++;
+        }
+        v.obs_count = min(v.obs_count + k + FS_HIT_ROWS, prm.cap);
+    }
+    return v;
+}

@@ -1,0 +1,41 @@
+/* From: ray queue `in` with surface hits.  To: hits moved to the first zero crossing of
+ * the path's weight-space realization of any GPIS object, with its analytic normal. */
+__kernel void gpis_weight_space(__constant RenderParams* params, int num_rays,
+                                PATH_PARAMS(path), RAY_PARAMS(in),
+                                __global const GpisObject* gpis,
+                                __global const GpKernel* kernels,
+                                __global const MeanNode* means,
+                                __global const float* order_table,
+                                __global int* counters)
+{
+    int i = get_global_id(0);
+    if (i >= num_rays) return;
+    float4 o = in_o[i], d = in_d[i];
+    int p = in_path[i];
+    uint2 key = gpis_realization_key(params, path_pixel[p], path_sample[p]);
+    float t_hit = in_hit_t[i];
+    int hit = -1;
+    float3 n_hit = (float3)(0.0f);
+    for (int k = 0; k < params->num_gpis; ++k) {
+        __global const GpisObject* g = &gpis[k];
+        float t0 = o.w, t1 = t_hit;
+        if (g->sampler != GPIS_SAMPLER_WEIGHT_SPACE || !gpis_proxy_clip(g, o.xyz, d.xyz, &t0, &t1))
+            continue;
+        float3 n;
+        int status = 0;
+        float t = ws_first_root(kernels[k], means + g->mean_first, g->mean_count,
+                                order_table + g->order_first, g->order_count, g->features, key, k,
+                                o.xyz, d.xyz, t0, t1, g->tolerance, &n, &status);
+        if (status) atomic_inc(&counters[COUNT_GPIS_FAILED]);
+        if (t < t_hit) {
+            t_hit = t;
+            hit = k;
+            n_hit = n;
+        }
+    }
+    if (hit >= 0) {
+        in_hit_t[i] = t_hit;
+        in_hit_prim[i] = GPIS_HIT_BASE - hit;
+        in_hit_n[i] = (float4)(n_hit, 0.0f);
+    }
+}

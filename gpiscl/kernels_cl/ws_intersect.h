@@ -1,0 +1,222 @@
+/* First root of a weight-space realization along a ray, with guaranteed range bounds.
+ * Needs ws_features.h (and gp_mean.h). The one-sided convention of the reference: a hit is
+ * a crossing from f >= 0 to f < 0; a ray that starts inside (f(t0) < 0) must first come
+ * back to f >= 0.
+ *
+ * Bounds over a ray interval [a, b]: the features' affine form (ws_affine) plus the mean's
+ * Lipschitz cone through both end values,
+ *   max(mu_a - L (t - a), mu_b - L (b - t)) <= mean(t) <= min(mu_a + L (t - a), mu_b + L (b - t)),
+ * L = Lip(mean) |d|. Their sums are piecewise-linear lower/upper bounds of f with one kink
+ * each (WsTents); they are exact for a linear mean of slope +-L (a plane seen head-on) and
+ * hold for any mean whose gradient norm is <= Lip (ws_mean_lipschitz).
+ *
+ * Search: a certified prefix [a, x_safe] where the bound proves "no crossing yet" advances
+ * a; a point x_opp where the bound proves the opposite sign shrinks the bracket (a, c].
+ * Steps double after an interval is certified whole and halve when little was certified.
+ * Because only bounds ever skip ray length, no crossing is missed: a dip of f below zero
+ * between any two samples is inside some interval whose lower bound is negative. The only
+ * approximation is at the resolution `tol`: an interval narrower than tol whose bound
+ * straddles zero is decided by a point evaluation at its end (see the loop).
+ * Near a simple root the form's error is O(h^2) (plus rounding), so brackets shrink
+ * quadratically, like interval Newton.
+ */
+#define WS_STATUS_OK 0
+#define WS_STATUS_ITER_CAP 1   /* WS_MAX_ITER bound evaluations without a decision */
+#define WS_STATUS_NAN 2        /* NaN realization (thin-plate kernel, bad mean program) */
+/* Each iteration costs one bound (M features and two mean evaluations). A segment costs
+ * about (length / marching step) + ~10 per crossing iterations, the step being ~l/2
+ * where |f| ~ sigma, so 4096 allows segments ~1000 length scales long. */
+#ifndef WS_MAX_ITER
+#define WS_MAX_ITER 4096
+#endif
+
+/* Lipschitz constant of a packed mean program in world units: max over leaves of
+ * |scale| ||M||_2 Lip(primitive) (smooth/sharp unions, intersections and differences never
+ * exceed their children's). Distance primitives are 1-Lipschitz, a plane |scale|, a
+ * constant 0; pack_mean's transform scale 1/||M^-1|| keeps scale ||M|| ~ 1 for rigid and
+ * uniformly scaled transforms. ||M||_2^2 <= max row sum of |M M^T| (Gershgorin), exact for
+ * scaled rotations. */
+inline float ws_mean_lipschitz(__global const MeanNode* nodes, int count)
+{
+    float lip = 0.0f;
+    for (int i = 0; i < count; ++i) {
+        __global const MeanNode* n = nodes + i;
+        if (n->kind >= GP_MEAN_FIRST_OP) continue;
+        float prim = n->kind == GP_MEAN_CONSTANT ? 0.0f
+                   : n->kind == GP_MEAN_PLANE ? fabs(n->p0.y) : 1.0f;
+        float3 r0 = n->row0.xyz, r1 = n->row1.xyz, r2 = n->row2.xyz;
+        float g01 = fabs(dot(r0, r1)), g02 = fabs(dot(r0, r2)), g12 = fabs(dot(r1, r2));
+        float s2 = fmax(dot(r0, r0) + g01 + g02,
+                        fmax(dot(r1, r1) + g01 + g12, dot(r2, r2) + g02 + g12));
+        lip = fmax(lip, fabs(n->scale) * sqrt(s2) * prim);
+    }
+    return lip;
+}
+
+/* Piecewise-linear bounds of f over [a, b]: lo through (a, lo_a), (lo_k, lo_m), (b, lo_b)
+ * and hi through (a, hi_a), (hi_k, hi_m), (b, hi_b). */
+typedef struct {
+    float lo_k, lo_a, lo_m, lo_b;
+    float hi_k, hi_a, hi_m, hi_b;
+    float round;   /* the rounding part: point evaluations are within it of the true f */
+} WsTents;
+
+inline WsTents ws_tents(GpKernel k, __global const MeanNode* mean, int mean_count,
+                        __global const float* order_cdf, int order_count, int M, uint2 key,
+                        int object, float3 o, float3 d, float a, float b, float lip)
+{
+    float tm = 0.5f * (a + b), h = 0.5f * (b - a);
+    WsAffine af = ws_affine(k, order_cdf, order_count, M, key, object, o, d, tm, h);
+    float3 g;
+    float ma = gp_mean_eval(mean, mean_count, o + a * d, &g);
+    float mb = gp_mean_eval(mean, mean_count, o + b * d, &g);
+    float lt = lip * length(d);
+    /* mean rounding: its value, and the rounded point (|dx| ~ eps |x|) moved by lip */
+    float3 xabs = fabs(o) + fmax(fabs(a), fabs(b)) * fabs(d);
+    float round = af.round
+                + 8.0f * FLT_EPSILON * (fabs(ma) + fabs(mb) + lip * (xabs.x + xabs.y + xabs.z));
+    float r = af.err + round;
+    float inv2l = 0.5f / fmax(lt, FLT_MIN);
+    WsTents T;
+    T.round = round;
+    T.lo_k = lt > 0.0f ? clamp(tm + (ma - mb) * inv2l, a, b) : tm;
+    T.hi_k = lt > 0.0f ? clamp(tm + (mb - ma) * inv2l, a, b) : tm;
+    float c0 = af.f0 - af.f1 * h, c1 = af.f0 + af.f1 * h;   /* feature centre at a, b */
+    T.lo_a = c0 - r + fmax(ma, mb - lt * (b - a));
+    T.lo_b = c1 - r + fmax(ma - lt * (b - a), mb);
+    T.lo_m = af.f0 + af.f1 * (T.lo_k - tm) - r
+           + fmax(ma - lt * (T.lo_k - a), mb - lt * (b - T.lo_k));
+    T.hi_a = c0 + r + fmin(ma, mb + lt * (b - a));
+    T.hi_b = c1 + r + fmin(ma + lt * (b - a), mb);
+    T.hi_m = af.f0 + af.f1 * (T.hi_k - tm) + r
+           + fmin(ma + lt * (T.hi_k - a), mb + lt * (b - T.hi_k));
+    return T;
+}
+
+/* First t in [a, b] where the 2-piece linear function through (a, pa), (k, pk), (b, pb) is
+ * negative; T_INFINITY if none. */
+inline float ws_first_negative(float a, float pa, float k, float pk, float b, float pb)
+{
+    if (pa < 0.0f) return a;
+    if (pk < 0.0f) return a + (k - a) * (pa / (pa - pk));
+    if (pb < 0.0f) return k + (b - k) * (pk / (pk - pb));
+    return T_INFINITY;
+}
+
+/* The first t in (t0, t1] where the realization crosses from >= 0 to < 0, to within tol
+ * (the returned t is the end of the final bracket, a point with f < 0), or T_INFINITY if
+ * there is none. normal = grad f / |grad f| at the returned t. *status: WS_STATUS_OK, or
+ * WS_STATUS_ITER_CAP / WS_STATUS_NAN with T_INFINITY returned (the caller must count or
+ * kill such rays: "no hit" is then not proven). d need not be unit length; t is in units
+ * of d. tol is raised to the float resolution of t where needed. */
+inline float ws_first_root_counted(GpKernel k, __global const MeanNode* mean,
+                                   int mean_count, __global const float* order_cdf,
+                                   int order_count, int M, uint2 key, int object, float3 o,
+                                   float3 d, float t0, float t1, float tol, float3* normal,
+                                   int* status, int* iterations)
+{
+    *status = WS_STATUS_OK;
+    *iterations = 0;
+    *normal = (float3)(0.0f);
+    if (!(t1 > t0)) return T_INFINITY;
+    float lip = ws_mean_lipschitz(mean, mean_count);
+    float tres = 4.0f * FLT_EPSILON * (fabs(t0) + fabs(t1) + length(o) / length(d));
+    tol = fmax(tol, 2.0f * tres);
+    float h0 = 0.5f * rsqrt(fmax(ws_lambda2(k, d), 1e-30f));
+    float3 g;
+    float f = ws_eval(k, mean, mean_count, order_cdf, order_count, M, key, object,
+                      o + t0 * d, &g);
+    if (isnan(f)) {
+        *status = WS_STATUS_NAN;
+        return T_INFINITY;
+    }
+    /* sgn = +1: outside, looking for f < 0; -1: inside, looking for f >= 0 */
+    float sgn = f < 0.0f ? -1.0f : 1.0f;
+    float a = t0, c = T_INFINITY, step = h0, hit = T_INFINITY;
+    int done = 0;
+    int it;
+    for (it = 0; it < WS_MAX_ITER && !done; ++it) {
+        if (c - a <= tol) {            /* the sign change is bracketed in (a, c] */
+            if (sgn > 0.0f) {
+                hit = c;
+                done = 1;
+            } else {                   /* back outside at c: now look for the hit */
+                sgn = 1.0f;
+                a = c;
+                c = T_INFINITY;
+                step = h0;
+            }
+            continue;
+        }
+        if (a >= t1) {
+            done = 1;
+            continue;
+        }
+        float b = fmin(fmin(a + step, t1), c);
+        WsTents T = ws_tents(k, mean, mean_count, order_cdf, order_count, M, key, object,
+                             o, d, a, b, lip);
+        /* bounds of phi = sgn f: certified "same sign" where phi_lo >= 0, opposite
+         * where phi_hi < 0 */
+        float x_safe, x_opp;
+        if (sgn > 0.0f) {
+            x_safe = ws_first_negative(a, T.lo_a, T.lo_k, T.lo_m, b, T.lo_b);
+            x_opp = ws_first_negative(a, T.hi_a, T.hi_k, T.hi_m, b, T.hi_b);
+        } else {
+            x_safe = ws_first_negative(a, -T.hi_a, T.hi_k, -T.hi_m, b, -T.hi_b);
+            x_opp = ws_first_negative(a, -T.lo_a, T.lo_k, -T.lo_m, b, -T.lo_b);
+        }
+        if (isnan(T.lo_a + T.lo_m + T.lo_b + T.hi_a + T.hi_m + T.hi_b)) {
+            *status = WS_STATUS_NAN;
+            return T_INFINITY;
+        }
+        c = fmin(c, x_opp);
+        if (x_safe >= b) {             /* the whole interval is certified */
+            a = b;
+            step *= 2.0f;
+            continue;
+        }
+        float width = b - a, gained = x_safe - a;
+        a = x_safe;
+        float rest = b - a;
+        if (c - a <= tol) continue;
+        if (rest <= tol) {
+            /* too narrow for the bound to decide: the sign at its end does. A dip of f
+             * below zero that starts and ends inside such an interval is at most
+             * max|f''| tol^2 / 8 deep (~1e-8 sigma for tol = 1e-4 l), far below float
+             * noise, so accepting the interval misses nothing resolvable. Leaving the
+             * inside needs f clear of rounding noise, else noise just after an
+             * up-crossing could fake a hit there. */
+            f = ws_eval(k, mean, mean_count, order_cdf, order_count, M, key, object,
+                        o + b * d, &g);
+            if (sgn > 0.0f ? f < 0.0f : f > T.round)
+                c = b;
+            else
+                a = b;
+            step = rest;
+            continue;
+        }
+        step = gained >= 0.5f * width ? rest : 0.5f * rest;
+    }
+    *iterations = it;
+    if (!done) {
+        *status = WS_STATUS_ITER_CAP;
+        return T_INFINITY;
+    }
+    if (hit < T_INFINITY) {
+        ws_eval(k, mean, mean_count, order_cdf, order_count, M, key, object, o + hit * d, &g);
+        float gl = length(g);
+        *normal = gl > 0.0f && isfinite(gl) ? g / gl : -d / length(d);
+    }
+    return hit;
+}
+
+/* ws_first_root_counted without the iteration count (the count is for profiling). */
+inline float ws_first_root(GpKernel k, __global const MeanNode* mean, int mean_count,
+                           __global const float* order_cdf, int order_count, int M,
+                           uint2 key, int object, float3 o, float3 d, float t0, float t1,
+                           float tol, float3* normal, int* status)
+{
+    int iterations;
+    return ws_first_root_counted(k, mean, mean_count, order_cdf, order_count, M, key, object,
+                                 o, d, t0, t1, tol, normal, status, &iterations);
+}

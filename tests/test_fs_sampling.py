@@ -1,0 +1,159 @@
+"""fs_sampling.h on the device: truncated normal, step rule, free flight and normals
+against analytic laws, dense joint samples and the numpy reference."""
+import math
+from statistics import NormalDist
+
+import numpy as np
+import pyopencl as cl
+import pytest
+
+from gpiscl.host.gp import (Constant, Plane, RationalQuadratic, SquaredExponential,
+                            ThinPlate, Periodic, device_layout)
+from gpiscl.host.gp import function_space as FS
+from gpiscl.host.gp import function_space_layout as FL
+from gpiscl.host.layouts import GPIS_MEMORIES
+from tests.stats import z_threshold
+
+WRAPPERS = r"""
+__kernel void tn_draw(double mu, double s, uint seed, __global double* out)
+{
+    int i = get_global_id(0);
+    FsRng rng = {seed, (uint)i, 0u, 0u, 0u};
+    out[i] = fs_truncnorm_pos(mu, s, rng, 0u, FS_U_START);
+}
+
+__kernel void step_rule(__global const GpKernel* kp, __global const double* d, double c,
+                   __global double* out)
+{
+    out[0] = fs_step(kp[0], vload3(0, d), c);
+}
+
+/* Rays along one line, one per item; after a hit the ray goes straight on from the hit
+ * (a continuation with the vertex record) up to `restarts` times. */
+__kernel void flight(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
+                     int samples, int memory, int cap, int refine, double c,
+                     __global const double* ray, uint seed, int first, int restarts,
+                     __global double* scratch, __global FsObs* rings, __global double* out)
+{
+    int i = get_global_id(0);
+    FsScratch S = fs_scratch(scratch, i);
+    FsParams prm = {samples, memory, cap, refine, c};
+    FsRay r = {vload3(0, ray), vload3(1, ray), ray[6], ray[7]};
+    FsRng rng = {seed, (uint)(first + i), 0u, 0u, 0u};
+    FsVertex v = {0};
+    __global double* o = out + 8 * i;
+    o[0] = -1.0; o[1] = o[2] = o[3] = 0.0; o[4] = 0.0; o[5] = 0.0; o[6] = 0.0; o[7] = 0.0;
+    for (int b = 0; b <= restarts; ++b) {
+        rng.bounce = (uint)b;
+        FsResult res = fs_free_flight(kp[0], mean, mc, prm, r, v, rings + (size_t)i * cap,
+                                      rng, S);
+        o[7] += res.segments;
+        if (res.status) { o[5] = res.status; break; }
+        if (!res.hit) break;
+        if (b == 0) { o[0] = res.t; vstore3(res.grad, 0, o + 1); o[6] = res.segments; }
+        o[4] += 1.0;
+        v = fs_vertex_at_hit(prm, r, res, v, rings + (size_t)i * cap, S);
+        r.o = r.o + res.t * r.d;
+        r.t1 -= res.t;
+        r.t0 = 0.0;
+    }
+}
+"""
+
+CAP_MAX, SAMPLES_MAX = 128, 32
+SE = SquaredExponential(sigma=1.0, length_scale=1.0)
+RQ = RationalQuadratic(sigma=1.0, length_scale=1.0, alpha=1.0)
+
+
+@pytest.fixture(scope="module")
+def prg(device):
+    p = cl.Program(device.ctx, FL.program_source(WRAPPERS)).build(
+        options=FL.build_options(SAMPLES_MAX, CAP_MAX))
+    return {k.function_name: k for k in p.all_kernels()}
+
+
+def _buf(device, a, rw=False):
+    flags = (cl.mem_flags.READ_WRITE if rw else cl.mem_flags.READ_ONLY)
+    return cl.Buffer(device.ctx, flags | cl.mem_flags.COPY_HOST_PTR,
+                     hostbuf=np.ascontiguousarray(a))
+
+
+def flights(device, prg, kernel, mean, n, memory="global", samples=8, cap=64, refine=6,
+            c=0.9, o=(0, 0, 0), d=(1, 0, 0), t0=0.0, t1=6.0, seed=1, restarts=0):
+    """Per ray: first-hit t (-1: none), gradient, hits, status, first-hit segment, segments."""
+    q = device.queue
+    mean_nodes = device_layout.pack_mean(mean)
+    kp, mb = _buf(device, device_layout.pack_kernel(kernel)), _buf(device, mean_nodes)
+    rb = _buf(device, np.array([*o, *d, t0, t1], np.float64))
+    stride = FL.scratch_doubles(FL.max_rows(SAMPLES_MAX, CAP_MAX))
+    chunk = max(1, min(n, (256 << 20) // (8 * stride)))
+    scratch = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, 8 * stride * chunk)
+    rings = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, FL.FS_OBS.dtype.itemsize * cap * chunk)
+    out = np.zeros((n, 8))
+    for first in range(0, n, chunk):
+        m = min(chunk, n - first)
+        ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 64 * m)
+        prg["flight"](q, (m,), None, kp, mb, np.int32(len(mean_nodes)), np.int32(samples),
+                      np.int32(GPIS_MEMORIES[memory]), np.int32(cap), np.int32(refine),
+                      np.float64(c), rb, np.uint32(seed), np.int32(first), np.int32(restarts),
+                      scratch, rings, ob)
+        cl.enqueue_copy(q, out[first:first + m], ob)
+    assert np.all(out[:, 5] == 0), f"solver status {np.unique(out[:, 5])}"
+    return out
+
+
+def ks_two_sample(a, b, num_tests):
+    """Two-sample Kolmogorov-Smirnov: statistic and its Bonferroni critical value
+    (asymptotic, c(alpha) = sqrt(-ln(alpha / 2) / 2))."""
+    a, b = np.sort(a), np.sort(b)
+    grid = np.concatenate([a, b])
+    D = np.max(np.abs(np.searchsorted(a, grid, "right") / len(a)
+                      - np.searchsorted(b, grid, "right") / len(b)))
+    alpha = 1e-3 / num_tests
+    return D, math.sqrt(-math.log(alpha / 2) / 2) * math.sqrt((len(a) + len(b)) / (len(a) * len(b)))
+
+
+def chi2_threshold(df, num_tests=1):
+    """Upper chi-square quantile by Wilson-Hilferty (accurate to <1% for df >= 5)."""
+    z = NormalDist().inv_cdf(1.0 - 1e-3 / num_tests)
+    return df * (1.0 - 2.0 / (9 * df) + z * math.sqrt(2.0 / (9 * df))) ** 3
+
+
+@pytest.mark.parametrize("a", [-1.5, 0.0, 3.0, 12.0, 40.0])
+def test_truncated_normal_matches_analytic_law(device, prg, a):
+    """a = -mu/s standard deviations of truncation; 40 exercises the rejection tail."""
+    n, s = 200_000, 0.7
+    mu = -a * s
+    buf = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 8 * n)
+    prg["tn_draw"](device.queue, (n,), None, np.float64(mu), np.float64(s), np.uint32(3), buf)
+    x = np.empty(n)
+    cl.enqueue_copy(device.queue, x, buf)
+    assert np.all(x >= 0.0)
+    mean, var = FS.truncnorm_moments(mu, s)
+    z = z_threshold(2 * 5)
+    se_mean = math.sqrt(var / n)
+    se_var = math.sqrt(np.mean((x - mean) ** 4) - var**2) / math.sqrt(n)
+    assert abs(x.mean() - mean) < z * se_mean
+    assert abs(x.var() - var) < z * se_var
+    # probability integral transform: uniform in 20 equiprobable bins
+    pit = 1.0 - FS.truncnorm_survival(x, mu, s)
+    counts = np.bincount(np.minimum((pit * 20).astype(int), 19), minlength=20)
+    chi2 = np.sum((counts - n / 20) ** 2 / (n / 20))
+    assert chi2 < chi2_threshold(19, 5)
+
+
+@pytest.mark.parametrize("kernel", [SE, RQ, RationalQuadratic(0.5, 2.0, 0.375, (1, 0.5, 2)),
+                                    ThinPlate(1.0, 3.0), Periodic(1.0, 2.0, 0.25)],
+                         ids=["se", "rq", "rq-aniso", "thin_plate", "periodic"])
+def test_step_rule(device, prg, kernel):
+    d = np.array([0.6, 0.0, 0.8]) * 1.5
+    out = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 8)
+    for c in (0.5, 0.9, 0.99):
+        prg["step_rule"](device.queue, (1,), None, _buf(device, device_layout.pack_kernel(kernel)),
+                    _buf(device, d), np.float64(c), out)
+        dt = np.empty(1)
+        cl.enqueue_copy(device.queue, dt, out)
+        assert abs(FS.correlation(kernel, d, dt[0]) - c) < 1e-9
+        assert abs(dt[0] - FS.step_size(kernel, d, c)) < 1e-9 * dt[0]
+    if kernel is SE:   # the closed form of the brief: l sqrt(-2 ln c) / sqrt(d'Ad)
+        assert abs(dt[0] - math.sqrt(-2 * math.log(0.99)) / 1.5) < 1e-12

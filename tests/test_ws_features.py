@@ -1,0 +1,248 @@
+"""ws_features.h: weight-space realizations on the device against numpy and the GP kernels."""
+import numpy as np
+import pyopencl as cl
+import pytest
+
+from gpiscl.host.device import PYOPENCL_CL_DIR, join_sources
+from gpiscl.host.gp import (Box, Constant, LocallyPeriodic, Periodic, RationalQuadratic, Sphere,
+                            SquaredExponential, Transform, Union)
+from gpiscl.host.gp import weight_space as ws
+from gpiscl.host.gp.device_layout import pack_kernel, pack_mean
+from stats import z_threshold
+
+EPS = float(np.finfo(np.float32).eps)
+ANISO = (1.0, 0.5, 2.0)
+KERNELS = [
+    SquaredExponential(sigma=1.25, length_scale=0.5, aniso=ANISO),
+    RationalQuadratic(sigma=0.875, length_scale=0.625, alpha=0.625, aniso=ANISO),  # a < 1: boost
+    Periodic(sigma=1.125, length_scale=0.875, w=0.625, aniso=ANISO),
+    LocallyPeriodic(sigma=0.75, length_scale=1.25, w=0.5, se_length_scale=1.5, aniso=ANISO),
+]
+ROT = np.array([[0.36, 0.48, -0.8], [-0.8, 0.6, 0.0], [0.48, 0.64, 0.6]])
+MEAN = Union(Transform(Sphere(radius=0.75), np.concatenate([ROT, [[0.5], [0.0], [-0.25]]], 1)),
+             Box(half_extents=(0.5, 0.25, 0.75), center=(-0.5, 0.25, 0.0)))
+
+WRAPPERS = r"""
+__kernel void ws_dump(__global const GpKernel* kp, __global const float* cdf, int nc, int M,
+                      __global const uint2* keys, int object, __global float* out)
+{
+    int r = get_global_id(0);
+    for (int i = 0; i < M; ++i) {
+        float3 th;
+        float tau, w;
+        ws_feature(kp[0], cdf, nc, keys[r], object, i, &th, &tau, &w);
+        vstore3(th, 0, out + 5 * (r * M + i));
+        out[5 * (r * M + i) + 3] = tau;
+        out[5 * (r * M + i) + 4] = w;
+    }
+}
+
+__kernel void ws_eval_points(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
+                             __global const float* cdf, int nc, int M, __global const uint2* keys,
+                             int object, int per_key, __global const float* x,
+                             __global float4* out)
+{
+    int i = get_global_id(0);
+    float3 g;
+    float v = ws_eval(kp[0], mean, mc, cdf, nc, M, keys[i / per_key], object, vload3(i, x), &g);
+    out[i] = (float4)(g, v);
+}
+
+__kernel void ws_philox_check(__global const uint2* keys, int object, uint call,
+                              __global uint4* mine, __global uint4* random123)
+{
+    int i = get_global_id(0);
+    wsu r0, r1, r2, r3;
+    ws_draw(keys[i], object, (wsi)i, call, &r0, &r1, &r2, &r3);
+    mine[i] = (uint4)(ws_lane0(r0), ws_lane0(r1), ws_lane0(r2), ws_lane0(r3));
+    philox4x32_ctr_t c = {{keys[i].x, keys[i].y, (uint)object, (uint)i}};
+    philox4x32_key_t k = {{call, WS_PHILOX_KEY1}};
+    philox4x32_ctr_t r = philox4x32(c, k);
+    random123[i] = (uint4)(r.v[0], r.v[1], r.v[2], r.v[3]);
+}
+
+__kernel void ws_lambda2_k(__global const GpKernel* kp, __global const float* d,
+                           __global float* out)
+{
+    out[get_global_id(0)] = ws_lambda2(kp[0], vload3(get_global_id(0), d));
+}
+"""
+
+
+def build(device, extra="", options=()):
+    """The ws headers, WRAPPERS and extra kernels as one program: name -> kernel."""
+    src = join_sources((), ("ws_features.h", "ws_intersect.h")) + WRAPPERS + extra
+    prg = cl.Program(device.ctx, src).build(options=[f"-I{PYOPENCL_CL_DIR}", *options])
+    return {k.function_name: k for k in prg.all_kernels()}
+
+
+def buf(device, array):
+    return cl.Buffer(device.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                     hostbuf=np.ascontiguousarray(array))
+
+
+def run(device, kernel, n, *args, out_shapes):
+    """Launch kernel over n items with args, then output buffers; returns the outputs."""
+    outs = [np.empty(s, dt) for s, dt in out_shapes]
+    bufs = [cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, o.nbytes) for o in outs]
+    kernel(device.queue, (n,), None, *args, *bufs)
+    for o, b in zip(outs, bufs):
+        cl.enqueue_copy(device.queue, o, b)
+    return outs
+
+
+def keys_for(n, stream=7):
+    return np.stack([np.arange(n), np.full(n, stream)], -1).astype(np.uint32)
+
+
+def gp_args(device, kernel, mean=Constant(0.0)):
+    """Device arguments (kernel, mean nodes, count, order table, count) of a GPIS."""
+    nodes, cdf = pack_mean(mean), ws.order_table(kernel)
+    return (buf(device, pack_kernel(kernel)), buf(device, nodes), np.int32(len(nodes)),
+            buf(device, cdf), np.int32(len(cdf)))
+
+
+def dump(device, prg, kernel, keys, m, obj=0):
+    """theta (R, M, 3), tau (R, M), w (R, M) of realizations keys, as the device draws them."""
+    kp, _, _, cdf, nc = gp_args(device, kernel)
+    (out,) = run(device, prg["ws_dump"], len(keys), kp, cdf, nc, np.int32(m), buf(device, keys),
+                 np.int32(obj), out_shapes=[((len(keys), m, 5), np.float32)])
+    out = out.astype(np.float64)
+    return out[..., :3], out[..., 3], out[..., 4]
+
+
+@pytest.fixture(scope="module")
+def prg(device):
+    return build(device)
+
+
+def test_philox_lanes_match_random123(device, prg):
+    """The vector Philox equals pyopencl's philox.cl and the numpy twin, bit for bit."""
+    keys = np.random.default_rng(3).integers(0, 2**32, (300, 2), dtype=np.uint32)
+    for call in (0, 1, 7):
+        mine, ref = run(device, prg["ws_philox_check"], 300, buf(device, keys), np.int32(5),
+                        np.uint32(call), out_shapes=[((300, 4), np.uint32)] * 2)
+        np.testing.assert_array_equal(mine, ref)
+        ctr = np.stack([keys[:, 0], keys[:, 1], np.full(300, 5), np.arange(300)], -1)
+        np.testing.assert_array_equal(ws.philox4x32(ctr, call), ref)
+
+
+@pytest.mark.parametrize("kernel", [KERNELS[0], KERNELS[2], KERNELS[3]], ids=lambda k: k.kind)
+def test_features_match_numpy_streams(device, prg, kernel):
+    """Device features equal regenerate_features up to float32 rounding. A normal is
+    rad cos(2 pi u), rad = sqrt(-2 log u) <= 6 for u >= 2^-24: log, sqrt and the reduced
+    sin/cos polynomials err by <= 2 ulp each, so |dz| <= 4 eps (|z| + rad); the frequency
+    scale sqrt(A)/l adds two roundings. Periodic orders are exact integers."""
+    keys = keys_for(6)
+    theta, tau, w = dump(device, prg, kernel, keys, 40, obj=3)
+    length = getattr(kernel, "se_length_scale", kernel.length_scale)
+    scale = 0.0 if kernel.kind == "periodic" else np.sqrt(ANISO) / length
+    for r, key in enumerate(keys):
+        t2, tau2, w2 = ws.regenerate_features(kernel, key, 3, 40)
+        assert np.all(np.abs(theta[r] - t2) <= 8 * EPS * (np.abs(t2) + 6 * scale))
+        assert np.all(np.abs(tau[r] - tau2) <= 4 * EPS * tau2)
+        assert np.all(np.abs(w[r] - w2) <= 8 * EPS * (np.abs(w2) + 6))
+
+
+def eval_tolerance(theta, tau, w, variance, x):
+    """Float32 error bound of ws_eval: phase = 3 products + 3 sums (gamma_6 of its absolute
+    terms), cos/sin polynomials ~4 eps absolute, M-term summation gamma_M."""
+    m = theta.shape[-2]
+    amp = np.sqrt(2 * variance / m)
+    phase_terms = np.abs(x[:, None, :] * theta[None]).sum(-1) + tau[None]       # (P, M)
+    e = 6 * EPS * phase_terms + 4 * EPS
+    aw = np.abs(w)[None]
+    value = amp * (aw * e).sum(-1) + amp * m * EPS * aw.sum(-1)
+    grad = amp * (aw * e * np.linalg.norm(theta, axis=-1)[None]).sum(-1) * (1 + m * EPS)
+    mean = 8 * EPS * (2 + np.abs(x).sum(-1))     # float distance of O(1) means at |x|
+    return value + mean, grad + 4 * mean
+
+
+@pytest.mark.parametrize("kernel", KERNELS, ids=lambda k: k.kind)
+def test_eval_matches_numpy(device, prg, kernel):
+    m, per_key = 37, 64                        # 37: a partial last chunk of lanes
+    keys = keys_for(4)
+    theta, tau, w = dump(device, prg, kernel, keys, m)
+    rng = np.random.default_rng(2)
+    x = rng.uniform(-2, 2, (len(keys) * per_key, 3))
+    x[:per_key] *= 10                          # |x| ~ 20: larger phases
+    x = x.astype(np.float32)
+    (out,) = run(device, prg["ws_eval_points"], len(x), *gp_args(device, kernel, MEAN),
+                 np.int32(m), buf(device, keys), np.int32(0), np.int32(per_key), buf(device, x),
+                 out_shapes=[((len(x), 4), np.float32)])
+    for r in range(len(keys)):
+        xs = x[r * per_key:(r + 1) * per_key].astype(np.float64)
+        v, g = ws.evaluate(theta[r], tau[r], w[r], kernel.variance, xs, MEAN)
+        tv, tg = eval_tolerance(theta[r], tau[r], w[r], kernel.variance, xs)
+        o = out[r * per_key:(r + 1) * per_key]
+        assert np.all(np.abs(o[:, 3] - v) <= tv), np.max(np.abs(o[:, 3] - v) / tv)
+        assert np.all(np.abs(o[:, :3] - g) <= tg[:, None]), np.max(np.abs(o[:, :3] - g))
+
+
+N_REALIZATIONS = 40_000
+A, B = np.array([0.1, -0.2, 0.3]), np.array([0.5, 0.1, -0.2])
+U, V = np.array([0.6, 0.0, 0.8]), np.array([0.0, 0.28, 0.96])
+NUM_COV_TESTS = len(KERNELS) * 6
+
+
+@pytest.mark.parametrize("kernel", KERNELS, ids=lambda k: k.kind)
+def test_realizations_have_the_kernel_covariances(device, prg, kernel):
+    """Over independent realization keys, E[f] = mean and the value and gradient
+    covariances are k and its closed-form derivatives, exactly for any M (here 24)."""
+    mean = Sphere(radius=0.5)
+    x = np.tile(np.stack([A, B]), (N_REALIZATIONS, 1)).astype(np.float32)
+    (out,) = run(device, prg["ws_eval_points"], len(x), *gp_args(device, kernel, mean),
+                 np.int32(24), buf(device, keys_for(N_REALIZATIONS, 11)), np.int32(2),
+                 np.int32(2), buf(device, x), out_shapes=[((len(x), 4), np.float32)])
+    out = out.astype(np.float64).reshape(N_REALIZATIONS, 2, 4)
+    mv, mg = mean.value_and_gradient(np.stack([A, B]))
+    fa, fb = out[:, 0, 3] - mv[0], out[:, 1, 3] - mv[1]
+    da, db = (out[:, 0, :3] - mg[0]) @ U, (out[:, 1, :3] - mg[1]) @ V
+    db_at_a = (out[:, 0, :3] - mg[0]) @ V
+    checks = {"mean": (fa, 0.0), "vv": (fa * fb, kernel.cov(A, B)),
+              "dv": (da * fb, kernel.cov_dv(A, U, B)), "vd": (fa * db, kernel.cov_vd(A, B, V)),
+              "dd": (da * db, kernel.cov_dd(A, U, B, V)),
+              "dd0": (da * db_at_a, kernel.cov_dd(A, U, A, V))}
+    for name, (samples, target) in checks.items():
+        z = abs(samples.mean() - target) / (samples.std(ddof=1) / np.sqrt(N_REALIZATIONS))
+        assert z < z_threshold(NUM_COV_TESTS), (name, samples.mean(), target, z)
+
+
+def test_lanes_do_not_change_the_realization(device, prg):
+    """WS_LANES only regroups work: features are equal and values agree to rounding."""
+    kernel, keys, m = KERNELS[3], keys_for(3), 21
+    ref = dump(device, prg, kernel, keys, m)
+    x = np.random.default_rng(4).uniform(-2, 2, (3 * 8, 3)).astype(np.float32)
+    def values(p):
+        return run(device, p["ws_eval_points"], len(x), *gp_args(device, kernel, MEAN),
+                   np.int32(m), buf(device, keys), np.int32(0), np.int32(8), buf(device, x),
+                   out_shapes=[((len(x), 4), np.float32)])[0]
+    v8 = values(prg)
+    for lanes in (1, 16):
+        p = build(device, options=[f"-DWS_LANES={lanes}"])
+        for a, b in zip(dump(device, p, kernel, keys, m), ref):
+            np.testing.assert_allclose(a, b, rtol=2 * EPS, atol=2 * EPS)
+        # only the order of the M-term sums differs: gamma_M of the absolute terms
+        np.testing.assert_allclose(values(p), v8, rtol=0, atol=m * EPS * 8)
+
+
+def test_lambda2_is_the_spectral_second_moment(device, prg):
+    d = np.random.default_rng(1).normal(size=(16, 3)).astype(np.float32)
+    for kernel in KERNELS:
+        (out,) = run(device, prg["ws_lambda2_k"], 16, buf(device, pack_kernel(kernel)),
+                     buf(device, d), out_shapes=[((16,), np.float32)])
+        ref = [ws.spectral_moment2(kernel, di) for di in d.astype(np.float64)]
+        np.testing.assert_allclose(out, ref, rtol=8 * EPS)
+
+
+def test_order_tables():
+    for l in (0.1, 0.875, 4.0):
+        cdf = ws.periodic_order_cdf(l)
+        assert cdf.dtype == np.float32 and cdf[-1] == 1.0 and np.all(np.diff(cdf) >= 0)
+        q = ws.periodic_order_weights(l)
+        np.testing.assert_allclose(np.diff(cdf, prepend=0)[:-1], q[:len(cdf) - 1], atol=2 * EPS)
+        assert 1.0 - np.cumsum(q)[len(cdf) - 2] > 2.0**-26   # nothing resolvable was cut
+    table, first, count = ws.pack_order_tables(KERNELS)
+    assert list(count[:2]) == [1, 1] and first[-1] == first[-2] + count[-2]
+    np.testing.assert_array_equal(table[first[2]:first[2] + count[2]],
+                                  ws.periodic_order_cdf(KERNELS[2].length_scale))

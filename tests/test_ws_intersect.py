@@ -1,0 +1,245 @@
+"""ws_intersect.h: guaranteed bounds, first roots against a dense scan, Rice's formula."""
+import math
+
+import numpy as np
+import pytest
+
+from gpiscl.host.gp import (Box, Constant, LocallyPeriodic, Periodic, Plane, RationalQuadratic,
+                            Sphere, SquaredExponential, ThinPlate, Torus, Transform, Union,
+                            sample_frequencies)
+from gpiscl.host.gp import weight_space as ws
+from gpiscl.host.gp.device_layout import pack_mean
+from stats import z_threshold
+from test_ws_features import ROT, build, buf, dump, eval_tolerance, gp_args, keys_for, run
+
+EXTRA = r"""
+__kernel void ws_tents_k(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
+                         __global const float* cdf, int nc, int M, __global const uint2* keys,
+                         __global const float* o, __global const float* d,
+                         __global const float2* ab, int npts, __global float* tents,
+                         __global float2* vals)
+{
+    int r = get_global_id(0);
+    float3 O = vload3(r, o), D = vload3(r, d), g;
+    float a = ab[r].x, b = ab[r].y;
+    WsTents T = ws_tents(kp[0], mean, mc, cdf, nc, M, keys[r], 0, O, D, a, b,
+                         ws_mean_lipschitz(mean, mc));
+    float t9[9] = {T.lo_k, T.lo_a, T.lo_m, T.lo_b, T.hi_k, T.hi_a, T.hi_m, T.hi_b, T.round};
+    for (int j = 0; j < 9; ++j) tents[9 * r + j] = t9[j];
+    for (int j = 0; j < npts; ++j) {
+        float t = j == npts - 1 ? b : a + (b - a) * ((float)j / (float)(npts - 1));
+        vals[r * npts + j] = (float2)(t, ws_eval(kp[0], mean, mc, cdf, nc, M, keys[r], 0,
+                                                 O + t * D, &g));
+    }
+}
+
+__kernel void ws_roots_k(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
+                         __global const float* cdf, int nc, int M, __global const uint2* keys,
+                         __global const float* o, __global const float* d, float t0, float t1,
+                         float tol, __global float4* hit, __global int2* st)
+{
+    int r = get_global_id(0), status, its;
+    float3 n;
+    float t = ws_first_root_counted(kp[0], mean, mc, cdf, nc, M, keys[r], 0, vload3(r, o),
+                                    vload3(r, d), t0, t1, tol, &n, &status, &its);
+    hit[r] = (float4)(n, t);
+    st[r] = (int2)(status, its);
+}
+
+/* every hit along (t0, t1]: each search restarts at the last hit, where f < 0 */
+__kernel void ws_count_k(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
+                         __global const float* cdf, int nc, int M, __global const uint2* keys,
+                         __global const float* o, __global const float* d, float t1, float tol,
+                         __global int2* out)
+{
+    int r = get_global_id(0), n = 0, status = 0;
+    float t = 0.0f;
+    float3 nrm;
+    for (;;) {
+        t = ws_first_root(kp[0], mean, mc, cdf, nc, M, keys[r], 0, vload3(r, o), vload3(r, d),
+                          t, t1, tol, &nrm, &status);
+        if (status != WS_STATUS_OK || t >= T_INFINITY) break;
+        ++n;
+    }
+    out[r] = (int2)(n, status);
+}
+
+__kernel void ws_lipschitz_k(__global const MeanNode* mean, int mc, __global float* out)
+{
+    out[0] = ws_mean_lipschitz(mean, mc);
+}
+"""
+KERNELS = [SquaredExponential(sigma=0.5, length_scale=0.5, aniso=(1.0, 0.5, 2.0)),
+           RationalQuadratic(sigma=0.75, length_scale=0.625, alpha=0.75),
+           Periodic(sigma=0.5, length_scale=1.0, w=0.375),
+           LocallyPeriodic(sigma=0.5, length_scale=1.25, w=0.5, se_length_scale=1.0)]
+RIGID = np.concatenate([ROT, [[0.25], [0.0], [-0.5]]], 1)
+MEANS = [Transform(Sphere(radius=1.0), RIGID), Constant(0.3),
+         Plane(normal=(0.0, 1.0, 0.0), point=(0.0, 0.0, 0.0), scale=2.0),
+         Union(Box(half_extents=(0.75, 0.5, 1.0)),
+               Transform(Torus(major=0.75, minor=0.25), np.diag([1.5, 1.0, 0.75, 1.0])))]
+
+
+@pytest.fixture(scope="module")
+def prg(device):
+    return build(device, EXTRA)
+
+
+def random_rays(rng, n, spread=2.0):
+    o = rng.uniform(-spread, spread, (n, 3))
+    d = rng.normal(size=(n, 3))
+    return o.astype(np.float32), (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
+
+
+def host_values(theta, tau, w, kernel, mean, o, d, t):
+    """f in float64 along rays: (R, T) values at parameters t (R, T) or (T,)."""
+    t = np.broadcast_to(t, (len(o), np.shape(t)[-1]))
+    x = o[:, None, :].astype(float) + t[..., None] * d[:, None, :].astype(float)
+    return np.stack([ws.evaluate(theta[r], tau[r], w[r], kernel.variance, x[r], mean)[0]
+                     for r in range(len(o))])
+
+
+@pytest.mark.parametrize("case", range(len(KERNELS) * len(MEANS)))
+def test_bounds_contain_every_point_evaluation(device, prg, case):
+    """Property test: over random intervals (widths 1e-4 l .. 8 l, origins up to 20 away),
+    device float evaluations and float64 evaluations all lie inside the piecewise-linear
+    bounds, exactly (the bounds carry their own rounding allowance)."""
+    kernel, mean = KERNELS[case % 4], MEANS[case // 4]
+    rng = np.random.default_rng(100 + case)
+    n, npts, m = 96, 33, 40
+    o, d = random_rays(rng, n)
+    o[: n // 4] *= 10.0
+    d *= rng.uniform(0.5, 2.0, (n, 1)).astype(np.float32)       # t need not be arc length
+    half = kernel.length_scale * 10.0 ** rng.uniform(-4, 0.6, n) / np.linalg.norm(d, axis=1)
+    a = rng.uniform(0.0, 3.0, n)
+    ab = np.stack([a, a + 2 * half], -1).astype(np.float32)
+    keys = keys_for(n, 21 + case)
+    tents, vals = run(device, prg["ws_tents_k"], n, *gp_args(device, kernel, mean), np.int32(m),
+                      buf(device, keys), buf(device, o), buf(device, d), buf(device, ab),
+                      np.int32(npts), out_shapes=[((n, 9), np.float32), ((n, npts, 2), np.float32)])
+    theta, tau, w = dump(device, prg, kernel, keys, m)
+    t = vals[..., 0].astype(float)
+    exact = host_values(theta, tau, w, kernel, mean, o, d, t)
+    for r in range(n):
+        (lk, la, lm, lb, hk, ha, hm, hb, _), (a_, b_) = tents[r].astype(float), ab[r]
+        lo = np.interp(t[r], [a_, lk, b_], [la, lm, lb])
+        hi = np.interp(t[r], [a_, hk, b_], [ha, hm, hb])
+        for v in (vals[r, :, 1], exact[r]):
+            assert np.all((lo <= v) & (v <= hi)), (r, np.min(v - lo), np.min(hi - v))
+
+
+ROOT_CASES = [(KERNELS[0], MEANS[0], 512), (KERNELS[1], MEANS[1], 256),
+              (KERNELS[3], MEANS[2], 256), (KERNELS[2], MEANS[3], 128)]   # 1152 rays
+
+
+@pytest.mark.parametrize("case", range(len(ROOT_CASES)))
+def test_first_roots_match_a_dense_scan(device, prg, case):
+    """No crossing that a dense float64 scan finds is ever skipped, and every reported
+    root is a genuine >= 0 -> < 0 crossing within tol of the scan's bracket."""
+    kernel, mean, n = ROOT_CASES[case]
+    rng = np.random.default_rng(7 + case)
+    m, t0, t1 = 64, 0.0, 4.0
+    tol = 1e-4 * kernel.length_scale
+    o, d = random_rays(rng, n)
+    keys = keys_for(n, 50 + case)
+    hit, st = run(device, prg["ws_roots_k"], n, *gp_args(device, kernel, mean), np.int32(m),
+                  buf(device, keys), buf(device, o), buf(device, d), np.float32(t0),
+                  np.float32(t1), np.float32(tol),
+                  out_shapes=[((n, 4), np.float32), ((n, 2), np.int32)])
+    assert np.all(st[:, 0] == 0)
+    theta, tau, w = dump(device, prg, kernel, keys, m)
+    ts = np.linspace(t0, t1, int((t1 - t0) / (kernel.length_scale / 200)) + 1)
+    t_lo, t_hi = ws.dense_scan_first_root(host_values(theta, tau, w, kernel, mean, o, d, ts), ts)
+    t_dev = hit[:, 3].astype(float)
+    found = t_dev < 1e29
+    assert np.all(t_dev[np.isfinite(t_hi)] <= t_hi[np.isfinite(t_hi)] + tol), "missed a root"
+    for r in np.flatnonzero(found):
+        # genuine: f >= 0 within tol before t_dev and f < 0 at t_dev, up to the float
+        # evaluation error (eval_tolerance). Roots earlier than the scan's bracket are
+        # dips narrower than its spacing, which only the bound catches.
+        near = t_dev[r] - tol * np.linspace(1, 0, 9)
+        x = o[r].astype(float) + near[:, None] * d[r].astype(float)
+        f, g = ws.evaluate(theta[r], tau[r], w[r], kernel.variance, x, mean)
+        noise, gnoise = eval_tolerance(theta[r], tau[r], w[r], kernel.variance, x)
+        assert f[-1] <= noise[-1] and np.max(f + noise) >= 0, (r, f)
+        assert not np.isfinite(t_lo[r]) or t_dev[r] > t0
+        # the normal is the unit gradient there: direction error <= 2 |dg| / |g|
+        n_host = g[-1] / np.linalg.norm(g[-1])
+        assert np.linalg.norm(hit[r, :3] - n_host) <= 2 * gnoise[-1] * 3 / np.linalg.norm(g[-1])
+
+
+def rice_target(kernel, u, d, m, n_mc, rng):
+    """Expected down-crossings of f = u + (m-feature realization) per unit length, and its
+    Monte Carlo standard error. Given the features, f is Gaussian in the weights, so Rice's
+    formula holds exactly with the features' own lambda_0, lambda_2 and their correlation;
+    averaging over features adds the O(1/M) correction to the closed form."""
+    beta = sample_frequencies(kernel, n_mc * m, rng).reshape(n_mc, m, 3) @ d
+    phi = rng.uniform(0, 2 * np.pi, (n_mc, m))
+    a, b = np.cos(phi), -beta * np.sin(phi)
+    s2 = 2.0 * kernel.variance / m
+    l0, l2, l01 = s2 * (a * a).sum(1), s2 * (b * b).sum(1), s2 * (a * b).sum(1)
+    mu = -l01 * u / l0                    # E[g' | g = -u]; g' conditional std s
+    s = np.sqrt(np.maximum(l2 - l01**2 / l0, 0.0))
+    cdf = np.vectorize(lambda z: 0.5 * math.erfc(z / math.sqrt(2)))(mu / s)
+    e_neg = s * np.exp(-0.5 * (mu / s) ** 2) / math.sqrt(2 * math.pi) - mu * cdf
+    rho = np.exp(-u * u / (2 * l0)) / np.sqrt(2 * np.pi * l0) * e_neg
+    return rho.mean(), rho.std(ddof=1) / np.sqrt(n_mc)
+
+
+RICE_CASES = [(KERNELS[0], 0.0, (1.0, 0.0, 0.0)), (KERNELS[0], 0.3, (0.0, 0.6, 0.8)),
+              (RationalQuadratic(sigma=0.75, length_scale=0.5, alpha=2.0), 0.0, (0.6, 0.0, 0.8)),
+              (KERNELS[1], 0.375, (0.0, 1.0, 0.0))]
+
+
+@pytest.mark.parametrize("case", range(len(RICE_CASES)))
+def test_crossing_rate_matches_rice(device, prg, case):
+    """Down-crossings per unit length along long rays with a constant mean u match
+    Rice's exp(-u^2 / (2 sigma^2)) sqrt(L2 / L0) / (2 pi), L2 = -2 k'(0) d^T A d, L0 = sigma^2
+    (half the two-sided rate: only >= 0 -> < 0 crossings count)."""
+    kernel, u, d = RICE_CASES[case]
+    d = np.asarray(d)
+    n, m, length = 768, 128, 30.0
+    rng = np.random.default_rng(300 + case)
+    o = rng.uniform(-3, 3, (n, 3)).astype(np.float32)
+    dirs = np.tile(d, (n, 1)).astype(np.float32)
+    (out,) = run(device, prg["ws_count_k"], n, *gp_args(device, kernel, Constant(u)),
+                 np.int32(m), buf(device, keys_for(n, 90 + case)), buf(device, o),
+                 buf(device, dirs), np.float32(length), np.float32(1e-4 * kernel.length_scale),
+                 out_shapes=[((n, 2), np.int32)])
+    assert np.all(out[:, 1] == 0)
+    rate, rate_se = out[:, 0].mean() / length, out[:, 0].std(ddof=1) / np.sqrt(n) / length
+    l2 = kernel.cov_dd(np.zeros(3), d, np.zeros(3), d)           # -2 k'(0) d^T A d
+    closed = math.exp(-u * u / (2 * kernel.variance)) * math.sqrt(l2 / kernel.variance) / (2 * math.pi)
+    target, target_se = rice_target(kernel, u, d, m, 20_000, rng)
+    z = abs(rate - target) / math.hypot(rate_se, target_se)
+    # target - closed is the finite-M correction (-0.2 % to -1 % at M = 128)
+    assert z < z_threshold(len(RICE_CASES)), (rate, target, closed, z)
+
+
+def test_lipschitz_of_packed_means(device, prg):
+    rng = np.random.default_rng(0)
+    for mean, expected in [(Constant(1.0), 0.0), (MEANS[0], 1.0), (MEANS[2], 2.0),
+                           (Transform(Sphere(), np.diag([2.0, 2.0, 2.0, 1.0])), 1.0),
+                           (MEANS[3], None)]:
+        nodes = pack_mean(mean)
+        (lip,) = run(device, prg["ws_lipschitz_k"], 1, buf(device, nodes), np.int32(len(nodes)),
+                     out_shapes=[((1,), np.float32)])
+        grads = mean.value_and_gradient(rng.uniform(-3, 3, (4000, 3)))[1]
+        assert np.max(np.linalg.norm(grads, axis=1)) <= lip[0] * (1 + 1e-6)
+        if expected is not None:
+            assert lip[0] == pytest.approx(expected, rel=1e-6)
+
+
+def test_failures_are_reported(device, prg):
+    o, d = random_rays(np.random.default_rng(1), 8)
+    keys = keys_for(8)
+    args = (np.int32(16), buf(device, keys), buf(device, o), buf(device, d), np.float32(0),
+            np.float32(50), np.float32(1e-5))
+    shapes = [((8, 4), np.float32), ((8, 2), np.int32)]
+    hit, st = run(device, prg["ws_roots_k"], 8, *gp_args(device, ThinPlate()), *args,
+                  out_shapes=shapes)
+    assert np.all(st[:, 0] == 2) and np.all(hit[:, 3] >= 1e30)        # WS_STATUS_NAN
+    capped = build(device, EXTRA, options=["-DWS_MAX_ITER=3"])
+    hit, st = run(device, capped["ws_roots_k"], 8, *gp_args(device, KERNELS[0], Constant(2.0)),
+                  *args, out_shapes=shapes)
+    assert np.all(st[:, 0] == 1) and np.all(hit[:, 3] >= 1e30)        # WS_STATUS_ITER_CAP
