@@ -99,6 +99,9 @@ def join_sources(stage_files, extra_headers=(), extra_c="") -> str:
     return "\n".join(parts)
 
 
+WORK_GROUP = 64
+
+
 class Program:
     """Builds one program once and hands out its kernels, each launch named and timed."""
 
@@ -126,7 +129,12 @@ class Program:
             return None
         kernel = self.kernels[name]
         kernel.set_args(*args)
-        event = cl.enqueue_nd_range_kernel(self.device.queue, kernel, (int(global_size),), None)
+        # One fixed work-group size: PoCL compiles a work-group function per local size,
+        # so letting it pick one per global size recompiles big kernels every bounce
+        # (seconds each). Kernels bound-check their index, so padding is harmless.
+        local = min(WORK_GROUP, self.device.device.max_work_group_size)
+        padded = -(-int(global_size) // local) * local
+        event = cl.enqueue_nd_range_kernel(self.device.queue, kernel, (padded,), (local,))
         self.timings.record(name, int(global_size), event)
         return event
 
