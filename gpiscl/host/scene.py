@@ -14,7 +14,7 @@ import math
 import os
 from dataclasses import dataclass, field
 
-from .scene_schema import (Bool, Context, Field, File, Int, ListOf, Nullable,
+from .scene_schema import (Bool, Context, Field, File, Int, ListOf, Nullable, String,
                            Number, Record, SceneError, Tagged, Vector, kind_of, show)
 
 __all__ = ["SceneError", "Scene", "load_scene", "write_resolved",
@@ -191,6 +191,7 @@ def _one_environment(scene):
 
 
 SCENE = Record({
+    "description": Field(String(), ""),  # free text for people; the renderer ignores it
     "camera": Field(CAMERA, {}),
     "render": Field(RENDER, {}),
     "shapes": Field(ListOf(SHAPES), []),
