@@ -96,6 +96,11 @@ def compile_gpis(shapes: list, material_of) -> CompiledGpis:
             o["proxy_p0"][:] = (*proxy["center"], proxy["radius"])
         o["sampler"] = layouts.GPIS_SAMPLERS[g["sampler"]["type"]]
         o["features"] = g["sampler"].get("features") or 0
+        if g["sampler"]["type"] == "function_space":
+            fs = g["sampler"]
+            o["memory"] = layouts.GPIS_MEMORIES[fs["memory"]]
+            for key in ("samples", "memory_cap", "refine", "step_corr"):
+                o[key] = fs[key]
         o["material"] = material_of(g["bsdf"])
         o["tolerance"] = ROOT_TOLERANCE * kernel_length_scale(g["kernel"])
         kernels[i] = pack_kernel(build_kernel(g["kernel"]))[0]

@@ -2,13 +2,21 @@
 
     {"type": "gpis", "proxy": {...}, "mean": {...}, "kernel": {...},
      "sampler": {"type": "weight_space", "features": null}, "bsdf": {...}}
+    sampler alternative: {"type": "function_space", "samples": 32, "memory": "renewal_plus",
+                          "memory_cap": 64, "step_corr": 0.9, "refine": 6}
+
+The proxy must bound the object: a realization is only searched inside it, and a ray
+that enters the proxy where f < 0 counts as starting inside (it must first come back out),
+so an object cut by its proxy shows holes. Leave ~5 sigma between the mean's zero set and
+the proxy.
 
 Importing this module registers the "gpis" shape with the scene loader.
 """
 from __future__ import annotations
 
 from .scene import ALBEDO, SHAPES, TRANSFORM, VEC3, _box_extent
-from .scene_schema import Field, Int, Nullable, Number, Record, Tagged, Vector
+from .gp import function_space_layout as FSL
+from .scene_schema import Enum, Field, Int, Nullable, Number, Record, Tagged, Vector
 
 DIRECTION = Vector(normalize=True)
 POSITIVE3 = Vector(broadcast=True, item=Number(gt=0))
@@ -67,6 +75,16 @@ DEFAULT_FEATURES_OTHER = 256
 
 SAMPLERS = Tagged("sampler", {
     "weight_space": Record({"features": Field(Nullable(Int(ge=1, le=65536)), None)}),
+    # Values of f sampled jointly along rays (fs_sampling.h pins the conventions):
+    # samples N per segment, the memory model, the global model's observation cap, the
+    # correlation between neighbouring samples (step rule) and crossing bisection steps.
+    "function_space": Record({
+        "samples": Field(Int(ge=2, le=FSL.MAX_SAMPLES), FSL.DEFAULT_SAMPLES),
+        "memory": Field(Enum("none", "renewal", "renewal_plus", "global"), "renewal_plus"),
+        "memory_cap": Field(Int(ge=8, le=512), FSL.DEFAULT_GLOBAL_CAP),
+        "step_corr": Field(Number(ge=0.5, le=0.999), FSL.DEFAULT_STEP_CORR),
+        "refine": Field(Int(ge=0, le=20), FSL.DEFAULT_REFINE),
+    }),
 })
 
 MICRO_BSDFS = Tagged("micro-BSDF", {
@@ -86,10 +104,29 @@ def _weight_space_kernel(g):
     return None
 
 
+def _thin_plate_span(g):
+    """Thin-plate covariances are positive definite only among points within `radius`
+    (anisotropic distance); function space samples anywhere in the proxy, so the proxy's
+    diameter must fit (a conservative bound through the largest aniso weight)."""
+    k, proxy = g["kernel"], g["proxy"]
+    if k["type"] != "thin_plate" or g["sampler"]["type"] != "function_space":
+        return None
+    if proxy["type"] == "box":
+        diameter = sum((b - a) ** 2 for a, b in zip(proxy["min"], proxy["max"])) ** 0.5
+    else:
+        diameter = 2.0 * proxy["radius"]
+    span = diameter * max(k["aniso"]) ** 0.5
+    if k["radius"] < span:
+        return "kernel.radius", (f"thin_plate is a covariance only within its radius; the "
+                                 f"proxy spans {span:.4g} (diameter x sqrt(max aniso)), so "
+                                 f"radius must be >= {span:.4g} (got {k['radius']:.4g})")
+    return None
+
+
 GPIS = SHAPES.register("gpis", Record({
     "proxy": Field(PROXIES),
     "mean": Field(MEANS),
     "kernel": Field(KERNELS),
     "sampler": Field(SAMPLERS, {"type": "weight_space"}),
     "bsdf": Field(MICRO_BSDFS, {"type": "diffuse"}),
-}, checks=[_weight_space_kernel]))
+}, checks=[_weight_space_kernel, _thin_plate_span]))

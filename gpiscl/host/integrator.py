@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyopencl as cl
 
-from . import layouts
+from . import gpis_function_space, layouts
 from .device import Device, Program, to_device
 from .film import Film, FilmImage
 from .queues import DeviceQueue
@@ -89,6 +89,11 @@ class WavefrontIntegrator:
         self.gpis_model = [to_device(device, gpis.kernels), to_device(device, gpis.mean_nodes),
                            to_device(device, gpis.order_table)]
         self.weight_space = gpis.uses("weight_space")
+        self.function_space = None
+        if gpis.uses("function_space"):
+            self.batch = min(self.batch, gpis_function_space.max_batch(gpis.objects))
+            self.function_space = gpis_function_space.FunctionSpaceStages(
+                device, gpis.objects, self.batch, self.program.timings)
         # work queues, sized for one batch
         cap = self.batch
         self.paths = DeviceQueue(ctx, layouts.PATH_STATE, cap)
@@ -136,6 +141,9 @@ class WavefrontIntegrator:
             self.program.launch("gpis_weight_space", n, self.params, np.int32(n),
                                 *self.paths.args, *rays.args, self.gpis_objects,
                                 *self.gpis_model, self.counters)
+        if self.function_space:
+            self.function_space.free_flight(self.params, self.paths, rays, n, self.gpis_objects,
+                                            *self.gpis_model[:2], self.counters)
 
     def gpis_shadow(self, n):
         """Blocks shadow rays that cross a GPIS object of the path's realization."""
@@ -143,6 +151,9 @@ class WavefrontIntegrator:
             self.program.launch("gpis_shadow_weight_space", n, self.params, *self.paths.args,
                                 *self.shadow.args, self.gpis_objects, *self.gpis_model,
                                 self.counters)
+        if self.function_space:
+            self.function_space.shadow(self.params, self.paths, self.shadow, n, self.gpis_objects,
+                                       *self.gpis_model[:2], self.counters)
 
     def queue_hits(self, rays, n):
         self.program.launch("queue_hits", n, np.int32(n), *rays.args, *self.hits.args,

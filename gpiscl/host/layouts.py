@@ -138,6 +138,9 @@ GPIS_OBJECT = Struct("GpisObject", (
     ("int", "order_first"),    # weight space: its periodic-order CDF in the order table
     ("int", "order_count"),
     ("float", "tolerance"),    # root refinement tolerance (world units)
+    ("int", "memory_cap"),     # function space, global memory: observations kept
+    ("int", "refine"),         # function space: bisection steps in a crossing bracket
+    ("float", "step_corr"),    # function space: correlation of neighbouring samples
 ))
 
 # Per-launch constants of the integrator.

@@ -35,18 +35,23 @@
  *      renewal_plus  value and the slope along the new direction: g . d_new at a vertex
  *                    (g . d_new < 0, e.g. transmission, starts the ray inside), the
  *                    conditioned d_d f at a segment end;
- *      global        every observation of the path so far (values along all segments
- *                    before each hit, and at each hit f = 0 plus the three gradient
- *                    components, each derivative with its own direction), the most
- *                    recent `cap` of them; the path's observations live in a per-path
- *                    ring of capacity cap (FsVertex.obs_end/obs_count).
- *  - Normal at a hit: the slope along d is the final bracket's difference quotient (< 0
- *    by construction); the tangential components are drawn from their conditional law
- *    given all rows, f(x_h) = 0 and that slope. Isotropic radial kernels (SE, RQ,
- *    thin-plate with equal aniso) under none/renewal/renewal_plus have every row on the
+ *      global        every draw of the path so far (values along all segments up to
+ *                    each hit's first negative sample, the bisection points, and at
+ *                    each hit the three gradient components, each derivative with its
+ *                    own direction), the most recent `cap` of them; the path's
+ *                    observations live in a per-path ring of capacity cap
+ *                    (FsVertex.obs_end/obs_count). The ring holds only genuine draws,
+ *                    never the interpolated f(x_h) = 0 or the secant slope (see the hit).
+ *  - Normal at a hit (none/renewal/renewal_plus): the slope along d is the final
+ *    bracket's difference quotient (< 0 by construction); the tangential components are
+ *    drawn from their conditional law given all rows, f(x_h) = 0 and that slope.
+ *    Isotropic radial kernels (SE, RQ, thin-plate with equal aniso) have every row on the
  *    ray, and cov(d_T f(x_h), anything on the ray) = 0, so the closed form
- *    N(T . grad mu(x_h), -2k'(0) I_2) is used; anisotropic/product kernels and the global
- *    model take the general conditional (four appended rows).
+ *    N(T . grad mu(x_h), -2k'(0) I_2) is used; anisotropic/product kernels take the
+ *    general conditional (four appended rows). Global: all three components are drawn
+ *    given every row (three appended rows); the slope is then a draw that is < 0 except
+ *    at grazing hits (probability ~ the bracket's relative width), whose normal faces
+ *    away and which the integrator kills and counts.
  *  - Random numbers: philox4x32, key (seed, FS_PHILOX_KEY) (rng.h uses another key
  *    word), counter (pixel, sample, bounce, stream << 28 | segment << 12 | block): one
  *    block = two 53-bit uniforms; fixed block numbers per draw (targets by their index in
@@ -87,7 +92,7 @@ typedef struct {
     double t;               /* hit distance, or t1 */
     double3 grad;           /* sampled gradient of f at the hit (outward, grad . d < 0) */
     int segments, samples;  /* work done */
-    int new_first, new_end, hit_row;  /* global: rows this ray adds to the path's memory */
+    int new_first, new_end;  /* global: rows [new_first, new_end) join the memory */
 } FsResult;
 
 inline FsScratch fs_scratch(__global double* base, int item)
@@ -292,7 +297,7 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
                                FsParams prm, FsRay ray, FsVertex v,
                                __global const FsObs* ring, FsRng rng, FsScratch S)
 {
-    FsResult res = {0, 0, ray.t1, (double3)(0.0), 0, 0, 0, 0, -1};
+    FsResult res = {0, 0, ray.t1, (double3)(0.0), 0, 0, 0, 0};
     double f_prev;
     int outside, n_old, factored = 0;
     int m = fs_begin(p, mean, mc, prm, ray, v, ring, rng, S, &f_prev, &outside, &n_old);
@@ -351,13 +356,32 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
             double z1 = fs_normal(rng, seg, FS_SLOT_NORMAL);
             double z2 = fs_normal(rng, seg, FS_SLOT_NORMAL + 1);
             double q1, q2;
-            if (fs_isotropic_radial(p) && prm.memory != GPIS_MEMORY_GLOBAL) {
+            res.new_first = n_old;
+            if (prm.memory == GPIS_MEMORY_GLOBAL) {
+                /* The memory keeps only genuine joint draws: the values up to the first
+                 * negative sample, the bisection points, and all three gradient
+                 * components at x_h sampled from their conditional given those. The
+                 * interpolated root and the bracket's difference quotient are not draws
+                 * (f(x_h) = 0 is off by O(width^2 f''), the quotient is a secant whose
+                 * jitter noise grows as the bracket shrinks); kept next to the values
+                 * they were computed from, as exact observations, they contradict them,
+                 * and continued rays lost ~5% of Rice's crossings (refine 6; 20% at 12). */
+                sd = fs_append(p, mean, mc, S, row, fs_obs(x, dn, FS_OBS_DERIV, 0.0), 0,
+                               fs_normal(rng, seg, FS_SLOT_NORMAL + 2), &res.status);
+                q1 = fs_append(p, mean, mc, S, row + 1, fs_obs(x, T, FS_OBS_DERIV, 0.0), 0,
+                               z1, &res.status);
+                q2 = fs_append(p, mean, mc, S, row + 2, fs_obs(x, B, FS_OBS_DERIV, 0.0), 0,
+                               z2, &res.status);
+                res.grad = T * q1 + B * q2 + dn * sd;
+                res.new_end = row + 3;
+                return res;
+            }
+            if (fs_isotropic_radial(p)) {
                 q1 = fs_prior_mean(mean, mc, x, T, FS_OBS_DERIV)
                    + sqrt(gp_cov(p, x, T, 1, x, T, 1)) * z1;
                 q2 = fs_prior_mean(mean, mc, x, B, FS_OBS_DERIV)
                    + sqrt(gp_cov(p, x, B, 1, x, B, 1)) * z2;
             } else {
-                res.hit_row = row;
                 fs_append(p, mean, mc, S, row, fs_obs(x, dn, FS_OBS_VALUE, 0.0), 1, 0.0,
                           &res.status);
                 fs_append(p, mean, mc, S, row + 1, fs_obs(x, dn, FS_OBS_DERIV, sd), 1, 0.0,
@@ -368,7 +392,6 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
                                z2, &res.status);
             }
             res.grad = T * q1 + B * q2 + dn * sd;
-            res.new_first = n_old;
             res.new_end = m + hit;
             return res;
         }
@@ -421,14 +444,13 @@ inline FsVertex fs_vertex_at_hit(FsParams prm, FsRay ray, FsResult r, FsVertex p
     v.obs_end = prev.valid ? prev.obs_end : 0;
     v.obs_count = prev.valid ? prev.obs_count : 0;
     v.pad = 0;
-    if (prm.memory == GPIS_MEMORY_GLOBAL && ring && r.hit_row >= 0) {
-        int k = r.new_end - r.new_first;
-        for (int i = 0; i < k + FS_HIT_ROWS; ++i) {
-            int src = i < k ? r.new_first + i : r.hit_row + i - k;
-            ring[v.obs_end % prm.cap] = S.rows[src];
+    if (prm.memory == GPIS_MEMORY_GLOBAL && ring && r.hit) {
+        int k = r.new_end - r.new_first;   /* contiguous: values, bisection, gradient */
+        for (int i = 0; i < k; ++i) {
+            ring[v.obs_end % prm.cap] = S.rows[r.new_first + i];
             v.obs_end++;
         }
-        v.obs_count = min(v.obs_count + k + FS_HIT_ROWS, prm.cap);
+        v.obs_count = min(v.obs_count + k, prm.cap);
     }
     return v;
 }

@@ -6,6 +6,9 @@ corr = c, segments of N samples at t_s + (i + u) dt with the last squeezed onto 
 bisection refinement of the crossing bracket, and the memory models none / renewal /
 renewal_plus / global. Used by the tests and tools/bench_function_space.py; one ray at a
 time with np.linalg.cholesky (and a dense joint sample along a ray as the ground truth).
+Not mirrored: the device's global model draws all three gradient components at a hit
+(the normal here conditions on f(x_h) = 0 and the secant slope); the two laws agree
+(tests/test_fs_free_flight.py), only the global ring needs genuine draws.
 """
 from __future__ import annotations
 

@@ -1,0 +1,86 @@
+"""Function-space GPIS stages of the integrator: free flight and shadow rays.
+
+They form a second program because fs_sampling.h needs gp_kernel.h in double
+(-DGP_REAL=double) while the weight-space stages stay in float; it is built only when a
+scene has function-space objects. Per-path state (the vertex record, its object and the
+global model's ring) is indexed by path id; scratch is per work item and the stages run
+in chunks, so its size does not grow with the batch.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+
+from . import layouts
+from .device import Device, KernelTimings, Program
+from .gp import function_space_layout as FL
+
+STAGE_FILES = ("gpis_function_space.cl", "gpis_shadow_function_space.cl")
+HEADERS = ("gpis_proxy.h", "fs_linalg.h", "fs_sampling.h")
+RING_BUDGET = 256 << 20      # bytes of global-model rings per batch: caps the batch size
+SCRATCH_BUDGET = 256 << 20   # bytes of scratch per launch: sets the chunk size
+
+
+def _fs_objects(objects: np.ndarray) -> np.ndarray:
+    return objects[objects["sampler"] == layouts.GPIS_SAMPLERS["function_space"]]
+
+
+def ring_stride(objects: np.ndarray) -> int:
+    """Observations per path ring: the largest cap of a global-memory object, else 1."""
+    fs = _fs_objects(objects)
+    glob = fs[fs["memory"] == layouts.GPIS_MEMORIES["global"]]
+    return int(glob["memory_cap"].max()) if len(glob) else 1
+
+
+def max_batch(objects: np.ndarray) -> int:
+    """The largest batch whose rings fit RING_BUDGET."""
+    return max(1, RING_BUDGET // (ring_stride(objects) * FL.FS_OBS.dtype.itemsize))
+
+
+class FunctionSpaceStages:
+    def __init__(self, device: Device, objects: np.ndarray, batch: int,
+                 timings: KernelTimings | None = None):
+        self.device = device
+        fs = _fs_objects(objects)
+        self.stride = ring_stride(objects)
+        rows_cap = self.stride if self.stride > 1 else 2
+        defines = FL.defines(int(fs["samples"].max()), rows_cap, int(fs["refine"].max()))
+        self.program = Program(device, STAGE_FILES, defines=defines, extra_headers=HEADERS,
+                               extra_c=FL.c_declarations())
+        if timings is not None:   # one kernel table for both programs
+            self.program.timings = timings
+        self.local = 16 if device.device.type & cl.device_type.CPU else 64
+        slice_bytes = 8 * defines["FS_SCRATCH_DOUBLES"]
+        chunk = max(1, min(batch, SCRATCH_BUDGET // (2 * slice_bytes)))
+        self.chunk = int(-(-chunk // self.local) * self.local)
+        mf, ctx = cl.mem_flags, device.ctx
+        self.scratch = cl.Buffer(ctx, mf.READ_WRITE, 2 * slice_bytes * self.chunk)
+        self.vertex = cl.Buffer(ctx, mf.READ_WRITE, FL.FS_VERTEX.dtype.itemsize * batch)
+        self.vertex_object = cl.Buffer(ctx, mf.READ_WRITE, 4 * batch)
+        self.rings = cl.Buffer(ctx, mf.READ_WRITE,
+                               FL.FS_OBS.dtype.itemsize * self.stride * batch)
+
+    def _chunks(self, name, n, head, tail):
+        """Launch over [0, n) in chunks with a fixed local size: PoCL compiles a kernel
+        once per work-group size, and these kernels take seconds to compile."""
+        kernel, queue = self.program.kernels[name], self.device.queue
+        for first in range(0, n, self.chunk):
+            m = min(self.chunk, n - first)
+            kernel.set_args(*head, np.int32(first), np.int32(first + m), *tail)
+            padded = -(-m // self.local) * self.local
+            event = cl.enqueue_nd_range_kernel(queue, kernel, (padded,), (self.local,))
+            self.program.timings.record(name, m, event)
+
+    def free_flight(self, params, paths, rays, n, gpis_objects, kernels, means, counters):
+        """Rays [0, n) of `rays`: hits moved to function-space crossings, vertices recorded."""
+        self._chunks("gpis_function_space", n, (params,),
+                     (*paths.args, *rays.args, gpis_objects, kernels, means, self.vertex,
+                      self.vertex_object, self.rings, np.int32(self.stride), self.scratch,
+                      counters))
+
+    def shadow(self, params, paths, shadow, n, gpis_objects, kernels, means, counters):
+        """Shadow rays (at most n: one per hit) blocked by function-space crossings."""
+        self._chunks("gpis_shadow_function_space", n, (params,),
+                     (*paths.args, *shadow.args, gpis_objects, kernels, means, self.vertex,
+                      self.vertex_object, self.rings, np.int32(self.stride), self.scratch,
+                      counters))

@@ -1,0 +1,78 @@
+/* From: ray queue `in` with surface (and weight-space) hits.  To: hits moved to the
+ * first zero crossing sampled along the ray inside a function-space GPIS proxy, with the
+ * sampled normal (hit_prim = GPIS_HIT_BASE - k); the path's vertex record (FsVertex, and
+ * for the global model its ring of observations) becomes that hit, or "none" when the
+ * ray's final hit is anything else.
+ *
+ * Memory lives only between consecutive GPIS vertices of one object: any other event (a
+ * surface, a null surface, another object's hit, leaving the proxy) resets it, so a ray
+ * that does not start at this path's last vertex of object k meets k with the fresh
+ * start condition. Every ray of a path at wavefront iteration b leaves from the event of
+ * iteration b - 1, which is why one record per path suffices (camera rays: b = 0).
+ *
+ * Scratch: two slices per work item, so that the winning object's rows survive while
+ * later objects on the same ray are sampled (the global model copies them into the
+ * ring); the host launches in chunks [first, first + chunk) to bound the scratch. */
+inline uint fs_object_seed(uint seed, int k)
+{
+    return seed ^ ((uint)k * 0x9e3779b9u);   /* objects draw independent streams */
+}
+
+__kernel void gpis_function_space(__constant RenderParams* params, int first, int end,
+                                  PATH_PARAMS(path), RAY_PARAMS(in),
+                                  __global const GpisObject* gpis,
+                                  __global const GpKernel* kernels,
+                                  __global const MeanNode* means,
+                                  __global FsVertex* vertex, __global int* vertex_object,
+                                  __global FsObs* rings, int ring_stride,
+                                  __global double* scratch, __global int* counters)
+{
+    int item = get_global_id(0), i = first + item;
+    if (i >= end) return;
+    float4 o = in_o[i], d = in_d[i];
+    int p = in_path[i];
+    int vk = params->bounce == 0 ? -1 : vertex_object[p];
+    FsVertex none = {0}, prev = vertex[p];
+    __global FsObs* ring = rings + (size_t)p * ring_stride;
+    float t_hit = in_hit_t[i];
+    int best = -1, slot = 0;
+    FsResult best_res;
+    FsRay best_ray;
+    FsParams best_prm;
+    for (int k = 0; k < params->num_gpis; ++k) {
+        __global const GpisObject* g = &gpis[k];
+        float t0 = o.w, t1 = t_hit;
+        if (g->sampler != GPIS_SAMPLER_FUNCTION_SPACE
+            || !gpis_proxy_clip(g, o.xyz, d.xyz, &t0, &t1))
+            continue;
+        FsParams prm = {g->samples, g->memory, g->memory_cap, g->refine, (double)g->step_corr};
+        FsRay r = {convert_double3(o.xyz), convert_double3(d.xyz), (double)t0, (double)t1};
+        FsRng rng = {fs_object_seed(params->seed, k), (uint)path_pixel[p],
+                     (uint)path_sample[p], (uint)params->bounce, 0u};
+        FsResult res = fs_free_flight(kernels[k], means + g->mean_first, g->mean_count, prm,
+                                      r, vk == k ? prev : none, ring, rng,
+                                      fs_scratch(scratch, 2 * item + slot));
+        if (res.status) {                /* counted, reported by the host; no hit */
+            atomic_inc(&counters[COUNT_GPIS_FAILED]);
+            continue;
+        }
+        if (res.hit && (float)res.t < t_hit) {
+            t_hit = (float)res.t;
+            best = k;
+            best_res = res;
+            best_ray = r;
+            best_prm = prm;
+            slot ^= 1;
+        }
+    }
+    if (best < 0) {
+        vertex_object[p] = -1;
+        return;
+    }
+    in_hit_t[i] = t_hit;
+    in_hit_prim[i] = GPIS_HIT_BASE - best;
+    in_hit_n[i] = (float4)(convert_float3(normalize(best_res.grad)), 0.0f);
+    vertex[p] = fs_vertex_at_hit(best_prm, best_ray, best_res, vk == best ? prev : none, ring,
+                                 fs_scratch(scratch, 2 * item + (slot ^ 1)));
+    vertex_object[p] = best;
+}

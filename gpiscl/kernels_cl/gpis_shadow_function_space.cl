@@ -1,0 +1,60 @@
+/* From: shadow queue.  To: contributions zeroed where a free flight through a
+ * function-space GPIS object, sampled under the object's memory model, crosses zero
+ * between the vertex and the light.
+ *
+ * Shadow rays read the path's vertex record and ring and never write them: the
+ * continuation ray from the same vertex (next iteration) is conditioned on exactly what
+ * it would have been without NEE.
+ *
+ * Why a 0/1 sample is unbiased: the NEE term of a vertex is E[c V], where c is the
+ * light sample's contribution (fixed by the path prefix) and V the indicator that the
+ * surface does not cross the segment. Under the memory model the law of the field along
+ * that segment, given the path prefix, is the conditional law defined by the vertex
+ * record; we draw V exactly from it (fresh random stream 1, independent of the
+ * continuation's stream 0), so E[V | prefix] = T(prefix), the model's transmittance.
+ * The pixel estimate is a sum of such terms, each linear in one V, so the correlation
+ * that one shared realization would put between a shadow ray and the later path (weight
+ * space has it, we do not) cannot change any expectation. Crossings are found on the
+ * same sample grid as free flight, so the visibility agrees with what a continuation
+ * ray along the same segment would see. */
+__kernel void gpis_shadow_function_space(__constant RenderParams* params, int first,
+                                         int end, PATH_PARAMS(path),
+                                         SHADOW_PARAMS(shadow),
+                                         __global const GpisObject* gpis,
+                                         __global const GpKernel* kernels,
+                                         __global const MeanNode* means,
+                                         __global const FsVertex* vertex,
+                                         __global const int* vertex_object,
+                                         __global const FsObs* rings, int ring_stride,
+                                         __global double* scratch, __global int* counters)
+{
+    int item = get_global_id(0), i = first + item;
+    if (i >= end || i >= counters[COUNT_SHADOW]) return;
+    if (max3(shadow_contribution[i].xyz) <= 0.0f) return;   /* blocked already */
+    float4 o = shadow_o[i], d = shadow_d[i];
+    int p = shadow_path[i], vk = vertex_object[p];
+    FsVertex none = {0}, prev = vertex[p];
+    __global const FsObs* ring = rings + (size_t)p * ring_stride;
+    FsScratch S = fs_scratch(scratch, item);
+    for (int k = 0; k < params->num_gpis; ++k) {
+        __global const GpisObject* g = &gpis[k];
+        float t0 = o.w, t1 = d.w;
+        if (g->sampler != GPIS_SAMPLER_FUNCTION_SPACE
+            || !gpis_proxy_clip(g, o.xyz, d.xyz, &t0, &t1))
+            continue;
+        FsParams prm = {g->samples, g->memory, g->memory_cap, g->refine, (double)g->step_corr};
+        FsRay r = {convert_double3(o.xyz), convert_double3(d.xyz), (double)t0, (double)t1};
+        FsRng rng = {fs_object_seed(params->seed, k), (uint)path_pixel[p],
+                     (uint)path_sample[p], (uint)params->bounce, 1u};
+        FsResult res = fs_free_flight(kernels[k], means + g->mean_first, g->mean_count, prm,
+                                      r, vk == k ? prev : none, ring, rng, S);
+        if (res.status) {                /* counted, reported by the host; unblocked */
+            atomic_inc(&counters[COUNT_GPIS_FAILED]);
+            continue;
+        }
+        if (res.hit) {
+            shadow_contribution[i] = (float4)(0.0f);
+            return;
+        }
+    }
+}

@@ -1,0 +1,144 @@
+"""Function-space GPIS rendered end to end: white furnace under every memory model,
+batch-size independence, and the global model against the weight-space render."""
+import math
+
+import numpy as np
+import pytest
+
+from gpiscl import render_result
+from stats import assert_agree, z_threshold
+
+MEMORIES = ("none", "renewal", "renewal_plus", "global")
+
+
+def gpis_scene(sampler, bsdf, albedo, lights, spp, seed=3, max_depth=256, rr_start=100000):
+    """A rough GPIS ball (sigma comparable to the mean's curvature, l small): concave
+    pockets make paths scatter several times inside the proxy."""
+    return {"camera": {"position": [0, 0, 3.0], "look_at": [0, 0, 0], "up": [0, 1, 0],
+                       "fov": 40, "resolution": [16, 16]},
+            "render": {"spp": spp, "seed": seed, "max_depth": max_depth,
+                       "russian_roulette": {"start_depth": rr_start}},
+            "shapes": [{"type": "gpis", "proxy": {"type": "box", "min": [-1.1] * 3,
+                                                  "max": [1.1] * 3},
+                        "mean": {"type": "sphere", "radius": 0.7},
+                        "kernel": {"type": "squared_exponential", "sigma": 0.3,
+                                   "length_scale": 0.2},
+                        "sampler": sampler, "bsdf": {"type": bsdf, "albedo": albedo}}],
+            "lights": lights}
+
+
+def fs(memory, **kw):
+    return {"type": "function_space", "samples": 16, "memory": memory, "memory_cap": 48, **kw}
+
+
+def run(scene, device, **kw):
+    res = render_result(scene, device=device, **kw)
+    st = res.stats
+    assert st.nan_paths == 0 and st.gpis_failed == 0 and st.truncated_paths == 0, st.summary()
+    return res
+
+
+@pytest.mark.parametrize("bsdf", ["mirror", "diffuse"])
+@pytest.mark.parametrize("memory", MEMORIES)
+def test01_white_furnace(device, memory, bsdf):
+    """Albedo 1 in a unit environment, roulette off: every pixel is 1. The mirror gives 1
+    per path (zero variance: any lost or killed path shows exactly); the diffuse BSDF
+    uses NEE + MIS, so it also checks that a shadow ray's 0/1 visibility has the same law
+    as the escape of a continuation ray from the same vertex record."""
+    env = [{"type": "environment", "radiance": 1.0}]
+    res = run(gpis_scene(fs(memory), bsdf, 1.0, env, spp=16), device)
+    img = res.image
+    assert res.stats.killed_paths == 0, res.stats.summary()
+    assert res.stats.rays > 1.5 * res.stats.paths   # the ball is hit, often repeatedly
+    assert_agree(img.mean, img.stderr, np.ones_like(img.mean), block=4, what="furnace")
+    if bsdf == "mirror":
+        assert np.all(img.stderr == 0)
+
+
+def test02_image_does_not_depend_on_the_batch_size(device):
+    scene = gpis_scene(fs("global"), "diffuse", 0.8,
+                       [{"type": "environment", "radiance": 1.0}], spp=4)
+    a = run(scene, device).image.mean
+    b = run(scene, device, batch_size=333).image.mean
+    np.testing.assert_array_equal(a, b)
+
+
+LIGHTS = [{"type": "directional", "direction": [-0.3, -1, -0.4], "irradiance": 3.0},
+          {"type": "environment", "radiance": 0.3}]
+
+
+def test03_global_memory_agrees_with_weight_space(device):
+    """Weight space is the exact global model (one realization per path); function space
+    with global memory must agree per pixel (z-test, Bonferroni) and in the image mean.
+    Measured at 256 spp: the default step (c = 0.9, ~1.7% of crossings missed) and cap 64
+    leave a 0.3-0.5% offset in the image mean, c = 0.99 with cap 256 agrees to 0.1%; both
+    are below this test's ~0.5% resolution. Renewal and renewal_plus forget the path
+    between vertices: their difference is printed (1-2% here, see issue 4's note)."""
+    spp = 32
+    ws = run(gpis_scene({"type": "weight_space", "features": 256}, "diffuse", 0.9, LIGHTS,
+                        spp, seed=7, max_depth=64, rr_start=8), device).image
+    imgs = {m: run(gpis_scene(fs(m, memory_cap=64), "diffuse", 0.9, LIGHTS, spp, seed=7,
+                              max_depth=64, rr_start=8), device).image
+            for m in ("global", "renewal_plus", "renewal")}
+    g = imgs["global"]
+    assert_agree(g.mean, g.stderr, ws.mean, ws.stderr, what="global vs weight space")
+    for m, img in imgs.items():
+        diff = img.mean.mean() - ws.mean.mean()
+        se = math.sqrt((img.stderr**2).sum() + (ws.stderr**2).sum()) / img.mean.size
+        print(f"{m}: image mean {img.mean.mean():.4f} vs weight space {ws.mean.mean():.4f}: "
+              f"{diff / ws.mean.mean():+.2%} +- {se / ws.mean.mean():.2%}")
+        if m == "global":
+            assert abs(diff) < z_threshold(1) * se
+
+
+def test04_failed_free_flights_are_counted_and_reported(device):
+    """A length scale far below the proxy size needs more than FS_MAX_SEGMENTS segments
+    of N = 2: each such ray is counted in gpis_failed and the summary says so."""
+    scene = gpis_scene(fs("renewal_plus", samples=2), "diffuse", 0.8,
+                       [{"type": "environment", "radiance": 1.0}], spp=1)
+    g = scene["shapes"][0]
+    g["kernel"]["length_scale"] = 1e-4
+    g["mean"] = {"type": "constant", "value": 10.0}
+    res = render_result(scene, device=device)
+    assert res.stats.gpis_failed > 0.5 * 16 * 16 * 0.4   # rays through the proxy
+    assert "undecided GPIS" in res.stats.summary()
+    np.testing.assert_allclose(res.image.mean, 1.0, rtol=1e-6)   # failed: no hit
+
+
+KERNELS = {"thin_plate": {"type": "thin_plate", "sigma": 0.04, "radius": 4.0},
+           "rq_aniso": {"type": "rational_quadratic", "sigma": 0.3, "length_scale": 0.25,
+                        "alpha": 0.75, "aniso": [1, 0.5, 2]},
+           "periodic": {"type": "periodic", "sigma": 0.2, "length_scale": 1.0, "w": 1.0},
+           "locally_periodic": {"type": "locally_periodic", "sigma": 0.2, "length_scale": 1.0,
+                                "w": 1.0, "se_length_scale": 0.5}}
+
+
+@pytest.mark.parametrize("memory", ["renewal_plus", "global"])
+@pytest.mark.parametrize("kernel", KERNELS)
+def test05_mirror_furnace_for_every_kernel(device, kernel, memory):
+    """Anisotropic and product kernels take the general gradient conditional (no closed
+    form), thin-plate the bisection step rule: still exactly 1 per path."""
+    scene = gpis_scene(fs(memory), "mirror", 1.0, [{"type": "environment", "radiance": 1.0}],
+                       spp=4)
+    scene["shapes"][0]["kernel"] = KERNELS[kernel]
+    res = run(scene, device)
+    assert res.stats.killed_paths == 0 and res.stats.rays > 1.2 * res.stats.paths
+    np.testing.assert_allclose(res.image.mean, 1.0, rtol=1e-6)
+
+
+@pytest.mark.parametrize("bsdf", ["mirror", "diffuse"])
+def test06_furnace_with_overlapping_objects_and_a_surface_inside(device, bsdf):
+    """Two overlapping function-space objects (global and renewal memory) and a sphere
+    inside a proxy: memory resets at other events, per-object random streams, and the
+    two scratch slices that keep the winning object's rows (global ring)."""
+    env = [{"type": "environment", "radiance": 1.0}]
+    scene = gpis_scene(fs("global"), bsdf, 1.0, env, spp=16)
+    second = dict(scene["shapes"][0], sampler=fs("renewal"))
+    second["proxy"] = {"type": "sphere", "center": [0.6, 0.3, 0.0], "radius": 0.8}
+    second["mean"] = {"type": "sphere", "center": [0.6, 0.3, 0.0], "radius": 0.4}
+    scene["shapes"] += [second, {"type": "sphere", "center": [-0.5, -0.6, 0.4], "radius": 0.3,
+                                 "bsdf": {"type": bsdf, "albedo": 1.0}}]
+    res = run(scene, device)
+    img = res.image
+    assert res.stats.killed_paths == 0
+    assert_agree(img.mean, img.stderr, np.ones_like(img.mean), block=4, what="furnace")
