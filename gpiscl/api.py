@@ -7,7 +7,7 @@ import numpy as np
 
 from .host.device import Device
 from .host.integrator import RenderResult, WavefrontIntegrator
-from .host.scene import Scene, load_scene
+from .host.scene import Scene, SceneError, load_scene
 from .host.scene_compile import compile_scene
 
 
@@ -27,10 +27,24 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
         settings["realization"] = int(realization)
     if resolution is not None:
         data["camera"]["resolution"] = [int(resolution[0]), int(resolution[1])]
+    _check_realization(data, scene.source)
     if not isinstance(device, Device):
         device = Device(device)
     integrator = WavefrontIntegrator(device, compile_scene(data), settings, batch_size)
     return integrator.render(settings["spp"], time_limit=time_limit, progress=progress)
+
+
+def _check_realization(data: dict, source: str):
+    """A fixed realization exists only in weight space: function space samples f along
+    each ray as it goes, so there is no realization to hold fixed."""
+    if data["render"]["realization"] is None:
+        return
+    for i, shape in enumerate(data["shapes"]):
+        if shape["type"] == "gpis" and shape["sampler"]["type"] != "weight_space":
+            raise SceneError(source, "render.realization",
+                             f"shapes[{i}] uses the {shape['sampler']['type']} sampler, which "
+                             "has no global realization to fix; use weight_space to render "
+                             "one realization")
 
 
 def render(scene, spp: int | None = None, **kwargs) -> np.ndarray:

@@ -191,3 +191,13 @@ def test_surface_type_slopes_follow_the_beckmann_law(device):
         counts = np.bincount(np.searchsorted(edges, slope), minlength=10)
         chi2 = float(np.sum((counts - n / 10) ** 2 / (n / 10)))
         assert chi2 < 40.0, (axis, chi2)  # P(chi2_9 > 40) ~ 7e-6
+
+
+def test_a_fixed_realization_needs_weight_space(device):
+    from gpiscl.host.scene import SceneError
+    shape = gpis("squared_exponential", "diffuse", 0.5)
+    shape["sampler"] = {"type": "function_space"}
+    scene = {"camera": camera(4), "lights": [{"type": "environment"}], "shapes": [shape]}
+    with pytest.raises(SceneError) as info:
+        render_result(scene, device=device, realization=1)
+    assert info.value.key == "render.realization" and "function_space" in info.value.reason
