@@ -1,9 +1,10 @@
-"""Command line: python -m gpiscl render|devices ..."""
+"""Command line: python -m gpiscl render|uq|sample|devices ..."""
 from __future__ import annotations
 
 import argparse
 import copy
 import sys
+from pathlib import Path
 
 from .host.device import Device, DeviceError, list_devices
 from .host.scene import Scene, SceneError, load_scene
@@ -47,7 +48,32 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--exposure", type=float, default=0.0, help="PNG preview exposure (stops)")
     r.add_argument("--stats", action="store_true", help="print per-kernel timings")
     sub.add_parser("devices", help="list OpenCL platforms and devices")
+    _add_uq_parser(sub)
+    _add_sample_parser(sub)
     return ap
+
+
+def _add_uq_parser(sub):
+    u = sub.add_parser("uq", help="per-pixel mean and variance over GPIS realizations",
+                       description="Render N weight-space realizations with K samples each; "
+                       "write the mean, the unbiased between-realization variance (Monte "
+                       "Carlo noise removed, not clamped), std and standard errors.")
+    u.add_argument("scene", nargs="?", help="scene JSON file (default: the built-in scene)")
+    u.add_argument("-o", "--output", default="uq.exr", help="output EXR (default uq.exr)")
+    u.add_argument("--realizations", type=_positive_int, default=16, metavar="N",
+                   help="number of realizations (default 16)")
+    u.add_argument("--spp", type=_positive_int, default=16, metavar="K",
+                   help="samples per pixel per realization, >= 2 (default 16)")
+    u.add_argument("--seed", type=int, help="picks the realizations and their samples")
+    u.add_argument("--first", type=int, default=0, metavar="I",
+                   help="index of the first realization: batches [I, I+N) of one seed "
+                   "merge with --merge (default 0)")
+    u.add_argument("--merge", nargs="+", metavar="NPZ",
+                   help="merge these .uq.npz partial sums (and render nothing)")
+    u.add_argument("--resolution", type=_resolution, help="WIDTHxHEIGHT")
+    u.add_argument("--device", help="OpenCL device: 'P:D' indices or a name fragment")
+    u.add_argument("--batch-size", type=_positive_int, help="paths in flight per batch")
+    u.add_argument("--exposure", type=float, default=0.0, help="PNG preview exposure (stops)")
 
 
 def _load(args) -> Scene:
@@ -123,6 +149,119 @@ def cmd_devices(_args) -> int:
     return 0
 
 
+def cmd_uq(args) -> int:
+    from .host.uq import UqSums, check_uq_scene, render_realizations, write_uq_outputs
+
+    if args.merge:
+        sums = UqSums.empty(())
+        for path in args.merge:
+            try:
+                sums = sums.merge(UqSums.load(path))
+            except (OSError, KeyError, ValueError) as exc:
+                raise SceneError(path, "", f"cannot merge this uq partial-sums file "
+                                 f"({exc})") from None
+        if sums.n < 2:
+            raise SceneError("<command line>", "--merge", "needs >= 2 realizations in all")
+        paths = write_uq_outputs(sums, None, args.output, args.exposure)
+        print(f"merged {sums.n} realizations; wrote {paths['exr']}", file=sys.stderr)
+        return 0
+    if args.spp < 2:
+        raise SceneError("<command line>", "--spp", "must be >= 2: each realization needs a "
+                         "sample variance to remove the Monte Carlo part")
+    if args.seed is not None and not 0 <= args.seed < 2**32:
+        raise SceneError("<command line>", "--seed", "must be in [0, 2**32)")
+    if args.first < 0:
+        raise SceneError("<command line>", "--first", "must be >= 0")
+    scene = _load(args)
+    check_uq_scene(scene.data, scene.source)
+    device = Device(args.device)
+    n, k = args.realizations, args.spp
+    print(f"uq: {n} realizations x {k} spp of {scene.source} on {device.name}",
+          file=sys.stderr)
+    bar = None
+    if sys.stderr.isatty():
+        from tqdm import tqdm
+        bar = tqdm(total=n, unit="realization", file=sys.stderr, desc="realizations")
+    try:
+        run = render_realizations(scene, n, k, seed=args.seed, first=args.first,
+                                  resolution=args.resolution, device=device,
+                                  batch_size=args.batch_size,
+                                  progress=bar.update if bar else None)
+    finally:
+        if bar:
+            bar.close()
+    n = run.sums.n
+    if run.interrupted:
+        print(f"interrupted: keeping the {n} completed realizations", file=sys.stderr)
+    if n == 0:
+        return 1
+    print(f"{n} realizations in {run.seconds:.2f} s ({n / run.seconds:.3g} realizations/s, "
+          f"{run.paths / run.seconds:.4g} paths/s)", file=sys.stderr)
+    if n < 2:   # a batch to merge later: no variance yet
+        path = Path(args.output).with_suffix(".uq.npz")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        run.sums.save(path)
+        print(f"one realization has no variance; wrote its partial sums {path} "
+              f"(combine with: uq --merge)", file=sys.stderr)
+        return 0
+    data = copy.deepcopy(scene.data)
+    if args.resolution:
+        data["camera"]["resolution"] = list(args.resolution)
+    paths = write_uq_outputs(run.sums, Scene(data, scene.source, scene.base_dir),
+                             args.output, args.exposure)
+    print(f"wrote {paths['exr']}, {paths['png']}, {paths['std_png']}, {paths['sums']}",
+          file=sys.stderr)
+    return 0
+
+
+def _add_sample_parser(sub):
+    s = sub.add_parser("sample", help="PNG figures of GPIS realizations (needs matplotlib)",
+                       description="Figures of random geometry: realizations along a line "
+                       "and on a slice, weight-space M features vs exact samples (Fig. 2), "
+                       "prior occupancy P(f <= 0) for a scene's GPIS (Fig. 3). Needs the "
+                       "optional extra: pip install -e '.[plots]'.")
+    s.add_argument("target", metavar="KERNEL_OR_SCENE",
+                   help="a kernel type (e.g. rational_quadratic), a kernel JSON object "
+                   "(e.g. '{\"type\": \"rational_quadratic\", \"alpha\": 0.5}') or a scene file")
+    s.add_argument("-o", "--output", default="figures", help="output folder (default figures)")
+    s.add_argument("--object", type=int, default=0, help="which GPIS of a scene (default 0)")
+    s.add_argument("--features", default="10,100,1000",
+                   help="feature counts M compared in features.png (default 10,100,1000)")
+    s.add_argument("--realizations", type=_positive_int, default=4,
+                   help="realizations per plot (default 4)")
+    s.add_argument("--resolution", type=_positive_int, default=128,
+                   help="slice resolution in pixels (default 128)")
+    s.add_argument("--seed", type=int, default=0, help="random seed")
+    s.add_argument("--observations", metavar="FILE",
+                   help="surface points (x y z [nx ny nz] per line, or .npy): also draw the "
+                   "posterior GPIS given them (mean, sd, occupancy, realizations)")
+    s.add_argument("--noise", type=float, default=1e-4,
+                   help="variance of the observed values (default 1e-4)")
+
+
+def cmd_sample(args) -> int:
+    from .host.sample_figures import resolve_target, write_figures
+
+    try:
+        features = tuple(int(v) for v in args.features.split(","))
+        if not features or min(features) < 1:
+            raise ValueError
+    except ValueError:
+        raise SceneError("<command line>", "--features",
+                         f"expected positive integers separated by commas (got "
+                         f"{args.features!r})") from None
+    from .host.sample_figures import load_observations
+
+    if not args.noise > 0:
+        raise SceneError("<command line>", "--noise", f"must be > 0 (got {args.noise})")
+    target = resolve_target(args.target, args.object)
+    obs = load_observations(args.observations, args.noise) if args.observations else None
+    paths = write_figures(target, args.output, features, args.realizations, args.seed,
+                          args.resolution, observations=obs)
+    print("wrote " + ", ".join(str(p) for p in paths), file=sys.stderr)
+    return 0
+
+
 def cl_type(dev) -> str:
     import pyopencl as cl
     return cl.device_type.to_string(dev.type).lower()
@@ -131,7 +270,9 @@ def cl_type(dev) -> str:
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     try:
-        return {"render": cmd_render, "devices": cmd_devices}[args.command](args)
+        commands = {"render": cmd_render, "devices": cmd_devices, "uq": cmd_uq,
+                    "sample": cmd_sample}
+        return commands[args.command](args)
     except (SceneError, DeviceError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
