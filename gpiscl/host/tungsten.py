@@ -1,0 +1,289 @@
+"""Import the GPIS subset of the authors' Tungsten scene format into a gpiscl scene dict.
+
+Mapping (../shared/design/REFERENCE-ALGORITHMS.md section 8 describes their format):
+
+  camera  pinhole {transform {position, look_at, up}, fov (horizontal degrees), resolution}
+          -> camera (fov made vertical for the image's aspect)
+  renderer.spp -> render.spp;  integrator.max_bounces -> render.max_depth;
+  integrator.enable_light_sampling -> render.nee
+  bsdfs   lambert -> diffuse, mirror -> mirror, forward/null -> null; a checker texture
+          albedo becomes the mean of its two colours (listed in the notes)
+  primitives
+          quad (unit square in xz, normal +y, transform scale/rotation/position) -> rectangle,
+            or a rectangle light when it has emission/power
+          cube (unit cube [-0.5, 0.5]^3, unrotated) -> box, or the proxy box of its
+            int_medium; sphere (radius, or position/scale) -> sphere, or a sphere proxy
+          infinite_sphere {emission: colour | .exr file} -> environment / environment_map
+          infinite_sphere_cap {cap_angle, power, transform} -> directional light towards
+            the rotated +y axis with radiance power / (2 pi (1 - cos cap)) inside the cap
+  media   function_space_gaussian_process / gaussian_process -> sampler function_space
+            {samples: sample_points, memory: elephant -> global, goldfish -> renewal_plus,
+             dori -> renewal, none -> none; step_corr: step_size_cov when > 0}
+          weight_space_gaussian_process -> weight_space {features: basis_functions};
+            single_realization -> render.realization 0 (a fixed realization; the authors'
+            seed is not reproducible)
+          phase_function / additional_phase_functions {type: brdf, bsdf} -> micro-BSDF by id
+          gaussian_process: standard {mean, covariance, id}; csg {left, right} -> one gpis
+            object per leaf in the same proxy: first hits over independent objects are the
+            union min(f_L, f_R), which is what the reference's csg computes
+  means   homogeneous {offset} -> constant; spherical {center, radius} -> sphere;
+          linear {reference_point, direction, scale} -> plane
+  kernels squared_exponential, rational_quadratic (a -> alpha), thin_plate (R -> radius),
+          with sigma, lengthScale and aniso; the reference's kernels and ours agree there
+
+Everything else (procedural, mesh and tabulated means, their radial periodic kernel, rough
+conductors, mesh proxies, .hdr environment maps, rotated cubes) is an error naming the key
+path and the reason, never silently dropped. Pass `environment` to substitute a missing
+environment map.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .scene_schema import SceneError
+
+MEMORIES = {"elephant": "global", "goldfish": "renewal_plus", "dori": "renewal", "none": "none"}
+FS_MEDIA = ("function_space_gaussian_process", "gaussian_process")
+WS_MEDIA = ("weight_space_gaussian_process",)
+KERNEL_KEYS = {
+    "squared_exponential": {"sigma": "sigma", "lengthScale": "length_scale", "aniso": "aniso"},
+    "rational_quadratic": {"sigma": "sigma", "lengthScale": "length_scale", "a": "alpha",
+                           "aniso": "aniso"},
+    "thin_plate": {"sigma": "sigma", "R": "radius", "aniso": "aniso"},
+}
+
+
+class _Converter:
+    def __init__(self, doc: dict, source: str, environment=None):
+        self.doc, self.source, self.environment = doc, source, environment
+        self.base = Path(source).resolve().parent if source != "<dict>" else Path.cwd()
+        self.notes: list[str] = []
+
+    def fail(self, key: str, reason: str):
+        raise SceneError(self.source, key, reason)
+
+    # --- small pieces -----------------------------------------------------------------
+
+    def colour(self, value, key):
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return [float(value)] * 3
+        if isinstance(value, list) and len(value) == 3:
+            return [float(v) for v in value]
+        if isinstance(value, dict) and value.get("type") == "checker":
+            on = self.colour(value.get("on_color", 0.8), f"{key}.on_color")
+            off = self.colour(value.get("off_color", 0.2), f"{key}.off_color")
+            self.notes.append(f"{key}: checker texture replaced by its mean colour")
+            return [(a + b) / 2 for a, b in zip(on, off)]
+        self.fail(key, f"unsupported colour or texture {value!r}")
+
+    def named(self, ref, table: str, key: str) -> tuple[dict, str]:
+        """An inline object, or the entry of doc[table] with that name."""
+        if isinstance(ref, dict):
+            return ref, key
+        for i, entry in enumerate(self.doc.get(table, [])):
+            if entry.get("name") == ref:
+                return entry, f"{table}[{i}]"
+        self.fail(key, f'no entry named "{ref}" in "{table}"')
+
+    def bsdf(self, ref, key, micro=False) -> dict:
+        b, key = self.named(ref, "bsdfs", key)
+        kind = b.get("type", "lambert")
+        albedo = self.colour(b.get("albedo", 1.0 if kind == "mirror" else 0.5), f"{key}.albedo")
+        if kind == "lambert":
+            return {"type": "diffuse", "albedo": albedo}
+        if kind == "mirror":
+            return {"type": "mirror", "albedo": albedo}
+        if kind in ("forward", "null") and not micro:
+            return {"type": "null"}
+        self.fail(f"{key}.type", f'BSDF "{kind}" is not supported'
+                  + (" as a micro-BSDF (diffuse or mirror only)" if micro else ""))
+
+    def transform(self, t: dict, key: str, allow_rotation=True):
+        pos = np.asarray(t.get("position", [0, 0, 0]), float)
+        scale = t.get("scale", 1.0)
+        scale = np.full(3, float(scale)) if np.ndim(scale) == 0 else np.asarray(scale, float)
+        rot = np.asarray(t.get("rotation", [0, 0, 0]), float)
+        if np.any(rot != 0) and not allow_rotation:
+            self.fail(f"{key}.rotation", "rotated boxes are not supported (axis-aligned only)")
+        # Tungsten's Mat4f::rotYXZ: R = Ry Rx Rz (degrees)
+        ax, ay, az = np.radians(rot)
+        rx = np.array([[1, 0, 0], [0, math.cos(ax), -math.sin(ax)], [0, math.sin(ax), math.cos(ax)]])
+        ry = np.array([[math.cos(ay), 0, math.sin(ay)], [0, 1, 0], [-math.sin(ay), 0, math.cos(ay)]])
+        rz = np.array([[math.cos(az), -math.sin(az), 0], [math.sin(az), math.cos(az), 0], [0, 0, 1]])
+        return pos, scale, ry @ rx @ rz
+
+    # --- blocks -----------------------------------------------------------------------
+
+    def camera(self) -> dict:
+        cam = self.doc.get("camera", {})
+        if cam.get("type", "pinhole") != "pinhole":
+            self.fail("camera.type", f'camera "{cam.get("type")}" is not supported (pinhole only)')
+        t = cam.get("transform", {})
+        res = cam.get("resolution", 512)
+        w, h = (res, res) if isinstance(res, int) else res
+        hfov = math.radians(float(cam.get("fov", 60.0)))
+        vfov = math.degrees(2 * math.atan(math.tan(hfov / 2) * h / w))
+        return {"position": t.get("position", [0, 0, 0]), "look_at": t.get("look_at", [0, 0, 1]),
+                "up": t.get("up", [0, 1, 0]), "fov": vfov, "resolution": [w, h]}
+
+    def render(self) -> dict:
+        out = {}
+        if "spp" in self.doc.get("renderer", {}):
+            out["spp"] = self.doc["renderer"]["spp"]
+        integ = self.doc.get("integrator", {})
+        if "max_bounces" in integ:
+            out["max_depth"] = integ["max_bounces"]
+        if "enable_light_sampling" in integ:
+            out["nee"] = bool(integ["enable_light_sampling"])
+        return out
+
+    def mean(self, m: dict, key: str) -> dict:
+        kind = m.get("type")
+        if kind == "homogeneous":
+            return {"type": "constant", "value": m.get("offset", 0.0)}
+        if kind == "spherical":
+            return {"type": "sphere", "center": m.get("center", [0, 0, 0]),
+                    "radius": m.get("radius", 1.0)}
+        if kind == "linear":
+            if "min" in m:
+                self.fail(f"{key}.min", "a clamped linear mean is not supported")
+            return {"type": "plane", "point": m.get("reference_point", [0, 0, 0]),
+                    "normal": m.get("direction", [1, 0, 0]), "scale": m.get("scale", 1.0)}
+        self.fail(f"{key}.type", f'mean "{kind}" is not supported (homogeneous, spherical, linear)')
+
+    def kernel(self, k: dict, key: str) -> dict:
+        kind = k.get("type")
+        if kind not in KERNEL_KEYS:
+            why = (" (the reference's periodic kernel is radial; gpiscl's is a product over "
+                   "axes)" if kind == "periodic" else "")
+            self.fail(f"{key}.type", f'covariance "{kind}" is not supported{why}')
+        out = {"type": kind}
+        for name, value in k.items():
+            if name == "type":
+                continue
+            if name not in KERNEL_KEYS[kind]:
+                self.fail(f"{key}.{name}", f'unknown {kind} key (the reference ignores it; '
+                          f'expected one of: {", ".join(KERNEL_KEYS[kind])})')
+            out[KERNEL_KEYS[kind][name]] = value
+        return out
+
+    def leaves(self, gp: dict, key: str):
+        """(mean, kernel, id, key) of each standard GP under a csg tree."""
+        kind = gp.get("type", "standard")
+        if kind == "csg":
+            return self.leaves(gp["left"], f"{key}.left") + self.leaves(gp["right"], f"{key}.right")
+        if kind != "standard":
+            self.fail(f"{key}.type", f'GP node "{kind}" is not supported (standard, csg)')
+        if "conditioning_data" in gp:
+            self.fail(f"{key}.conditioning_data", "conditioning on a mesh is not supported")
+        return [(self.mean(gp.get("mean", {"type": "spherical"}), f"{key}.mean"),
+                 self.kernel(gp.get("covariance", {"type": "squared_exponential"}),
+                             f"{key}.covariance"), int(gp.get("id", 0)), key)]
+
+    def sampler(self, med: dict, key: str) -> dict:
+        kind = med.get("type")
+        if kind in FS_MEDIA:
+            s = {"type": "function_space", "samples": med.get("sample_points", 32),
+                 "memory": MEMORIES.get(med.get("correlation_context", "goldfish"))}
+            if s["memory"] is None:
+                self.fail(f"{key}.correlation_context",
+                          f"unknown memory model (expected one of: {', '.join(MEMORIES)})")
+            if med.get("step_size_cov", 0) > 0:
+                s["step_corr"] = med["step_size_cov"]
+            return s
+        if kind in WS_MEDIA:
+            return {"type": "weight_space", "features": med.get("basis_functions", 300)}
+        self.fail(f"{key}.type", f'medium "{kind}" is not a Gaussian-process medium')
+
+    def gpis(self, medium_ref, proxy: dict, key: str, render: dict) -> list:
+        med, mkey = self.named(medium_ref, "media", key)
+        phases = [med.get("phase_function", {"type": "brdf", "bsdf": {"type": "lambert"}})]
+        phases += med.get("additional_phase_functions", [])
+        sampler = self.sampler(med, mkey)
+        if med.get("single_realization"):
+            render["realization"] = 0
+        shapes = []
+        for mean, kernel, gp_id, gkey in self.leaves(med.get("gaussian_process", {}),
+                                                    f"{mkey}.gaussian_process"):
+            if gp_id >= len(phases):
+                self.fail(f"{gkey}.id", f"no phase function for GP id {gp_id}")
+            phase = phases[gp_id]
+            pkey = (f"{mkey}.phase_function" if gp_id == 0
+                    else f"{mkey}.additional_phase_functions[{gp_id - 1}]")
+            if phase.get("type") != "brdf":
+                self.fail(f"{pkey}.type", "only brdf phase functions (micro-BSDFs) are supported")
+            shapes.append({"type": "gpis", "proxy": proxy, "mean": mean, "kernel": kernel,
+                           "sampler": dict(sampler),
+                           "bsdf": self.bsdf(phase.get("bsdf", {}), f"{pkey}.bsdf", micro=True)})
+        return shapes
+
+    def primitive(self, p: dict, key: str, render: dict, shapes: list, lights: list):
+        kind = p.get("type")
+        t = p.get("transform", {})
+        if kind == "quad":
+            pos, scale, rot = self.transform(t, f"{key}.transform")
+            u, v = rot @ [scale[0], 0, 0], rot @ [0, 0, -scale[2]]
+            if "emission" in p or "power" in p:
+                area = float(np.linalg.norm(np.cross(u, v)))
+                radiance = (self.colour(p["emission"], f"{key}.emission") if "emission" in p
+                            else [c / (math.pi * area) for c in self.colour(p["power"], f"{key}.power")])
+                lights.append({"type": "rectangle", "center": pos.tolist(), "u": u.tolist(),
+                               "v": v.tolist(), "radiance": radiance})
+            else:
+                shapes.append({"type": "rectangle", "center": pos.tolist(), "u": u.tolist(),
+                               "v": v.tolist(), "bsdf": self.bsdf(p.get("bsdf", {}), f"{key}.bsdf")})
+        elif kind in ("cube", "sphere"):
+            pos, scale, _ = self.transform(t, f"{key}.transform", allow_rotation=False)
+            if kind == "cube":
+                geo = {"min": (pos - scale / 2).tolist(), "max": (pos + scale / 2).tolist()}
+            else:
+                geo = {"center": pos.tolist(), "radius": float(p.get("radius", scale[0]))}
+            if "int_medium" in p:
+                shapes += self.gpis(p["int_medium"], {"type": ("box" if kind == "cube" else "sphere"),
+                                                      **geo}, f"{key}.int_medium", render)
+            else:
+                shapes.append({"type": "box" if kind == "cube" else "sphere", **geo,
+                               "bsdf": self.bsdf(p.get("bsdf", {}), f"{key}.bsdf")})
+        elif kind == "infinite_sphere":
+            lights.append(self.environment_light(p.get("emission", 1.0), f"{key}.emission"))
+        elif kind == "infinite_sphere_cap":
+            theta = math.radians(float(p.get("cap_angle", 10.0)))
+            _, _, rot = self.transform(t, f"{key}.transform")
+            power = self.colour(p.get("power", 1.0), f"{key}.power")
+            radiance = [c / (2 * math.pi * (1 - math.cos(theta))) for c in power]
+            lights.append({"type": "directional", "direction": (rot @ [0, 1, 0]).tolist(),
+                           "angular_radius": math.degrees(theta),
+                           "irradiance": [L * math.pi * math.sin(theta) ** 2 for L in radiance]})
+        elif "int_medium" in p:
+            self.fail(f"{key}.type", f'a "{kind}" proxy is not supported (cube or sphere)')
+        else:
+            self.fail(f"{key}.type", f'primitive "{kind}" is not supported')
+
+    def environment_light(self, emission, key) -> dict:
+        if self.environment is not None:
+            self.notes.append(f"{key}: replaced by the given environment")
+            return self.environment
+        if isinstance(emission, str):
+            path = (self.base / emission).resolve()
+            if path.suffix.lower() != ".exr":
+                self.fail(key, f'environment map "{emission}" is not an .exr; convert it or '
+                          "pass a substitute environment")
+            return {"type": "environment_map", "file": str(path)}
+        return {"type": "environment", "radiance": self.colour(emission, key)}
+
+    def convert(self) -> dict:
+        render = self.render()
+        shapes, lights = [], []
+        for i, p in enumerate(self.doc.get("primitives", [])):
+            self.primitive(p, f"primitives[{i}]", render, shapes, lights)
+        return {"description": f"converted from {Path(self.source).name}",
+                "camera": self.camera(), "render": render, "shapes": shapes, "lights": lights}
+
+
+def convert_tungsten(doc: dict, source: str = "<dict>", environment: dict | None = None):
+    """gpiscl scene dict and a list of notes on lossy mappings; SceneError if unsupported."""
+    c = _Converter(doc, source, environment)
+    return c.convert(), c.notes

@@ -1,0 +1,109 @@
+"""tools/convert_tungsten.py: the authors' CSG test scene imports, renders, and what we
+cannot import is an error naming the key path."""
+import copy
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gpiscl import load_scene, render_result
+from gpiscl.host.scene import SceneError
+from gpiscl.host.tungsten import convert_tungsten
+
+ROOT = Path(__file__).resolve().parent.parent
+CSG = ROOT / "tests" / "data" / "tungsten" / "gp-csg-test.json"
+SKY = {"type": "environment", "radiance": 0.3}
+
+
+def authors_scene():
+    return json.loads(CSG.read_text())
+
+
+def test_csg_scene_maps_every_gp_setting():
+    scene, notes = convert_tungsten(authors_scene(), str(CSG), SKY)
+    data = load_scene(scene).data  # strict loader accepts it
+    gpis = [s for s in data["shapes"] if s["type"] == "gpis"]
+    # csg union -> two independent objects sharing the proxy box
+    assert len(gpis) == 2
+    assert gpis[0]["proxy"] == gpis[1]["proxy"]
+    assert gpis[0]["proxy"]["min"] == pytest.approx([-1.5, -0.499, -1.5])
+    assert gpis[0]["proxy"]["max"] == pytest.approx([1.5, 2.501, 1.5])
+    assert gpis[0]["mean"] == {"type": "sphere", "center": [-0.4, 0.8, 0.0], "radius": 0.8}
+    assert gpis[1]["kernel"]["sigma"] == 0.001 and gpis[1]["kernel"]["length_scale"] == 0.5
+    s = gpis[0]["sampler"]
+    assert (s["type"], s["samples"], s["memory"], s["step_corr"]) == (
+        "function_space", 8, "renewal_plus", 0.9)  # goldfish is Renewal+
+    assert gpis[0]["bsdf"] == {"type": "mirror", "albedo": [0.35, 0.3, 0.9]}
+    assert data["render"]["max_depth"] == 20 and data["render"]["spp"] == 1
+    assert data["camera"]["fov"] == pytest.approx(20.0)  # square image: vertical = horizontal
+    sun = [l for l in data["lights"] if l["type"] == "directional"]
+    assert len(sun) == 2
+    # the sky cap: radiance power / (2 pi (1 - cos 50 deg)) over the cap, seen on axis
+    theta = math.radians(50)
+    E = 4.5 / (2 * math.pi * (1 - math.cos(theta))) * math.pi * math.sin(theta) ** 2
+    assert sun[1]["irradiance"][0] == pytest.approx(E)
+    assert sun[1]["direction"] == pytest.approx([0, 1, 0])
+    floor = data["shapes"][0]
+    assert floor["type"] == "rectangle" and floor["bsdf"]["albedo"] == pytest.approx([0.5] * 3)
+    assert any("checker" in n for n in notes) and any("environment" in n for n in notes)
+
+
+def test_converted_scene_renders(device):
+    scene, _ = convert_tungsten(authors_scene(), str(CSG), SKY)
+    res = render_result(scene, spp=2, resolution=(12, 12), device=device)
+    st = res.stats
+    assert st.nan_paths == 0 and st.gpis_failed == 0
+    assert np.all(np.isfinite(res.image.mean)) and res.image.mean.max() > 0
+
+
+def _with(path, value):
+    doc = authors_scene()
+    node = doc
+    for k in path[:-1]:
+        node = node[k]
+    node[path[-1]] = value
+    return doc
+
+
+GP = ["media", 0, "gaussian_process"]
+BAD = [
+    (_with(GP + ["left", "mean"], {"type": "procedural", "func": "knob"}),
+     "media[0].gaussian_process.left.mean.type", "not supported"),
+    (_with(GP + ["right", "covariance", "roughness"], 0.01),
+     "media[0].gaussian_process.right.covariance.roughness", "the reference ignores it"),
+    (_with(GP + ["left", "covariance"], {"type": "periodic", "w": 1.0}),
+     "media[0].gaussian_process.left.covariance.type", "radial"),
+    (_with(["media", 0, "correlation_context"], "parrot"),
+     "media[0].correlation_context", "unknown memory model"),
+    (_with(["media", 0, "phase_function", "bsdf", "type"], "rough_conductor"),
+     "media[0].phase_function.bsdf.type", "micro-BSDF"),
+    (_with(["primitives", 1, "transform", "rotation"], [0, 45, 0]),
+     "primitives[1].transform.rotation", "axis-aligned"),
+    (_with(["primitives", 1, "int_medium"], "fog"),
+     "primitives[1].int_medium", 'no entry named "fog"'),
+    (_with(["primitives", 0, "type"], "curves"), "primitives[0].type", "not supported"),
+    (_with(["camera", "type"], "thinlens"), "camera.type", "pinhole only"),
+]
+
+
+@pytest.mark.parametrize("doc,key,reason", BAD, ids=[b[1] for b in BAD])
+def test_unsupported_input_names_the_key(doc, key, reason):
+    with pytest.raises(SceneError) as info:
+        convert_tungsten(doc, str(CSG), SKY)
+    assert info.value.key == key and reason in info.value.reason
+
+
+def test_missing_environment_map_is_an_error_unless_substituted(tmp_path):
+    tool = [sys.executable, str(ROOT / "tools" / "convert_tungsten.py"), str(CSG)]
+    out = tmp_path / "scene.json"
+    r = subprocess.run(tool + [str(out)], capture_output=True, text=True)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1
+    assert "primitives[4].emission" in r.stderr and ".exr" in r.stderr
+    r = subprocess.run(tool + [str(out), "--environment", "0.3"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert load_scene(out).data["lights"][-1] == {"type": "environment",
+                                                 "radiance": [0.3, 0.3, 0.3]}
