@@ -100,6 +100,9 @@ def join_sources(stage_files, extra_headers=(), extra_c="") -> str:
 
 
 WORK_GROUP = 64
+# Built programs by (context, source, options): even a PoCL cache hit costs ~0.1 s, paid
+# by every integrator (one per UQ realization, one per test render) without this.
+_BUILT: dict = {}
 
 
 class Program:
@@ -112,6 +115,13 @@ class Program:
         opts = [f"-I{PYOPENCL_CL_DIR}"]
         opts += [f"-D{k}={v}" for k, v in sorted((defines or {}).items())]
         self.options = opts
+        key = (device.ctx.int_ptr, self.source, tuple(opts))
+        if key not in _BUILT:
+            _BUILT[key] = self._build(device, opts)
+        self.kernels = _BUILT[key]
+        self.timings = KernelTimings()
+
+    def _build(self, device: Device, opts) -> dict:
         try:
             prg = cl.Program(device.ctx, self.source).build(options=opts)
         except cl.Error as exc:
@@ -120,8 +130,7 @@ class Program:
                 f.write(self.source)
             raise DeviceError(f"OpenCL build failed on '{device.name}' with options "
                               f"{' '.join(opts)}; source saved to {path}:\n{exc}") from None
-        self.kernels = {k.function_name: k for k in prg.all_kernels()}
-        self.timings = KernelTimings()
+        return {k.function_name: k for k in prg.all_kernels()}
 
     def launch(self, name: str, global_size: int, *args):
         """Enqueue kernel `name` over global_size items; returns the event."""
