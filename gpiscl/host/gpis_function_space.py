@@ -16,7 +16,7 @@ from .device import Device, KernelTimings, Program
 from .gp import function_space_layout as FL
 
 STAGE_FILES = ("gpis_function_space.cl", "gpis_shadow_function_space.cl")
-HEADERS = ("gpis_proxy.h", "fs_linalg.h", "fs_sampling.h")
+HEADERS = ("gpis_proxy.h", "fs_linalg.h", "fs_sampling.h", "fs_objects.h")
 RING_BUDGET = 256 << 20      # bytes of global-model rings per batch: caps the batch size
 SCRATCH_BUDGET = 256 << 20   # bytes of scratch per launch: sets the chunk size
 

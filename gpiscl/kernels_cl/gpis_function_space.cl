@@ -13,11 +13,6 @@
  * Scratch: two slices per work item, so that the winning object's rows survive while
  * later objects on the same ray are sampled (the global model copies them into the
  * ring); the host launches in chunks [first, first + chunk) to bound the scratch. */
-inline uint fs_object_seed(uint seed, int k)
-{
-    return seed ^ ((uint)k * 0x9e3779b9u);   /* objects draw independent streams */
-}
-
 __kernel void gpis_function_space(__constant RenderParams* params, int first, int end,
                                   PATH_PARAMS(path), RAY_PARAMS(in),
                                   __global const GpisObject* gpis,
@@ -40,22 +35,13 @@ __kernel void gpis_function_space(__constant RenderParams* params, int first, in
     FsRay best_ray;
     FsParams best_prm;
     for (int k = 0; k < params->num_gpis; ++k) {
-        __global const GpisObject* g = &gpis[k];
-        float t0 = o.w, t1 = t_hit;
-        if (g->sampler != GPIS_SAMPLER_FUNCTION_SPACE
-            || !gpis_proxy_clip(g, o.xyz, d.xyz, &t0, &t1))
-            continue;
-        FsParams prm = {g->samples, g->memory, g->memory_cap, g->refine, (double)g->step_corr};
-        FsRay r = {convert_double3(o.xyz), convert_double3(d.xyz), (double)t0, (double)t1};
-        FsRng rng = {fs_object_seed(params->seed, k), (uint)path_pixel[p],
-                     (uint)path_sample[p], (uint)params->bounce, 0u};
-        FsResult res = fs_free_flight(kernels[k], means + g->mean_first, g->mean_count, prm,
-                                      r, vk == k ? prev : none, ring, rng,
-                                      fs_scratch(scratch, 2 * item + slot));
-        if (res.status) {                /* counted, reported by the host; no hit */
-            atomic_inc(&counters[COUNT_GPIS_FAILED]);
-            continue;
-        }
+        FsRay r;
+        FsParams prm;
+        FsResult res = fs_object_flight(params, gpis, k, kernels, means, o, d, t_hit,
+                                        path_pixel[p], path_sample[p], 0u,
+                                        vk == k ? prev : none, ring,
+                                        fs_scratch(scratch, 2 * item + slot), counters, &r,
+                                        &prm);
         if (res.hit && (float)res.t < t_hit) {
             t_hit = (float)res.t;
             best = k;

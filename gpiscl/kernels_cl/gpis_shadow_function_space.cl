@@ -37,22 +37,11 @@ __kernel void gpis_shadow_function_space(__constant RenderParams* params, int fi
     __global const FsObs* ring = rings + (size_t)p * ring_stride;
     FsScratch S = fs_scratch(scratch, item);
     for (int k = 0; k < params->num_gpis; ++k) {
-        __global const GpisObject* g = &gpis[k];
-        float t0 = o.w, t1 = d.w;
-        if (g->sampler != GPIS_SAMPLER_FUNCTION_SPACE
-            || !gpis_proxy_clip(g, o.xyz, d.xyz, &t0, &t1))
-            continue;
-        FsParams prm = {g->samples, g->memory, g->memory_cap, g->refine, (double)g->step_corr};
-        FsRay r = {convert_double3(o.xyz), convert_double3(d.xyz), (double)t0, (double)t1};
-        FsRng rng = {fs_object_seed(params->seed, k), (uint)path_pixel[p],
-                     (uint)path_sample[p], (uint)params->bounce, 1u};
-        FsResult res = fs_free_flight(kernels[k], means + g->mean_first, g->mean_count, prm,
-                                      r, vk == k ? prev : none, ring, rng, S);
-        if (res.status) {                /* counted, reported by the host; unblocked */
-            atomic_inc(&counters[COUNT_GPIS_FAILED]);
-            continue;
-        }
-        if (res.hit) {
+        FsRay r;
+        FsParams prm;
+        if (fs_object_flight(params, gpis, k, kernels, means, o, d, d.w, path_pixel[p],
+                             path_sample[p], 1u, vk == k ? prev : none, ring, S, counters, &r,
+                             &prm).hit) {
             shadow_contribution[i] = (float4)(0.0f);
             return;
         }

@@ -17,16 +17,9 @@ __kernel void gpis_weight_space(__constant RenderParams* params, int num_rays,
     int hit = -1;
     float3 n_hit = (float3)(0.0f);
     for (int k = 0; k < params->num_gpis; ++k) {
-        __global const GpisObject* g = &gpis[k];
-        float t0 = o.w, t1 = t_hit;
-        if (g->sampler != GPIS_SAMPLER_WEIGHT_SPACE || !gpis_proxy_clip(g, o.xyz, d.xyz, &t0, &t1))
-            continue;
         float3 n;
-        int status = 0;
-        float t = ws_first_root(kernels[k], means + g->mean_first, g->mean_count,
-                                order_table + g->order_first, g->order_count, g->features, key, k,
-                                o.xyz, d.xyz, t0, t1, g->tolerance, &n, &status);
-        if (status) atomic_inc(&counters[COUNT_GPIS_FAILED]);
+        float t = ws_object_first_root(gpis, k, kernels, means, order_table, key, o.xyz, d.xyz,
+                                       o.w, t_hit, &n, counters);
         if (t < t_hit) {
             t_hit = t;
             hit = k;

@@ -1,0 +1,40 @@
+/* The function-space GPIS objects of a scene as seen by one ray: shared by the hit stage
+ * and the shadow stage so both sample with the same rules. */
+
+inline uint fs_object_seed(uint seed, int k)
+{
+    return seed ^ ((uint)k * 0x9e3779b9u);   /* objects draw independent streams */
+}
+
+/* Free flight through object k along [o.w, t1] clipped to its proxy, conditioned on vertex
+ * record v, with random stream `stream` (0: continuation, 1: shadow). res.hit = 0 when k is
+ * not a function-space object or the ray misses its proxy; a failed solve is counted in
+ * COUNT_GPIS_FAILED (reported by the host) and also returns no hit. *ray and *prm receive
+ * what fs_vertex_at_hit needs. */
+inline FsResult fs_object_flight(__constant RenderParams* params,
+                                 __global const GpisObject* gpis, int k,
+                                 __global const GpKernel* kernels,
+                                 __global const MeanNode* means, float4 o, float4 d, float t1,
+                                 int pixel, int sample, uint stream, FsVertex v,
+                                 __global const FsObs* ring, FsScratch S,
+                                 __global int* counters, FsRay* ray, FsParams* prm)
+{
+    FsResult none = {0};
+    __global const GpisObject* g = &gpis[k];
+    float t0 = o.w;
+    if (g->sampler != GPIS_SAMPLER_FUNCTION_SPACE || !gpis_proxy_clip(g, o.xyz, d.xyz, &t0, &t1))
+        return none;
+    FsParams pr = {g->samples, g->memory, g->memory_cap, g->refine, (double)g->step_corr};
+    FsRay r = {convert_double3(o.xyz), convert_double3(d.xyz), (double)t0, (double)t1};
+    FsRng rng = {fs_object_seed(params->seed, k), (uint)pixel, (uint)sample,
+                 (uint)params->bounce, stream};
+    FsResult res = fs_free_flight(kernels[k], means + g->mean_first, g->mean_count, pr, r, v,
+                                  ring, rng, S);
+    if (res.status) {
+        atomic_inc(&counters[COUNT_GPIS_FAILED]);
+        return none;
+    }
+    *ray = r;
+    *prm = pr;
+    return res;
+}

@@ -1,0 +1,23 @@
+/* The weight-space GPIS objects of a scene as seen by one ray: shared by the hit stage and
+ * the shadow stage so both see exactly the same realization and root rule. */
+
+/* First crossing of object k's realization (path key `key`) along [t0, t1] clipped to its
+ * proxy, or T_INFINITY (also when k is not a weight-space object). A search that cannot
+ * decide is counted in COUNT_GPIS_FAILED and reported by the host as undecided. */
+inline float ws_object_first_root(__global const GpisObject* gpis, int k,
+                                  __global const GpKernel* kernels,
+                                  __global const MeanNode* means,
+                                  __global const float* order_table, uint2 key, float3 o,
+                                  float3 d, float t0, float t1, float3* normal,
+                                  __global int* counters)
+{
+    __global const GpisObject* g = &gpis[k];
+    if (g->sampler != GPIS_SAMPLER_WEIGHT_SPACE || !gpis_proxy_clip(g, o, d, &t0, &t1))
+        return T_INFINITY;
+    int status = 0;
+    float t = ws_first_root(kernels[k], means + g->mean_first, g->mean_count,
+                            order_table + g->order_first, g->order_count, g->features, key, k,
+                            o, d, t0, t1, g->tolerance, normal, &status);
+    if (status) atomic_inc(&counters[COUNT_GPIS_FAILED]);
+    return t;
+}
