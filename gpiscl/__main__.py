@@ -20,6 +20,18 @@ def _resolution(text: str):
         raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, e.g. 512x512 (got {text!r})")
 
 
+NO_REALIZATION = "none"
+
+
+def _realization(text: str):
+    if text.lower() == NO_REALIZATION:
+        return NO_REALIZATION
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer or 'none', got '{text}'") from None
+
+
 def _positive_int(text: str) -> int:
     try:
         v = int(text)
@@ -39,8 +51,9 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("-o", "--output", default="out.exr", help="output EXR (default out.exr)")
     r.add_argument("--spp", type=_positive_int, help="samples per pixel")
     r.add_argument("--seed", type=int, help="random seed")
-    r.add_argument("--realization", type=int, metavar="R",
-                   help="render one fixed GPIS realization R for every pixel (weight space)")
+    r.add_argument("--realization", type=_realization, metavar="R",
+                   help="render one fixed GPIS realization R for every pixel (weight space); "
+                   "'none' averages over realizations whatever the scene says")
     r.add_argument("--resolution", type=_resolution, help="WIDTHxHEIGHT")
     r.add_argument("--time-limit", type=float, help="stop after this many seconds")
     r.add_argument("--device", help="OpenCL device: 'P:D' indices or a name fragment")
@@ -94,9 +107,11 @@ def cmd_render(args) -> int:
     for key in ("spp", "seed", "realization"):
         if getattr(args, key) is not None:
             data["render"][key] = getattr(args, key)
+    if args.realization == NO_REALIZATION:
+        data["render"]["realization"] = None
     if not 0 <= data["render"]["seed"] < 2**32:
         raise SceneError("<command line>", "--seed", "must be in [0, 2**32)")
-    if args.realization is not None and not 0 <= args.realization < 2**31:
+    if isinstance(args.realization, int) and not 0 <= args.realization < 2**31:
         raise SceneError("<command line>", "--realization", "must be in [0, 2**31)")
     scene = Scene(data, scene.source, scene.base_dir)
     device = Device(args.device)

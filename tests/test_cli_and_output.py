@@ -79,3 +79,19 @@ def test_devices_lists_the_default_device():
     r = gpiscl_cli("devices")
     assert r.returncode == 0
     assert any(line.startswith("*") for line in r.stdout.splitlines())
+
+
+def test_realization_flag_sets_and_clears_the_fixed_realization(tmp_path):
+    scene = tmp_path / "s.json"
+    scene.write_text(json.dumps({
+        "render": {"realization": 5}, "lights": [{"type": "environment"}],
+        "camera": {"resolution": [4, 4]}}))
+    for flag, expected in (("3", 3), ("none", None), ("NONE", None)):
+        out = tmp_path / f"r{flag}.exr"
+        r = gpiscl_cli("render", str(scene), "-o", str(out), "--spp", "1",
+                       "--realization", flag)
+        assert r.returncode == 0, r.stderr
+        resolved = json.loads(out.with_suffix(".scene.json").read_text())
+        assert resolved["render"]["realization"] == expected
+    r = gpiscl_cli("render", str(scene), "-o", str(tmp_path / "x.exr"), "--realization", "-1")
+    assert r.returncode == 2 and "--realization" in r.stderr
