@@ -64,6 +64,36 @@ __kernel void ws_count_k(__global const GpKernel* kp, __global const MeanNode* m
     out[r] = (int2)(n, status);
 }
 
+/* a first root from outside, then a second search leaving it: origin x = root - inset n,
+ * direction at cos(angle) u.x to the normal n, azimuth 2 pi u.y, length u.w */
+__kernel void ws_restart_k(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
+                           __global const float* cdf, int nc, int M, __global const uint2* keys,
+                           __global const float* o, __global const float* d, float t1, float tol,
+                           __global const float4* u, __global float* x_out,
+                           __global float* d_out, __global float* hit, __global int4* st)
+{
+    int r = get_global_id(0), status, status2 = 0, evals2 = 0;
+    float3 n, n2;
+    float t = ws_first_root(kp[0], mean, mc, cdf, nc, M, keys[r], 0, vload3(r, o),
+                           vload3(r, d), 0.0f, t1, tol, &n, &status);
+    float3 x = vload3(r, o) + t * vload3(r, d), dir = n;
+    float t2 = T_INFINITY;
+    if (status == WS_STATUS_OK && t < T_INFINITY) {
+        float4 ur = u[r];
+        float3 e1 = normalize(cross(fabs(n.x) > 0.5f ? (float3)(0, 1, 0) : (float3)(1, 0, 0), n));
+        float3 e2 = cross(n, e1);
+        float s = sqrt(fmax(1.0f - ur.x * ur.x, 0.0f)), phi = 6.28318531f * ur.y;
+        dir = ur.x * n + s * (cos(phi) * e1 + sin(phi) * e2);
+        x -= ur.z * n;
+        t2 = ws_first_root_counted(kp[0], mean, mc, cdf, nc, M, keys[r], 0, x, dir, 0.0f, ur.w,
+                                   tol, &n2, &status2, &evals2);
+    }
+    vstore3(x, r, x_out);
+    vstore3(dir, r, d_out);
+    hit[r] = t2;
+    st[r] = (int4)(status, t < T_INFINITY, status2, evals2);
+}
+
 __kernel void ws_lipschitz_k(__global const MeanNode* mean, int mc, __global float* out)
 {
     out[0] = ws_mean_lipschitz(mean, mc);
@@ -214,6 +244,55 @@ def test_crossing_rate_matches_rice(device, prg, case):
     z = abs(rate - target) / math.hypot(rate_se, target_se)
     # target - closed is the finite-M correction (-0.2 % to -1 % at M = 128)
     assert z < z_threshold(len(RICE_CASES)), (rate, target, closed, z)
+
+
+def test_searches_leaving_a_root_decide_and_match_a_dense_scan(device, prg):
+    """Regression: bounce and shadow rays start exactly at a previous root (f < 0 within
+    rounding of 0) and leave outwards, often grazing, where |f| stays within the bound's
+    rounding floor for many tol; the search once shrank its step there below tol and hit
+    WS_MAX_ITER. Every such search is decided, and its root agrees with a dense float64
+    scan. Leaving the inside needs f above rounding noise (ws_first_root_counted), so a
+    bump above zero no higher than the evaluation error may be stepped over."""
+    kernel, mean = SquaredExponential(sigma=0.1, length_scale=0.1), Sphere(radius=1.0)
+    m, n = 64, 256
+    rng = np.random.default_rng(17)
+    tol, length = 1e-4 * kernel.length_scale, 2.5
+    o = rng.normal(size=(n, 3))
+    o *= 2.5 / np.linalg.norm(o, axis=1, keepdims=True)
+    d = rng.normal(size=(n, 3)) * 0.4 - o
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    # cosine-distributed (bounces), grazing, started up to 10 tol inside, uniform
+    kind = np.arange(n) % 4
+    cos = np.select([kind == 0, kind == 1], [np.sqrt(rng.uniform(size=n)), rng.uniform(0, 0.02, n)],
+                    rng.uniform(size=n))
+    inset = np.where(kind == 2, tol * 10 ** rng.uniform(-3, 1, n), 0.0)
+    u = np.stack([cos, rng.uniform(size=n), inset, np.full(n, length)], -1).astype(np.float32)
+    keys = keys_for(n, 77)
+    x, dirs, hit, st = run(device, prg["ws_restart_k"], n, *gp_args(device, kernel, mean),
+                           np.int32(m), buf(device, keys), buf(device, o.astype(np.float32)),
+                           buf(device, d.astype(np.float32)), np.float32(5.0), np.float32(tol),
+                           buf(device, u), out_shapes=[((n, 3), np.float32), ((n, 3), np.float32),
+                                                       ((n,), np.float32), ((n, 4), np.int32)])
+    assert np.all(st[:, 0] == 0) and np.mean(st[:, 1]) > 0.9
+    assert np.all(st[:, 2] == 0), f"{np.sum(st[:, 2] != 0)} undecided"
+    theta, tau, w = dump(device, prg, kernel, keys, m)
+    ts = np.linspace(0.0, length, int(length / (kernel.length_scale / 200)) + 1)
+    for r in np.flatnonzero(st[:, 1]):
+        xs = x[r].astype(float) + ts[:, None] * dirs[r].astype(float)
+        f, _ = ws.evaluate(theta[r], tau[r], w[r], kernel.variance, xs, mean)
+        noise, _ = eval_tolerance(theta[r], tau[r], w[r], kernel.variance, xs)
+        t_lo, t_hi = (v[0] for v in ws.dense_scan_first_root(f[None], ts))
+        t_robust = ws.dense_scan_first_root(f[None], ts, leave_above=noise[None])[1][0]
+        t_dev = hit[r] if hit[r] < 1e29 else np.inf
+        assert t_dev <= t_robust + tol, ("missed a root", r, t_dev, t_robust)
+        if np.isfinite(t_dev):
+            near = t_dev - tol * np.linspace(1, 0, 9)
+            xn = x[r].astype(float) + near[:, None] * dirs[r].astype(float)
+            fn, _ = ws.evaluate(theta[r], tau[r], w[r], kernel.variance, xn, mean)
+            nn, _ = eval_tolerance(theta[r], tau[r], w[r], kernel.variance, xn)
+            assert fn[-1] <= nn[-1] and np.max(fn + nn) >= 0, (r, fn)
+        if t_robust == t_hi and np.isfinite(t_dev):   # a clear crossing: the same one
+            assert t_lo - tol <= t_dev <= t_hi + tol, (r, t_dev, t_lo, t_hi)
 
 
 def test_lipschitz_of_packed_means(device, prg):

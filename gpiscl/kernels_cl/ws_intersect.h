@@ -12,22 +12,28 @@
  *
  * Search: a certified prefix [a, x_safe] where the bound proves "no crossing yet" advances
  * a; a point x_opp where the bound proves the opposite sign shrinks the bracket (a, c].
- * Steps double after an interval is certified whole and halve when little was certified.
+ * Steps grow after an interval is certified whole and halve when little was certified.
  * Because only bounds ever skip ray length, no crossing is missed: a dip of f below zero
  * between any two samples is inside some interval whose lower bound is negative. The only
  * approximation is at the resolution `tol`: an interval narrower than tol whose bound
  * straddles zero is decided by a point evaluation at its end (see the loop).
- * Near a simple root the form's error is O(h^2) (plus rounding), so brackets shrink
- * quadratically, like interval Newton.
+ * Near a simple root the features' error is O(h^2), but the mean's cones are O(h) and the
+ * rounding allowance O(1): brackets shrink linearly, and within the rounding floor
+ * (|f| below ~T.round, e.g. along a ray leaving a root or grazing the surface) no bound
+ * decides anything, so there intervals are never much narrower than tol and point
+ * evaluations decide them. (Letting the step shrink further there made it walk at
+ * ~1e-7 l per bound into WS_MAX_ITER.)
  */
 #define WS_STATUS_OK 0
-#define WS_STATUS_ITER_CAP 1   /* WS_MAX_ITER bound evaluations without a decision */
+#define WS_STATUS_ITER_CAP 1   /* WS_MAX_ITER loop passes without a decision */
 #define WS_STATUS_NAN 2        /* NaN realization (thin-plate kernel, bad mean program) */
-/* Each iteration costs one bound (M features and two mean evaluations). A segment costs
- * about (length / marching step) + ~10 per crossing iterations, the step being ~l/2
- * where |f| ~ sigma, so 4096 allows segments ~1000 length scales long. */
+/* Each pass costs one bound or point evaluation (M cached features and two mean
+ * evaluations). A segment costs about (length / marching step) + ~10 per crossing passes,
+ * the step being ~l/2 where |f| ~ sigma; a ray grazing the surface walks the stretch where
+ * |f| is within the rounding floor at ~tol per pass (up to ~2000 passes seen for rays
+ * within 1 degree of tangent, tests/test_ws_intersect.py). 16384 leaves room for both. */
 #ifndef WS_MAX_ITER
-#define WS_MAX_ITER 4096
+#define WS_MAX_ITER 16384
 #endif
 
 /* Lipschitz constant of a packed mean program in world units: max over leaves of
@@ -61,12 +67,13 @@ typedef struct {
     float round;   /* the rounding part: point evaluations are within it of the true f */
 } WsTents;
 
-inline WsTents ws_tents(GpKernel k, __global const MeanNode* mean, int mean_count,
-                        __global const float* order_cdf, int order_count, int M, uint2 key,
-                        int object, float3 o, float3 d, float a, float b, float lip)
+inline WsTents ws_tents_cached(const float* cache, GpKernel k, __global const MeanNode* mean,
+                               int mean_count, __global const float* order_cdf,
+                               int order_count, int M, uint2 key, int object, float3 o,
+                               float3 d, float a, float b, float lip)
 {
     float tm = 0.5f * (a + b), h = 0.5f * (b - a);
-    WsAffine af = ws_affine(k, order_cdf, order_count, M, key, object, o, d, tm, h);
+    WsAffine af = ws_affine(cache, k, order_cdf, order_count, M, key, object, o, d, tm, h);
     float3 g;
     float ma = gp_mean_eval(mean, mean_count, o + a * d, &g);
     float mb = gp_mean_eval(mean, mean_count, o + b * d, &g);
@@ -93,6 +100,14 @@ inline WsTents ws_tents(GpKernel k, __global const MeanNode* mean, int mean_coun
     return T;
 }
 
+inline WsTents ws_tents(GpKernel k, __global const MeanNode* mean, int mean_count,
+                        __global const float* order_cdf, int order_count, int M, uint2 key,
+                        int object, float3 o, float3 d, float a, float b, float lip)
+{
+    return ws_tents_cached(0, k, mean, mean_count, order_cdf, order_count, M, key, object, o,
+                           d, a, b, lip);
+}
+
 /* First t in [a, b] where the 2-piece linear function through (a, pa), (k, pk), (b, pb) is
  * negative; T_INFINITY if none. */
 inline float ws_first_negative(float a, float pa, float k, float pk, float b, float pb)
@@ -108,32 +123,55 @@ inline float ws_first_negative(float a, float pa, float k, float pk, float b, fl
  * there is none. normal = grad f / |grad f| at the returned t. *status: WS_STATUS_OK, or
  * WS_STATUS_ITER_CAP / WS_STATUS_NAN with T_INFINITY returned (the caller must count or
  * kill such rays: "no hit" is then not proven). d need not be unit length; t is in units
- * of d. tol is raised to the float resolution of t where needed. */
+ * of d. tol is raised to the float resolution of t where needed. *evaluations counts the
+ * M-feature passes (bounds and point evaluations), the search's cost. */
 inline float ws_first_root_counted(GpKernel k, __global const MeanNode* mean,
                                    int mean_count, __global const float* order_cdf,
                                    int order_count, int M, uint2 key, int object, float3 o,
                                    float3 d, float t0, float t1, float tol, float3* normal,
-                                   int* status, int* iterations)
+                                   int* status, int* evaluations)
 {
     *status = WS_STATUS_OK;
-    *iterations = 0;
+    *evaluations = 0;
     *normal = (float3)(0.0f);
     if (!(t1 > t0)) return T_INFINITY;
     float lip = ws_mean_lipschitz(mean, mean_count);
     float tres = 4.0f * FLT_EPSILON * (fabs(t0) + fabs(t1) + length(o) / length(d));
     tol = fmax(tol, 2.0f * tres);
     float h0 = 0.5f * rsqrt(fmax(ws_lambda2(k, d), 1e-30f));
+    /* the narrowest interval: tol less the rounding of a + hmin (<= eps |t| / 2, and
+     * tol >= 8 eps |t|), so that a + hmin - a <= tol and the end point decides it */
+    float hmin = 0.875f * tol;
+#if WS_CACHE_FEATURES > 0
+    float cache_mem[5 * WS_CACHE_FEATURES];
+    const float* cache = 0;
+    if (M <= WS_CACHE_FEATURES) {
+        ws_fill_cache(k, order_cdf, order_count, key, object, M, cache_mem);
+        cache = cache_mem;
+    }
+#else
+    const float* cache = 0;
+#endif
     float3 g;
-    float f = ws_eval(k, mean, mean_count, order_cdf, order_count, M, key, object,
-                      o + t0 * d, &g);
+    float f = ws_eval_cached(cache, k, mean, mean_count, order_cdf, order_count, M, key, object,
+                             o + t0 * d, &g);
+    int evals = 1;
     if (isnan(f)) {
         *status = WS_STATUS_NAN;
+        *evaluations = evals;
         return T_INFINITY;
     }
     /* sgn = +1: outside, looking for f < 0; -1: inside, looking for f >= 0 */
     float sgn = f < 0.0f ? -1.0f : 1.0f;
-    float a = t0, c = T_INFINITY, step = h0, hit = T_INFINITY;
-    int done = 0;
+    /* First step: a bound cannot certify further than phi = sgn f can fall, so heading
+     * towards a sign change the Newton distance phi / |phi'| is the natural step. Rays that
+     * leave a root (every bounce and shadow ray) start with phi ~ 0: without this they
+     * spend ~log2(h0 / tol) bounds halving h0. */
+    float phi = sgn * f, dphi = sgn * dot(g, d);
+    float step = dphi < 0.0f ? clamp(phi / -dphi, hmin, h0) : h0;
+    float a = t0, c = T_INFINITY, hit = T_INFINITY;
+    float noise = 0.0f;     /* the last bound's rounding allowance */
+    int done = 0, g_at_c = 0, walk = 0;
     int it;
     for (it = 0; it < WS_MAX_ITER && !done; ++it) {
         if (c - a <= tol) {            /* the sign change is bracketed in (a, c] */
@@ -141,10 +179,13 @@ inline float ws_first_root_counted(GpKernel k, __global const MeanNode* mean,
                 hit = c;
                 done = 1;
             } else {                   /* back outside at c: now look for the hit */
+                /* f(c) is within noise of 0, so nothing wider than the minimum step
+                 * can be certified there yet; doubling from it is the fastest way up */
                 sgn = 1.0f;
                 a = c;
                 c = T_INFINITY;
-                step = h0;
+                step = hmin;
+                g_at_c = 0;
             }
             continue;
         }
@@ -152,9 +193,31 @@ inline float ws_first_root_counted(GpKernel k, __global const MeanNode* mean,
             done = 1;
             continue;
         }
-        float b = fmin(fmin(a + step, t1), c);
-        WsTents T = ws_tents(k, mean, mean_count, order_cdf, order_count, M, key, object,
-                             o, d, a, b, lip);
+        if (walk) {
+            /* |f| is within the rounding floor, where no bound decides anything: go on
+             * deciding intervals narrower than tol by their end point, without the bound
+             * (which would only straddle zero again), until f clears the floor */
+            float b = fmin(fmin(a + hmin, t1), c);
+            f = ws_eval_cached(cache, k, mean, mean_count, order_cdf, order_count, M, key,
+                               object, o + b * d, &g);
+            ++evals;
+            if (sgn > 0.0f ? f < 0.0f : f > noise) {
+                c = b;
+                g_at_c = 1;
+            } else {
+                a = b;
+                g_at_c = 0;
+            }
+            walk = sgn * f <= 2.0f * noise;
+            continue;
+        }
+        /* intervals never narrower than hmin: below tol the end-point sign decides
+         * (below), and a bound cannot certify anything within its rounding floor */
+        float b = fmin(fmin(a + fmax(step, hmin), t1), c);
+        WsTents T = ws_tents_cached(cache, k, mean, mean_count, order_cdf, order_count, M, key,
+                                    object, o, d, a, b, lip);
+        ++evals;
+        noise = T.round;
         /* bounds of phi = sgn f: certified "same sign" where phi_lo >= 0, opposite
          * where phi_hi < 0 */
         float x_safe, x_opp;
@@ -167,15 +230,27 @@ inline float ws_first_root_counted(GpKernel k, __global const MeanNode* mean,
         }
         if (isnan(T.lo_a + T.lo_m + T.lo_b + T.hi_a + T.hi_m + T.hi_b)) {
             *status = WS_STATUS_NAN;
+            *evaluations = evals;
             return T_INFINITY;
         }
-        c = fmin(c, x_opp);
+        if (x_opp < c) {
+            c = x_opp;
+            g_at_c = 0;
+        }
         if (x_safe >= b) {             /* the whole interval is certified */
+            /* grow by the margin m the bound left over its own width e (less rounding):
+             * the features' part of e grows ~h^2, so sqrt(m / e) predicts how much wider
+             * still certifies; a quarter of m keeps failed (partial) tries rare. At least
+             * x2 (plain doubling); x8 mostly just after leaving a root, where e ~ 0. */
+            float m = sgn > 0.0f ? fmin(T.lo_a, fmin(T.lo_m, T.lo_b))
+                                 : -fmax(T.hi_a, fmax(T.hi_m, T.hi_b));
+            float e = 0.5f * fmax(T.hi_a - T.lo_a, T.hi_b - T.lo_b) - T.round;
+            float grow = e > 0.0f ? clamp(sqrt(0.25f * m / e), 2.0f, 8.0f) : 8.0f;
+            step = (b - a) * grow;
             a = b;
-            step *= 2.0f;
             continue;
         }
-        float width = b - a, gained = x_safe - a;
+        float width = b - a;
         a = x_safe;
         float rest = b - a;
         if (c - a <= tol) continue;
@@ -186,37 +261,52 @@ inline float ws_first_root_counted(GpKernel k, __global const MeanNode* mean,
              * noise, so accepting the interval misses nothing resolvable. Leaving the
              * inside needs f clear of rounding noise, else noise just after an
              * up-crossing could fake a hit there. */
-            f = ws_eval(k, mean, mean_count, order_cdf, order_count, M, key, object,
-                        o + b * d, &g);
-            if (sgn > 0.0f ? f < 0.0f : f > T.round)
+            f = ws_eval_cached(cache, k, mean, mean_count, order_cdf, order_count, M, key,
+                               object, o + b * d, &g);
+            ++evals;
+            if (sgn > 0.0f ? f < 0.0f : f > T.round) {
                 c = b;
-            else
+                g_at_c = 1;            /* the hit's normal needs no second evaluation */
+            } else {
                 a = b;
-            step = rest;
+                g_at_c = 0;
+            }
+            step = hmin;
+            walk = sgn * f <= 2.0f * noise;
             continue;
         }
-        step = gained >= 0.5f * width ? rest : 0.5f * rest;
+        /* Next try all that is left undecided (of this interval, or of the bracket,
+         * which the bound may have pulled in) when the bound decided at least half of
+         * it, else half of it: a bracketed root gets bounds over its whole bracket,
+         * which shrink it from both ends. */
+        float left = fmin(c, b) - a;
+        step = left <= 0.5f * width ? left : 0.5f * left;
     }
-    *iterations = it;
     if (!done) {
         *status = WS_STATUS_ITER_CAP;
+        *evaluations = evals;
         return T_INFINITY;
     }
     if (hit < T_INFINITY) {
-        ws_eval(k, mean, mean_count, order_cdf, order_count, M, key, object, o + hit * d, &g);
+        if (!g_at_c) {
+            ws_eval_cached(cache, k, mean, mean_count, order_cdf, order_count, M, key, object,
+                           o + hit * d, &g);
+            ++evals;
+        }
         float gl = length(g);
         *normal = gl > 0.0f && isfinite(gl) ? g / gl : -d / length(d);
     }
+    *evaluations = evals;
     return hit;
 }
 
-/* ws_first_root_counted without the iteration count (the count is for profiling). */
+/* ws_first_root_counted without the evaluation count (the count is for profiling). */
 inline float ws_first_root(GpKernel k, __global const MeanNode* mean, int mean_count,
                            __global const float* order_cdf, int order_count, int M,
                            uint2 key, int object, float3 o, float3 d, float t0, float t1,
                            float tol, float3* normal, int* status)
 {
-    int iterations;
+    int evaluations;
     return ws_first_root_counted(k, mean, mean_count, order_cdf, order_count, M, key, object,
-                                 o, d, t0, t1, tol, normal, status, &iterations);
+                                 o, d, t0, t1, tol, normal, status, &evaluations);
 }

@@ -128,16 +128,18 @@ def evaluate(theta, tau, w, variance: float, x, mean=None):
     return value, grad
 
 
-def dense_scan_first_root(values, t):
+def dense_scan_first_root(values, t, leave_above=None):
     """First one-sided crossing in sampled values (..., n) at parameters t (n,).
 
     Returns the bracket (t_lo, t_hi] per ray, with t_hi = inf where there is none: the
     first sample < 0 after one >= 0 (a ray starting inside must first come back out).
+    leave_above (broadcast to values): count only samples above it as back out, as the
+    device does (it leaves the inside only where f clears its rounding noise).
     """
     values = np.asarray(values)
-    nonneg = values >= 0.0
-    seen = np.maximum.accumulate(nonneg, axis=-1)
-    hit = (~nonneg) & np.concatenate([np.zeros_like(seen[..., :1]), seen[..., :-1]], -1)
+    out = values >= 0.0 if leave_above is None else values > leave_above
+    seen = np.maximum.accumulate(out, axis=-1)
+    hit = (values < 0.0) & np.concatenate([np.zeros_like(seen[..., :1]), seen[..., :-1]], -1)
     any_hit = hit.any(axis=-1)
     k = np.argmax(hit, axis=-1)
     t = np.asarray(t, float)
