@@ -10,6 +10,7 @@ from .gp import kernels as K
 from .gp import means as M
 from .gp.weight_space import pack_order_tables
 from .gp.device_layout import GP_KERNEL, MEAN_NODE, pack_kernel, pack_mean
+from .gpis_schema import FIELD_KEYS, field_minimum
 from .scene_schema import SceneError
 
 _KERNELS = {"squared_exponential": K.SquaredExponential, "rational_quadratic": K.RationalQuadratic,
@@ -21,10 +22,26 @@ _KERNELS = {"squared_exponential": K.SquaredExponential, "rational_quadratic": K
 ROOT_TOLERANCE = 1e-4
 
 
-def build_kernel(k: dict) -> K.Kernel:
-    params = {key: (tuple(v) if isinstance(v, list) else v) for key, v in k.items()
+def _build_field(f: dict):
+    params = {key: (tuple(v) if isinstance(v, list) else v) for key, v in f.items()
               if key != "type"}
-    return _KERNELS[k["type"]](**params)
+    return K.FIELDS[f["type"]](**params)
+
+
+def build_kernel(k: dict, proxy: dict | None = None) -> K.Kernel:
+    """proxy: where rays sample, for the step rule's smallest l(x) (required with a
+    linear length_scale_field)."""
+    params = {key: (tuple(v) if isinstance(v, list) else v) for key, v in k.items()
+              if key not in ("type", *FIELD_KEYS)}
+    base = _KERNELS[k["type"]](**params)
+    sf, lf = k.get("sigma_field"), k.get("length_scale_field")
+    if sf is None and lf is None:
+        return base
+    step = None
+    if lf is not None and proxy is not None:
+        step = base.length_scale * field_minimum(lf, proxy)
+    return K.NonStationary(base, sigma_field=sf and _build_field(sf),
+                           length_scale_field=lf and _build_field(lf), step_length_scale=step)
 
 
 def _transform_matrix(t: dict) -> np.ndarray:
@@ -55,6 +72,13 @@ def build_mean(m: dict) -> M.Mean:
         return cls[kind](build_mean(m["left"]), build_mean(m["right"]), k=m["k"])
     if kind == "transform":
         return M.Transform(build_mean(m["child"]), _transform_matrix(m))
+    if kind == "mesh":
+        from .sdf_bake import mesh_mean
+        return mesh_mean(m["file"], m["resolution"], m["margin"], m["band"],
+                         _transform_matrix(m["transform"]))[0]
+    if kind == "grid":
+        from .sdf_bake import load_grid
+        return load_grid(m["file"])
     raise AssertionError(kind)
 
 
@@ -103,7 +127,7 @@ def compile_gpis(shapes: list, material_of) -> CompiledGpis:
                 o[key] = fs[key]
         o["material"] = material_of(g["bsdf"])
         o["tolerance"] = ROOT_TOLERANCE * kernel_length_scale(g["kernel"])
-        kernels[i] = pack_kernel(build_kernel(g["kernel"]))[0]
+        kernels[i] = pack_kernel(build_kernel(g["kernel"], proxy))[0]
         try:
             prog = pack_mean(build_mean(g["mean"]))
         except ValueError as exc:

@@ -14,9 +14,10 @@ Importing this module registers the "gpis" shape with the scene loader.
 """
 from __future__ import annotations
 
-from .scene import ALBEDO, SHAPES, TRANSFORM, VEC3, _box_extent
+from .scene import ALBEDO, SHAPES, TRANSFORM, VEC3, _box_extent, _mesh_problem
 from .gp import function_space_layout as FSL
-from .scene_schema import Enum, Field, Int, Nullable, Number, Record, Tagged, Vector
+from .scene_schema import Enum, Field, File, Int, Nullable, Number, Record, Tagged, Vector
+from .sdf_bake import grid_problem
 
 DIRECTION = Vector(normalize=True)
 POSITIVE3 = Vector(broadcast=True, item=Number(gt=0))
@@ -48,25 +49,76 @@ for _op in ("union", "intersection", "difference"):  # k > 0: smooth blend of wi
     MEANS.register(_op, Record({"left": Field(MEANS), "right": Field(MEANS),
                                 "k": Field(Number(ge=0), 0.0)}))
 MEANS.register("transform", Record({"child": Field(MEANS), **TRANSFORM.fields}))
+# Baked signed distance of a triangle mesh (gpiscl/host/sdf_bake.py): `resolution`
+# samples along the longest axis of the mesh bounds grown by `margin` per side (null:
+# 10% of the largest extent); `band` clamps distances to [-band, band] (null: none);
+# `transform` is applied to the vertices before baking, so distances stay exact.
+MEANS.register("mesh", Record({"file": Field(File((".obj", ".ply", ".stl", ".off"),
+                                                  _mesh_problem)),
+                               "resolution": Field(Int(ge=4, le=256), 128),
+                               "margin": Field(Nullable(Number(gt=0)), None),
+                               "band": Field(Nullable(Number(gt=0)), None),
+                               "transform": Field(TRANSFORM, {})}))
+# A voxel grid of mean values (.npz with values (nx, ny, nz), origin, voxel_size).
+MEANS.register("grid", Record({"file": Field(File((".npz",), grid_problem))}))
+
+# Spatially varying multipliers (function space only): sigma(x) = sigma m(x) on every
+# kernel ("sigma_field"), l(x) = l m(x) on SE and RQ ("length_scale_field", the
+# Paciorek-Schervish form, gpiscl/host/gp/kernels.py). A field is 1 where it is absent.
+#   linear  m = value + gradient . (x - origin); must stay positive over the proxy
+#   radial  m = inner + (outer - inner) (1 + tanh((|x - center|^2 - radius^2)
+#               / (2 radius width))) / 2: inner inside the sphere, outer beyond, blended
+#               over about `width`
+FIELDS = Tagged("field", {
+    "linear": Record({"value": Field(Number(gt=0), 1.0), "gradient": Field(VEC3, [0, 0, 0]),
+                      "origin": Field(VEC3, [0, 0, 0])}),
+    "radial": Record({"center": Field(VEC3, [0, 0, 0]), "radius": Field(Number(gt=0)),
+                      "width": Field(Number(gt=0)), "inner": Field(Number(gt=0)),
+                      "outer": Field(Number(gt=0))}),
+})
+_SIGMA_FIELD = Field(Nullable(FIELDS), None)
+_LS_FIELD = Field(Nullable(FIELDS), None)
+FIELD_KEYS = ("sigma_field", "length_scale_field")
 
 # Squared exponential: sigma^2 exp(-r^T A r / (2 l^2)), A = diag(aniso).
 _ANISO = Field(POSITIVE3, 1.0)
 KERNELS = Tagged("kernel", {
     "squared_exponential": Record({"sigma": Field(Number(gt=0), 1.0),
-                                   "length_scale": Field(Number(gt=0), 1.0), "aniso": _ANISO}),
+                                   "length_scale": Field(Number(gt=0), 1.0), "aniso": _ANISO,
+                                   "sigma_field": _SIGMA_FIELD,
+                                   "length_scale_field": _LS_FIELD}),
     "rational_quadratic": Record({"sigma": Field(Number(gt=0), 1.0),
                                   "length_scale": Field(Number(gt=0), 1.0),
-                                  "alpha": Field(Number(gt=0), 1.0), "aniso": _ANISO}),
+                                  "alpha": Field(Number(gt=0), 1.0), "aniso": _ANISO,
+                                  "sigma_field": _SIGMA_FIELD,
+                                  "length_scale_field": _LS_FIELD}),
     "periodic": Record({"sigma": Field(Number(gt=0), 1.0),
                         "length_scale": Field(Number(gt=0), 1.0),
-                        "w": Field(Number(gt=0), 6.283185307179586), "aniso": _ANISO}),
+                        "w": Field(Number(gt=0), 6.283185307179586), "aniso": _ANISO,
+                        "sigma_field": _SIGMA_FIELD}),
     "locally_periodic": Record({"sigma": Field(Number(gt=0), 1.0),
                                 "length_scale": Field(Number(gt=0), 1.0),
                                 "w": Field(Number(gt=0), 6.283185307179586),
-                                "se_length_scale": Field(Number(gt=0), 1.0), "aniso": _ANISO}),
+                                "se_length_scale": Field(Number(gt=0), 1.0), "aniso": _ANISO,
+                                "sigma_field": _SIGMA_FIELD}),
     "thin_plate": Record({"sigma": Field(Number(gt=0), 1.0),
-                          "radius": Field(Number(gt=0), 1.0), "aniso": _ANISO}),
+                          "radius": Field(Number(gt=0), 1.0), "aniso": _ANISO,
+                          "sigma_field": _SIGMA_FIELD}),
 })
+
+
+def field_minimum(field: dict, proxy: dict) -> float:
+    """The smallest multiplier of a resolved field over a resolved proxy (exact for
+    linear fields; min(inner, outer) for radial ones)."""
+    if field["type"] == "radial":
+        return min(field["inner"], field["outer"])
+    g, o, v = field["gradient"], field["origin"], field["value"]
+    if proxy["type"] == "box":
+        return v + sum(min(gi * (lo - oi), gi * (hi - oi))
+                       for gi, lo, hi, oi in zip(g, proxy["min"], proxy["max"], o))
+    c, r = proxy["center"], proxy["radius"]
+    return (v + sum(gi * (ci - oi) for gi, ci, oi in zip(g, c, o))
+            - r * sum(gi * gi for gi in g) ** 0.5)
 
 # Random Fourier features per realization when "features" is null: the RQ spectrum is a
 # heavy-tailed scale mixture and needs more features to reach the same covariance error.
@@ -95,6 +147,12 @@ MICRO_BSDFS = Tagged("micro-BSDF", {
 
 def _weight_space_kernel(g):
     if g["sampler"]["type"] == "weight_space":
+        for key in FIELD_KEYS:
+            if g["kernel"].get(key) is not None:
+                return f"kernel.{key}", ("a spatially varying kernel is not stationary, and "
+                                         "weight space samples stationary kernels only (random "
+                                         "Fourier features of one spectral density); use the "
+                                         "function_space sampler")
         if g["kernel"]["type"] == "thin_plate":
             return "kernel.type", ("thin_plate has no spectral density, so weight space "
                                    "cannot sample it; use the function_space sampler")
@@ -123,10 +181,22 @@ def _thin_plate_span(g):
     return None
 
 
+def _fields_positive(g):
+    """A linear field may cross zero somewhere; where rays sample it must not."""
+    for key in FIELD_KEYS:
+        f = g["kernel"].get(key)
+        if f is not None and f["type"] == "linear":
+            m = field_minimum(f, g["proxy"])
+            if not m > 0.0:
+                return f"kernel.{key}", (f"the linear field falls to {m:.4g} inside the proxy; "
+                                         "a multiplier of sigma or l must stay positive there")
+    return None
+
+
 GPIS = SHAPES.register("gpis", Record({
     "proxy": Field(PROXIES),
     "mean": Field(MEANS),
     "kernel": Field(KERNELS),
     "sampler": Field(SAMPLERS, {"type": "weight_space"}),
     "bsdf": Field(MICRO_BSDFS, {"type": "diffuse"}),
-}, checks=[_weight_space_kernel, _thin_plate_span]))
+}, checks=[_weight_space_kernel, _thin_plate_span, _fields_positive]))

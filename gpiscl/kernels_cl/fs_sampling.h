@@ -11,6 +11,8 @@
  *    to c, e.g. a periodic one with large l, gets the curvature lag sqrt(2(1-c)/lambda2)).
  *    At c = 0.9 one down-crossing in ~55 falls between two samples together with an
  *    up-crossing and is missed (Rice vs the grid's arccos(c)/(2 pi dt)); c = 0.99: 1 in 600.
+ *    Spatially varying kernels (gp_kernel.h): a sigma(x) field keeps the rule exact; an
+ *    l(x) field uses the smallest l over the proxy (fs_step), a conservative step.
  *  - Placement: segment k starts at the previous segment's last sample t_s (the ray's t0
  *    for the first) and samples t_i = t_s + (i + u) dt, i < N, with one fresh offset
  *    u in (0, 1] per segment, so no gap exceeds dt and grids of different rays never
@@ -21,8 +23,9 @@
  *    linear in the final bracket (error O((dt 2^-refine)^2 f'')).
  *  - Start condition (a ray entering from free space or a surface, and every segment
  *    start under `none`): f(x(t0)) = v0 with v0 ~ N(mu, k(0)) truncated to [0, inf)
- *    (the authors' convention: the ray starts outside). Exact inverse-CDF sampler, so a
- *    ray whose mean at t0 is far inside gets v0 ~ s/|a| just above 0, not an atom at 0.
+ *    (the authors' convention: the ray starts outside; k(0) is k(x, x) under a sigma(x)
+ *    field). Exact inverse-CDF sampler, so a ray whose mean at t0 is far inside gets
+ *    v0 ~ s/|a| just above 0, not an atom at 0.
  *  - Memory models at a new ray from a vertex / at a segment end without a hit:
  *      none          fresh start condition at the start point (forgets everything);
  *      renewal       f(x) = 0 (vertex) or f(end) (segment end); at a vertex the slope
@@ -48,10 +51,11 @@
  *    Isotropic radial kernels (SE, RQ, thin-plate with equal aniso) have every row on the
  *    ray, and cov(d_T f(x_h), anything on the ray) = 0, so the closed form
  *    N(T . grad mu(x_h), -2k'(0) I_2) is used; anisotropic/product kernels take the
- *    general conditional (four appended rows). Global: all three components are drawn
- *    given every row (three appended rows); the slope is then a draw that is < 0 except
- *    at grazing hits (probability ~ the bracket's relative width), whose normal faces
- *    away and which the integrator kills and counts.
+ *    general conditional (four appended rows), and so do kernels with sigma(x) or l(x)
+ *    fields (grad sigma, grad l correlate d_T f(x_h) with the ray's values). Global: all
+ *    three components are drawn given every row (three appended rows); the slope is then
+ *    a draw that is < 0 except at grazing hits (probability ~ the bracket's relative
+ *    width), whose normal faces away and which the integrator kills and counts.
  *  - Random numbers: philox4x32, key (seed, FS_PHILOX_KEY) (rng.h uses another key
  *    word), counter (pixel, sample, bounce, stream << 28 | segment << 12 | block): one
  *    block = two 53-bit uniforms; fixed block numbers per draw (targets by their index in
@@ -170,7 +174,7 @@ inline double fs_corr(GpKernel p, double3 d, double t)
 }
 
 /* The lag dt with corr(f(x), f(x + dt d)) = c (stationary kernels: independent of x). */
-inline double fs_step(GpKernel p, double3 d, double c)
+inline double fs_step_stationary(GpKernel p, double3 d, double c)
 {
     double dad = dot(gp_aniso(p) * d, d), l = p.length_scale;
     if (p.kind == GP_KERNEL_SQUARED_EXPONENTIAL) return l * sqrt(-2.0 * log(c) / dad);
@@ -189,6 +193,17 @@ inline double fs_step(GpKernel p, double3 d, double c)
         if (fs_corr(p, d, mid) > c) lo = mid; else hi = mid;
     }
     return 0.5 * (lo + hi);
+}
+
+/* A variance field leaves the correlation stationary (sigma(x) sigma(y) cancels), so the
+ * stationary rule is exact for it. A length-scale field is stepped with the smallest l(x)
+ * over the proxy (ls_step, from the scene compiler): never coarser than the local rule
+ * anywhere on the ray, at the price of oversampling where l(x) is larger. */
+inline double fs_step(GpKernel p, double3 d, double c)
+{
+    if (p.ls_field) p.length_scale = p.ls_step;
+    p.sigma_field = p.ls_field = GP_FIELD_NONE;
+    return fs_step_stationary(p, d, c);
 }
 
 inline FsObs fs_obs(double3 x, double3 u, int kind, double value)
@@ -248,7 +263,9 @@ inline void fs_frame(double3 n, double3* t, double3* b)   /* Duff et al. 2017 */
 
 inline int fs_isotropic_radial(GpKernel p)
 {
-    return (p.kind == GP_KERNEL_SQUARED_EXPONENTIAL || p.kind == GP_KERNEL_RATIONAL_QUADRATIC
+    /* sigma(x), l(x) correlate d_T f(x_h) with the ray's values: no closed form */
+    return !gp_kernel_nonstationary(p)
+        && (p.kind == GP_KERNEL_SQUARED_EXPONENTIAL || p.kind == GP_KERNEL_RATIONAL_QUADRATIC
             || p.kind == GP_KERNEL_THIN_PLATE)
         && p.aniso.x == p.aniso.y && p.aniso.y == p.aniso.z;
 }
@@ -285,7 +302,7 @@ inline int fs_begin(GpKernel p, __global const MeanNode* mean, int mc, FsParams 
     }
     double3 x = ray.o + ray.t0 * ray.d;
     *f0 = fs_truncnorm_pos(fs_prior_mean(mean, mc, x, d, FS_OBS_VALUE),
-                           sqrt(gp_kernel_value(p, (double3)(0.0))), rng, 0, FS_U_START);
+                           sqrt(gp_cov_vv(p, x, x)), rng, 0, FS_U_START);
     S.rows[0] = fs_obs(x, d, FS_OBS_VALUE, *f0);
     return 1;
 }
@@ -417,8 +434,8 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
             factored = 0;
         } else {
             if (prm.memory != GPIS_MEMORY_RENEWAL) {   /* none: a fresh start condition */
-                f_prev = fs_truncnorm_pos(S.mu[e], sqrt(gp_kernel_value(p, (double3)(0.0))),
-                                          rng, seg + 1, FS_U_START);
+                f_prev = fs_truncnorm_pos(S.mu[e], sqrt(gp_cov_vv(p, xe, xe)), rng, seg + 1,
+                                          FS_U_START);
                 outside = 1;
             }
             S.rows[0] = fs_obs(xe, dn, FS_OBS_VALUE, f_prev);

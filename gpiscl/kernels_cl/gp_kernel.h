@@ -14,6 +14,10 @@
  * The local jet of k in r, Hess k = alpha g g^T + diag(D), gives all covariances:
  *   cov(f(a), f(b)) = k,  cov(d_u f(a), f(b)) = -u.G,  cov(f(a), d_v f(b)) = v.G,
  *   cov(d_u f(a), d_v f(b)) = -(alpha (u.g)(v.g) + u.D.v)
+ *
+ * A kernel with a sigma(x) or l(x) field (GpKernel.sigma_field / ls_field, gp_cov_ns at
+ * the end) is no function of b - a: gp_kernel_value and gp_kernel_jet then give only its
+ * stationary base, so callers go through gp_cov*, which dispatch on the fields.
  */
 #ifndef GP_REAL
 #define GP_REAL float
@@ -123,27 +127,124 @@ inline GpJet gp_kernel_jet(GpKernel p, GP_REAL3 r)
     return j;
 }
 
+/* Spatially varying sigma(x) = sigma m_s(x) and (SE, RQ) l(x) = l m_l(x): kernels.py
+ * (NonStationary) derives every term. A kernel with either field is not a function of
+ * b - a, so gp_kernel_value/gp_kernel_jet do not apply to it; gp_cov* dispatch. */
+inline int gp_kernel_nonstationary(GpKernel p) { return p.sigma_field | p.ls_field; }
+
+/* A field multiplier m(x) and its gradient (linear or radial blend). */
+inline GP_REAL gp_field(int kind, float4 p0, float4 p1, GP_REAL3 x, GP_REAL3* grad)
+{
+    GP_REAL3 c = (GP_REAL3)((GP_REAL)p0.x, (GP_REAL)p0.y, (GP_REAL)p0.z);
+    GP_REAL3 o = (GP_REAL3)((GP_REAL)p1.x, (GP_REAL)p1.y, (GP_REAL)p1.z);
+    if (kind == GP_FIELD_LINEAR) {
+        *grad = c;
+        return (GP_REAL)p0.w + dot(c, x - o);
+    }
+    if (kind == GP_FIELD_RADIAL) {
+        /* tanh of (|q|^2 - R^2) / (2 R w), not of |q| - R: smooth at the centre */
+        GP_REAL3 q = x - c;
+        GP_REAL R = (GP_REAL)p0.w, w = (GP_REAL)p1.z, h = (GP_REAL)0.5 * (o.y - o.x);
+        GP_REAL th = tanh((dot(q, q) - R * R) / (2 * R * w));
+        *grad = (h * (1 - th * th) / (R * w)) * q;
+        return o.x + h * (1 + th);
+    }
+    *grad = (GP_REAL3)(0);
+    return 1;
+}
+
+/* Paciorek-Schervish SE/RQ with Sigma(x) = l(x)^2 A^-1: k0 and its derivative
+ * covariances cov0(d_u f(a), f(b)), cov0(f(a), d_v f(b)), cov0(d_u f(a), d_v f(b)). */
+inline GP_REAL gp_ps_terms(GpKernel p, GP_REAL3 a, GP_REAL3 u, GP_REAL3 b, GP_REAL3 v,
+                           GP_REAL* dv, GP_REAL* vd, GP_REAL* dd)
+{
+    GP_REAL3 A = gp_aniso(p), ar = A * (b - a), gla, glb;
+    GP_REAL s = dot(ar, b - a), l = (GP_REAL)p.length_scale;
+    GP_REAL la = l * gp_field(p.ls_field, p.ls_p0, p.ls_p1, a, &gla);
+    GP_REAL lb = l * gp_field(p.ls_field, p.ls_p0, p.ls_p1, b, &glb);
+    gla *= l;
+    glb *= l;
+    GP_REAL S = la * la + lb * lb, beta = 0, psi;
+    if (p.kind == GP_KERNEL_RATIONAL_QUADRATIC) {
+        GP_REAL al = (GP_REAL)p.alpha;
+        beta = 1 / al;
+        psi = -al * log1p(s / (al * S));
+    } else {
+        psi = -s / S;
+    }
+    GP_REAL P = 2 * la * lb / S;
+    GP_REAL k0 = (GP_REAL)p.sigma2 * P * sqrt(P) * exp(psi);
+    GP_REAL D = S + beta * s, iD2 = 1 / (D * D), h = (GP_REAL)1.5;
+    GP_REAL G_s = -1 / D, G_ss = beta * iD2, G_sS = iD2;
+    GP_REAL G_S = s / (S * D) - h / S;
+    GP_REAL G_SS = -s * (D + S) * iD2 / (S * S) + h / (S * S);
+    GP_REAL3 gSa = (2 * la) * gla, gSb = (2 * lb) * glb;
+    GP_REAL3 Fa = (h / la) * gla - (2 * G_s) * ar + G_S * gSa;
+    GP_REAL3 Fb = (h / lb) * glb + (2 * G_s) * ar + G_S * gSb;
+    GP_REAL uFa = dot(u, Fa), vFb = dot(v, Fb), uAr = dot(u, ar), vAr = dot(v, ar);
+    GP_REAL uS = dot(u, gSa), vS = dot(v, gSb);
+    GP_REAL uHv = -2 * G_s * dot(u * A, v) + 2 * vAr * (-2 * G_ss * uAr + G_sS * uS)
+                + vS * (-2 * G_sS * uAr + G_SS * uS);
+    *dv = k0 * uFa;
+    *vd = k0 * vFb;
+    *dd = k0 * (uFa * vFb + uHv);
+    return k0;
+}
+
+/* One joint-covariance entry of a non-stationary kernel: the base (stationary or
+ * Paciorek-Schervish) terms, then the product rule for m_s(a) m_s(b). */
+inline GP_REAL gp_cov_ns(GpKernel p, GP_REAL3 a, GP_REAL3 u, int da,
+                         GP_REAL3 b, GP_REAL3 v, int db)
+{
+    GP_REAL k0, dv, vd, dd;
+    if (p.ls_field) {
+        k0 = gp_ps_terms(p, a, u, b, v, &dv, &vd, &dd);
+    } else {
+        GpJet j = gp_kernel_jet(p, b - a);
+        k0 = j.k;
+        dv = -dot(u, j.G);
+        vd = dot(v, j.G);
+        dd = -(j.alpha * dot(u, j.g) * dot(v, j.g) + dot(u * j.D, v));
+    }
+    GP_REAL ma = 1, mb = 1, ua = 0, vb = 0;
+    if (p.sigma_field) {
+        GP_REAL3 g;
+        ma = gp_field(p.sigma_field, p.sigma_p0, p.sigma_p1, a, &g);
+        ua = da ? dot(u, g) : (GP_REAL)0;
+        mb = gp_field(p.sigma_field, p.sigma_p0, p.sigma_p1, b, &g);
+        vb = db ? dot(v, g) : (GP_REAL)0;
+    }
+    if (!da && !db) return ma * mb * k0;
+    if (!db) return mb * (ua * k0 + ma * dv);
+    if (!da) return ma * (vb * k0 + mb * vd);
+    return ua * vb * k0 + ua * mb * vd + ma * vb * dv + ma * mb * dd;
+}
+
 /* cov(f(a), f(b)) */
 inline GP_REAL gp_cov_vv(GpKernel p, GP_REAL3 a, GP_REAL3 b)
 {
+    if (gp_kernel_nonstationary(p)) return gp_cov_ns(p, a, a, 0, b, b, 0);
     return gp_kernel_value(p, b - a);
 }
 
 /* cov(d_u f(a), f(b)) */
 inline GP_REAL gp_cov_dv(GpKernel p, GP_REAL3 a, GP_REAL3 u, GP_REAL3 b)
 {
+    if (gp_kernel_nonstationary(p)) return gp_cov_ns(p, a, u, 1, b, u, 0);
     return -dot(u, gp_kernel_jet(p, b - a).G);
 }
 
 /* cov(f(a), d_v f(b)) */
 inline GP_REAL gp_cov_vd(GpKernel p, GP_REAL3 a, GP_REAL3 b, GP_REAL3 v)
 {
+    if (gp_kernel_nonstationary(p)) return gp_cov_ns(p, a, v, 0, b, v, 1);
     return dot(v, gp_kernel_jet(p, b - a).G);
 }
 
 /* cov(d_u f(a), d_v f(b)) */
 inline GP_REAL gp_cov_dd(GpKernel p, GP_REAL3 a, GP_REAL3 u, GP_REAL3 b, GP_REAL3 v)
 {
+    if (gp_kernel_nonstationary(p)) return gp_cov_ns(p, a, u, 1, b, v, 1);
     GpJet j = gp_kernel_jet(p, b - a);
     return -(j.alpha * dot(u, j.g) * dot(v, j.g) + dot(u * j.D, v));
 }
@@ -153,6 +254,7 @@ inline GP_REAL gp_cov_dd(GpKernel p, GP_REAL3 a, GP_REAL3 u, GP_REAL3 b, GP_REAL
 inline GP_REAL gp_cov(GpKernel p, GP_REAL3 a, GP_REAL3 u, int da,
                       GP_REAL3 b, GP_REAL3 v, int db)
 {
+    if (gp_kernel_nonstationary(p)) return gp_cov_ns(p, a, u, da, b, v, db);
     if (!da && !db) return gp_kernel_value(p, b - a);
     GpJet j = gp_kernel_jet(p, b - a);
     if (da && db) return -(j.alpha * dot(u, j.g) * dot(v, j.g) + dot(u * j.D, v));

@@ -7,6 +7,9 @@
  *     (8) cover any tree of up to 128 leaves, because the host emits the child needing the
  *     deeper stack first (flag GP_MEAN_FLAG_SWAPPED restores the operand order). The host
  *     rejects deeper trees; a malformed program here yields NaN, never a stack overrun.
+ * A grid leaf is followed by its samples, stored inline as payload records (flags = their
+ * count; see device_layout.py): the evaluator jumps over them, and ws_mean_lipschitz skips
+ * them because their kind is not a leaf kind.
  * Stack entries are float4: xyz = gradient, w = value, so blending and negation treat
  * value and gradient alike. Means are evaluated in float: they enter covariance-free
  * formulas (occupancy, conditioning right-hand sides) where float is ample.
@@ -44,6 +47,55 @@ inline float gp_sd_box(float3 p, float3 extent, float3* g)
     }
     *g = copysign((float3)(1.0f), p) * dir;
     return out_len + fmin(qmax, 0.0f);
+}
+
+inline float gp_grid_sample(GP_MEAN_SPACE const MeanNode* payload, int j)
+{
+    int r = j / GP_MEAN_GRID_PAYLOAD_FLOATS;
+    return ((GP_MEAN_SPACE const float*)(payload + r))[j - r * GP_MEAN_GRID_PAYLOAD_FLOATS];
+}
+
+/* Trilinear interpolant of the samples at index coordinates u, with the gradient of the
+ * same interpolant (cell = floor(u) clamped to the last cell: one-sided at faces, as
+ * means.GridMean). Outside the sample box, with g the clamped point's value and d its
+ * distance (p0.x = 1 / S converts voxels to the normalised samples' units):
+ * sqrt(g^2 + d^2) where g >= 0, g + d where g < 0 (means.GridMean says why); either
+ * keeps |gradient| <= 1 in these units (device_layout.py). */
+inline float gp_mean_grid(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* g)
+{
+    GP_MEAN_SPACE const MeanNode* payload = n + 1;
+    float3 hi = n->p1.xyz - 1.0f;
+    float3 c = fmin(fmax(u, (float3)(0.0f)), hi);
+    float3 cell = fmin(floor(c), hi - 1.0f);
+    float3 t = c - cell;
+    int ny = (int)n->p1.y, nz = (int)n->p1.z;
+    int sx = ny * nz;
+    int b = ((int)cell.x * ny + (int)cell.y) * nz + (int)cell.z;
+    float c000 = gp_grid_sample(payload, b), c001 = gp_grid_sample(payload, b + 1);
+    float c010 = gp_grid_sample(payload, b + nz), c011 = gp_grid_sample(payload, b + nz + 1);
+    float c100 = gp_grid_sample(payload, b + sx), c101 = gp_grid_sample(payload, b + sx + 1);
+    float c110 = gp_grid_sample(payload, b + sx + nz);
+    float c111 = gp_grid_sample(payload, b + sx + nz + 1);
+    float x0 = mix(mix(c000, c001, t.z), mix(c010, c011, t.z), t.y);
+    float x1 = mix(mix(c100, c101, t.z), mix(c110, c111, t.z), t.y);
+    float gy = mix(mix(c010 - c000, c011 - c001, t.z), mix(c110 - c100, c111 - c101, t.z), t.x);
+    float gz = mix(mix(c001 - c000, c011 - c010, t.y), mix(c101 - c100, c111 - c110, t.y), t.x);
+    float3 out = u - c, dir;
+    float3 grad = (float3)(x1 - x0, gy, gz);
+    grad = select(grad, (float3)(0.0f), isnotequal(out, (float3)(0.0f)));
+    float v = mix(x0, x1, t.x);
+    float d = n->p0.x * gp_norm_dir3(out, &dir);
+    if (!(d > 0.0f)) {
+        *g = grad;
+        return v;
+    }
+    if (v < 0.0f) {
+        *g = grad + n->p0.x * dir;
+        return v + d;
+    }
+    float r = sqrt(v * v + d * d);
+    *g = (v * grad + d * n->p0.x * dir) / r;
+    return r;
 }
 
 inline float gp_mean_leaf(GP_MEAN_SPACE const MeanNode* n, float3 x, float3* grad)
@@ -87,6 +139,9 @@ inline float gp_mean_leaf(GP_MEAN_SPACE const MeanNode* n, float3 x, float3* gra
         v = gp_norm_dir3(pa - h * ba, &g) - p0.w;
         break;
     }
+    case GP_MEAN_GRID:
+        v = gp_mean_grid(n, y, &g);
+        break;
     default:
         v = NAN;
     }
@@ -117,9 +172,10 @@ inline float gp_mean_eval(GP_MEAN_SPACE const MeanNode* nodes, int count, float3
             float3 g;
             float v = gp_mean_leaf(n, x, &g);
             stack[top++] = (float4)(g, v);
+            if (n->kind == GP_MEAN_GRID) i += n->flags;
             continue;
         }
-        if (top < 2) { top = -1; break; }
+        if (top < 2 || n->kind == GP_MEAN_PAYLOAD) { top = -1; break; }
         float4 b = stack[--top], a = stack[top - 1];
         if (n->flags & GP_MEAN_FLAG_SWAPPED) { float4 t = a; a = b; b = t; }
         float4 r;

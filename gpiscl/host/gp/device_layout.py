@@ -27,6 +27,16 @@ GP_KERNEL = Struct("GpKernel", (
     ("float", "w"),                 # periodic frequency
     ("float", "se_length_scale"),   # locally periodic envelope
     ("float", "radius"),            # thin-plate R
+    # Spatially varying multipliers sigma(x) = sigma m_s(x), l(x) = l m_l(x) (kernels.py):
+    # kind GP_FIELD_*; linear p0 = (gradient, value), p1.xyz = origin; radial
+    # p0 = (center, radius), p1 = (inner, outer, width, 0).
+    ("int", "sigma_field"),
+    ("int", "ls_field"),
+    ("float", "ls_step"),           # smallest l(x) where rays sample: the step rule's l
+    ("float4", "sigma_p0"),
+    ("float4", "sigma_p1"),
+    ("float4", "ls_p0"),
+    ("float4", "ls_p1"),
 ))
 
 # Leaf parameters (local coordinates, centre folded into the map):
@@ -37,6 +47,16 @@ GP_KERNEL = Struct("GpKernel", (
 #   rounded_box p0.x = radius, p1.xyz = half extents
 #   torus     p0.x = major, p0.y = minor
 #   capsule   p0.xyz = a, p0.w = radius, p1.xyz = b
+#   grid      the map goes to index coordinates u (voxel units, sample (i,j,k) at u = i,j,k);
+#             p1.xyz = sample counts (nx, ny, nz); p0.x = 1 / S, S = GridMean.lipschitz
+#             (world units), the weight of the outside distance (in voxels); flags =
+#             number of payload records that follow the leaf.
+#             Samples are stored divided by S h, with scale multiplied by S h: the leaf's
+#             primitive is then 1-Lipschitz in index units like every distance, so
+#             ws_mean_lipschitz's |scale| ||M|| is the grid's bound with no special case.
+# Grid payload: GRID_PAYLOAD_FLOATS floats per record in row0..p1, sample (i, j, k) at
+# float index (i ny + j) nz + k; kind = payload, which every walker of the program skips
+# as a non-leaf (gp_mean_eval jumps over it using the leaf's flags).
 MEAN_NODE = Struct("MeanNode", (
     ("float4", "row0"),     # world -> local affine map, w = translation
     ("float4", "row1"),
@@ -44,17 +64,21 @@ MEAN_NODE = Struct("MeanNode", (
     ("float4", "p0"),
     ("float4", "p1"),
     ("int", "kind"),
-    ("int", "flags"),       # ops: MEAN_FLAG_SWAPPED if the right operand was emitted first
+    ("int", "flags"),       # ops: MEAN_FLAG_SWAPPED if the right operand was emitted first;
+                            # grid leaves: payload record count
     ("float", "scale"),     # leaves: distance scale of the composite transform
     ("float", "k"),         # ops: smooth blend width, 0 = sharp
 ))
 
 KERNEL_KINDS = {"squared_exponential": 0, "rational_quadratic": 1, "periodic": 2,
                 "locally_periodic": 3, "thin_plate": 4}
+FIELD_KINDS = {"none": 0, "linear": 1, "radial": 2}
 MEAN_KINDS = {"constant": 0, "plane": 1, "sphere": 2, "box": 3, "rounded_box": 4,
-              "torus": 5, "capsule": 6, "union": 16, "intersection": 17, "difference": 18}
+              "torus": 5, "capsule": 6, "grid": 7, "union": 16, "intersection": 17,
+              "difference": 18, "payload": 31}
 MEAN_FLAG_SWAPPED = 1
 MEAN_STACK_DEPTH = 8    # GP_MEAN_STACK_DEPTH in gp_mean.h
+GRID_PAYLOAD_FLOATS = 20    # the float4 fields row0..p1; kind must stay a valid int
 STRUCTS = (GP_KERNEL, MEAN_NODE)
 
 _F32_MAX = float(np.finfo(np.float32).max)
@@ -64,14 +88,42 @@ def c_declarations() -> str:
     """#defines and struct declarations that gp_kernel.h and gp_mean.h assume."""
     lines = ["/* Generated from gpiscl/host/gp/device_layout.py: do not edit. */"]
     lines += [f"#define GP_KERNEL_{k.upper()} {v}" for k, v in KERNEL_KINDS.items()]
+    lines += [f"#define GP_FIELD_{k.upper()} {v}" for k, v in FIELD_KINDS.items()]
     lines += [f"#define GP_MEAN_{k.upper()} {v}" for k, v in MEAN_KINDS.items()]
     lines.append(f"#define GP_MEAN_FIRST_OP {MEAN_KINDS['union']}")
     lines.append(f"#define GP_MEAN_FLAG_SWAPPED {MEAN_FLAG_SWAPPED}")
     lines.append(f"#define GP_MEAN_STACK_DEPTH {MEAN_STACK_DEPTH}")
+    lines.append(f"#define GP_MEAN_GRID_PAYLOAD_FLOATS {GRID_PAYLOAD_FLOATS}")
     return "\n".join(lines) + "\n" + "\n".join(s.c_declaration() for s in STRUCTS)
 
 
+def _pack_field(field):
+    p0, p1 = np.zeros(4), np.zeros(4)
+    if isinstance(field, K.LinearField):
+        p0[:3], p0[3], p1[:3] = field.gradient, field.value, field.origin
+    elif isinstance(field, K.RadialField):
+        p0[:3], p0[3] = field.center, field.radius
+        p1[:3] = field.inner, field.outer, field.width
+    else:
+        raise TypeError(f"no device form for field {type(field).__name__}")
+    return FIELD_KINDS[field.kind], p0, p1
+
+
 def pack_kernel(kernel: K.Kernel) -> np.ndarray:
+    if isinstance(kernel, K.NonStationary):
+        out = pack_kernel(kernel.base)
+        if kernel.sigma_field is not None:
+            out["sigma_field"], out["sigma_p0"], out["sigma_p1"] = _pack_field(kernel.sigma_field)
+        if kernel.length_scale_field is not None:
+            out["ls_field"], out["ls_p0"], out["ls_p1"] = _pack_field(kernel.length_scale_field)
+            step = kernel.step_length_scale
+            if step is None:   # without a proxy only a bounded field gives a bound
+                if not isinstance(kernel.length_scale_field, K.RadialField):
+                    raise ValueError("a linear length_scale field needs step_length_scale "
+                                     "(its minimum over the sampled region)")
+                step = kernel.length_scale * kernel.length_scale_field.minimum()
+            out["ls_step"] = step
+        return out
     out = GP_KERNEL.zeros(1)
     out["aniso"] = (*np.asarray(kernel.aniso, dtype=np.float64), 0.0)
     out["kind"] = KERNEL_KINDS[kernel.kind]
@@ -129,12 +181,42 @@ def _leaf(node, m, scale):
     elif isinstance(node, M.Capsule):
         kind = "capsule"
         p0[:3], p0[3], p1[:3] = node.a, node.radius, node.b
+    elif isinstance(node, M.GridMean):
+        return _grid_leaf(node, m, scale)
     else:
         raise TypeError(f"no device form for mean {type(node).__name__}")
     rec["kind"] = MEAN_KINDS[kind]
     rec["row0"], rec["row1"], rec["row2"] = m
     rec["p0"], rec["p1"], rec["scale"] = p0, p1, scale
     return rec
+
+
+def _grid_leaf(node: M.GridMean, m, scale):
+    """The grid leaf record followed by its payload records."""
+    values = np.asarray(node.values, np.float64)
+    if values.size >= 2**31:
+        raise ValueError(f"grid of {values.shape} samples is too large: the device indexes "
+                         f"samples with 32-bit ints")
+    h = float(node.voxel_size)
+    s_index = node.lipschitz * h            # slope bound per voxel
+    to_index = np.concatenate([np.eye(3) / h, -np.asarray(node.origin, float)[:, None] / h], 1)
+    flat = (values / s_index).astype(np.float32).ravel()     # C order: (i ny + j) nz + k
+    n_rec = -(-flat.size // GRID_PAYLOAD_FLOATS)
+    payload = MEAN_NODE.zeros(n_rec)
+    floats = np.zeros(n_rec * GRID_PAYLOAD_FLOATS, np.float32)
+    floats[:flat.size] = flat
+    floats = floats.reshape(n_rec, GRID_PAYLOAD_FLOATS // 4, 4)
+    for f, name in enumerate(("row0", "row1", "row2", "p0", "p1")):
+        payload[name] = floats[:, f]
+    payload["kind"] = MEAN_KINDS["payload"]
+    rec = MEAN_NODE.zeros(1)
+    rec["kind"] = MEAN_KINDS["grid"]
+    rec["flags"] = n_rec
+    rec["row0"], rec["row1"], rec["row2"] = _compose(m, to_index)
+    rec["p0"] = (h / s_index, 0.0, 0.0, 0.0)
+    rec["p1"] = (*values.shape, 0.0)
+    rec["scale"] = scale * s_index
+    return np.concatenate([rec, payload])
 
 
 def _emit(node, m, scale, out):

@@ -1,4 +1,5 @@
-"""Stationary covariance kernels on R^3 with closed-form derivative covariances.
+"""Stationary covariance kernels on R^3 with closed-form derivative covariances, and
+(NonStationary, at the end) their spatially varying sigma(x), l(x) forms.
 
 Conventions (pinned here, in gp_kernel.h and in the docs):
   r = b - a for k(a, b);  A = diag(aniso);  s = r^T A r.
@@ -238,6 +239,8 @@ def covariance_matrix(kernel: Kernel, x1, x2=None, u1=None, u2=None):
     u (n, 3) holds a direction per observation for directional derivatives; a row of
     NaN, or u = None, marks a value observation.
     """
+    if isinstance(kernel, NonStationary):
+        return kernel.covariance_matrix(x1, x2, u1, u2)
     x1 = _vec(x1)
     x2 = x1 if x2 is None else _vec(x2)
     if x2 is x1 and u2 is None:
@@ -259,3 +262,215 @@ def covariance_matrix(kernel: Kernel, x1, x2=None, u1=None, u2=None):
     dd = -(j.alpha * ug1 * ug2 + np.einsum("ik,ijk,jk->ij", u1, j.D, u2))
     D1, D2 = d1[:, None], d2[None, :]
     return np.where(D1, np.where(D2, dd, dv), np.where(D2, vd, vv))
+
+
+# --- spatially varying sigma(x) and l(x) ------------------------------------------------
+#
+# Fields are dimensionless positive multipliers: sigma(x) = sigma m_s(x), l(x) = l m_l(x)
+# (the reference's `nonstationary` / `proc_nonstationary` semantics: the base kernel's own
+# sigma and l still apply), so a field identically 1 is the stationary kernel. Only the
+# value and gradient of a field enter: the derivative covariances need grad_a grad_b^T of
+# k, in which a field at a and the same field at b never meet in one second derivative.
+#
+# Variance field (any base kernel k0; PSD because it is a congruence D K0 D):
+#   k(a, b) = m(a) m(b) k0(a, b), and by the product rule
+#   cov(d_u f(a), f(b))      = m(b) [(u.grad m(a)) k0 + m(a) cov0(d_u f(a), f(b))]
+#   cov(d_u f(a), d_v f(b))  = (u.grad m(a))(v.grad m(b)) k0
+#                              + (u.grad m(a)) m(b) cov0(f(a), d_v f(b))
+#                              + m(a) (v.grad m(b)) cov0(d_u f(a), f(b)) + m(a) m(b) cov0(d_u, d_v)
+# The reference froze sigma(x) and l(x) in its derivative covariances (REFERENCE-ALGORITHMS
+# 2.3): those are then not the covariances of the derivatives of its f, so slopes and
+# normals drawn with them follow another law than the surface's. Here every term is kept.
+#
+# Length-scale field: Paciorek & Schervish with Sigma(x) = l(x)^2 A^-1 (d = 3):
+#   k0(a, b) = (|Sigma_a| |Sigma_b|)^(1/4) |(Sigma_a + Sigma_b)/2|^(-1/2) kappa(r^T Sbar^-1 r)
+#            = (2 l_a l_b / S)^(3/2) kappa_L(s),   S = l_a^2 + l_b^2,  L^2 = S / 2,
+# kappa_L the stationary radial kernel at length scale L:
+#   SE  k0 = sigma^2 (2 l_a l_b / S)^(3/2) exp(-s / S)
+#   RQ  k0 = sigma^2 (2 l_a l_b / S)^(3/2) (1 + s / (a S))^(-a)
+# With l constant, S = 2 l^2 and the prefactor is 1: sigma^2 exp(-s / (2 l^2)), our SE.
+# PD for every radial kernel that is PD in all dimensions (SE, and RQ as a scale mixture
+# of SE); thin-plate and the product kernels have no such form and take no l(x).
+# Derivatives through F = ln k0 = const + 3/2 ln l_a + 3/2 ln l_b + G(s, S),
+#   G = psi(s, S) - 3/2 ln S, psi = ln kappa_L: with beta = 1/a (0 for SE), D = S + beta s,
+#   psi_s = -1/D, psi_ss = beta/D^2, psi_sS = 1/D^2, psi_S = s/(S D),
+#   psi_SS = -s (D + S)/(D^2 S^2);
+#   grad_a s = -2Ar, grad_b s = 2Ar, grad_a grad_b^T s = -2A, grad_a S = 2 l_a grad l_a;
+#   grad_a F = 3/2 grad l_a / l_a - 2 G_s Ar + G_S grad_a S   (b: +2 G_s Ar, grad_b S)
+#   u^T (grad_a grad_b^T F) v = -2 G_s u.Av + 2 (v.Ar)(-2 G_ss u.Ar + G_sS u.grad_a S)
+#                               + (v.grad_b S)(-2 G_sS u.Ar + G_SS u.grad_a S)
+#   cov(d_u f(a), f(b)) = k0 u.grad_a F,  cov(d_u f(a), d_v f(b)) = k0 [(u.grad_a F)(v.grad_b F)
+#                                                                       + u^T H v]
+
+@dataclass(frozen=True)
+class LinearField:
+    """m(x) = value + gradient . (x - origin); the scene check keeps it positive over the
+    proxy, where rays sample it."""
+    value: float = 1.0
+    gradient: tuple = (0.0, 0.0, 0.0)
+    origin: tuple = (0.0, 0.0, 0.0)
+    kind = "linear"
+
+    def eval(self, x):
+        x = _vec(x)
+        g = _vec(self.gradient)
+        return self.value + np.sum((x - _vec(self.origin)) * g, -1), np.broadcast_to(g, x.shape)
+
+    def minimum(self, lo, hi):
+        """Smallest value over the box [lo, hi] (a linear function: at a corner)."""
+        g, o = _vec(self.gradient), _vec(self.origin)
+        return float(self.value + np.sum(np.minimum(g * (_vec(lo) - o), g * (_vec(hi) - o))))
+
+    def minimum_ball(self, center, radius):
+        g = _vec(self.gradient)
+        return float(self.value + g @ (_vec(center) - _vec(self.origin))
+                     - np.linalg.norm(g) * radius)
+
+
+@dataclass(frozen=True)
+class RadialField:
+    """A smooth blend from `inner` (|x - center| < radius) to `outer`, across a shell of
+    about `width`: m = inner + (outer - inner) (1 + tanh(t)) / 2, t = (q - R^2) / (2 R width),
+    q = |x - c|^2. t ~ (|x - c| - R) / width near the sphere; a function of q rather than
+    of |x - c| keeps m smooth at the centre."""
+    center: tuple = (0.0, 0.0, 0.0)
+    radius: float = 1.0
+    width: float = 0.1
+    inner: float = 1.0
+    outer: float = 1.0
+    kind = "radial"
+
+    def __post_init__(self):
+        for name in ("radius", "width", "inner", "outer"):
+            if not float(getattr(self, name)) > 0.0:
+                raise ValueError(f"radial field: {name} must be positive")
+
+    def eval(self, x):
+        q = _vec(x) - _vec(self.center)
+        R, w = self.radius, self.width
+        th = np.tanh((np.sum(q * q, -1) - R * R) / (2.0 * R * w))
+        h = 0.5 * (self.outer - self.inner)
+        return self.inner + h * (1.0 + th), (h * (1.0 - th * th) / (R * w))[..., None] * q
+
+    def minimum(self, lo=None, hi=None):
+        return float(min(self.inner, self.outer))
+
+    def minimum_ball(self, center=None, radius=None):
+        return self.minimum()
+
+
+FIELDS = {cls.kind: cls for cls in (LinearField, RadialField)}
+
+
+@dataclass(frozen=True)
+class NonStationary(Kernel):
+    """A stationary base kernel with a variance field and/or (SE, RQ) a length-scale
+    field; see the derivation above. step_length_scale: the smallest l(x) where rays
+    sample (set by the scene compiler from the proxy); the step rule uses it."""
+    base: Kernel = None
+    sigma_field: object = None
+    length_scale_field: object = None
+    step_length_scale: float | None = None
+
+    def __post_init__(self):
+        if not isinstance(self.base, Kernel) or isinstance(self.base, NonStationary):
+            raise ValueError("non-stationary kernel: base must be a stationary kernel")
+        if (self.length_scale_field is not None
+                and not isinstance(self.base, (SquaredExponential, RationalQuadratic))):
+            raise ValueError(f"{self.base.kind}: a length_scale field needs a radial kernel "
+                             "that is positive definite in every dimension (SE, RQ)")
+
+    def __getattr__(self, name):   # kind, sigma, length_scale, aniso, ... of the base
+        if name.startswith("__") or name == "base":
+            raise AttributeError(name)
+        return getattr(self.base, name)
+
+    def value(self, r):
+        raise TypeError("a non-stationary kernel is not a function of r = b - a: use cov")
+
+    def jet(self, r):
+        raise TypeError("a non-stationary kernel has no jet in r: use cov, cov_dv, ...")
+
+    def variance_at(self, x):
+        return self.cov(x, x)
+
+    def _l(self, x):
+        m, g = self.length_scale_field.eval(x)
+        return self.base.length_scale * m, self.base.length_scale * g
+
+    def _base_terms(self, a, u, b, v):
+        """k0, cov0(d_u f(a), f(b)), cov0(f(a), d_v f(b)), cov0(d_u f(a), d_v f(b))."""
+        base = self.base
+        if self.length_scale_field is None:
+            return (base.cov(a, b), base.cov_dv(a, u, b), base.cov_vd(a, b, v),
+                    base.cov_dd(a, u, b, v))
+        A = base._a
+        r = b - a
+        Ar = A * r
+        s = np.sum(Ar * r, -1)
+        la, gla = self._l(a)
+        lb, glb = self._l(b)
+        S = la * la + lb * lb
+        sig2 = float(base.sigma) ** 2
+        if isinstance(base, RationalQuadratic):
+            al = base.alpha
+            beta, psi = 1.0 / al, -al * np.log1p(s / (al * S))
+        else:
+            beta, psi = 0.0, -s / S
+        k0 = sig2 * (2.0 * la * lb / S) ** 1.5 * np.exp(psi)
+        D = S + beta * s
+        G_s, G_ss, G_sS = -1.0 / D, beta / D**2, 1.0 / D**2
+        G_S = s / (S * D) - 1.5 / S
+        G_SS = -s * (D + S) / (D**2 * S**2) + 1.5 / S**2
+        gSa, gSb = 2.0 * la[..., None] * gla, 2.0 * lb[..., None] * glb
+        Fa = 1.5 * gla / la[..., None] - 2.0 * G_s[..., None] * Ar + G_S[..., None] * gSa
+        Fb = 1.5 * glb / lb[..., None] + 2.0 * G_s[..., None] * Ar + G_S[..., None] * gSb
+        uFa, vFb = np.sum(u * Fa, -1), np.sum(v * Fb, -1)
+        uAr, vAr = np.sum(u * Ar, -1), np.sum(v * Ar, -1)
+        uS, vS = np.sum(u * gSa, -1), np.sum(v * gSb, -1)
+        uHv = (-2.0 * G_s * np.sum(u * A * v, -1) + 2.0 * vAr * (-2.0 * G_ss * uAr + G_sS * uS)
+               + vS * (-2.0 * G_sS * uAr + G_SS * uS))
+        return k0, k0 * uFa, k0 * vFb, k0 * (uFa * vFb + uHv)
+
+    def _terms(self, a, u, b, v):
+        a, b = np.broadcast_arrays(_vec(a), _vec(b))
+        u = np.broadcast_to(_vec(u), a.shape)
+        v = np.broadcast_to(_vec(v), a.shape)
+        k0, dv0, vd0, dd0 = self._base_terms(a, u, b, v)
+        if self.sigma_field is None:
+            return k0, dv0, vd0, dd0
+        ma, ga = self.sigma_field.eval(a)
+        mb, gb = self.sigma_field.eval(b)
+        ua, vb = np.sum(u * ga, -1), np.sum(v * gb, -1)
+        return (ma * mb * k0, mb * (ua * k0 + ma * dv0), ma * (vb * k0 + mb * vd0),
+                ua * vb * k0 + ua * mb * vd0 + ma * vb * dv0 + ma * mb * dd0)
+
+    def cov(self, a, b):
+        return self._terms(a, np.zeros(3), b, np.zeros(3))[0]
+
+    def cov_dv(self, a, u, b):
+        return self._terms(a, u, b, np.zeros(3))[1]
+
+    def cov_vd(self, a, b, v):
+        return self._terms(a, np.zeros(3), b, v)[2]
+
+    def cov_dd(self, a, u, b, v):
+        return self._terms(a, u, b, v)[3]
+
+    def covariance_matrix(self, x1, x2=None, u1=None, u2=None):
+        x1 = _vec(x1)
+        x2 = x1 if x2 is None else _vec(x2)
+        if x2 is x1 and u2 is None:
+            u2 = u1
+        def split(x, u):
+            if u is None:
+                return np.zeros_like(x), np.zeros(len(x), bool)
+            u = _vec(u)
+            d = ~np.any(np.isnan(u), axis=-1)
+            return np.where(d[:, None], u, 0.0), d
+        u1, d1 = split(x1, u1)
+        u2, d2 = split(x2, u2)
+        vv, dv, vd, dd = self._terms(x1[:, None, :], u1[:, None, :], x2[None, :, :],
+                                     u2[None, :, :])
+        D1, D2 = d1[:, None], d2[None, :]
+        return np.where(D1, np.where(D2, dd, dv), np.where(D2, vd, vv))

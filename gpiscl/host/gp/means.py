@@ -20,6 +20,7 @@ between it and sigma_max / sigma_min times it.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -250,7 +251,133 @@ class Transform(Mean):
         return s * v, s * (g @ w2o[:, :3])
 
 
+@dataclass(frozen=True, eq=False)
+class GridMean(Mean):
+    """Trilinear interpolant of samples values[i, j, k] at origin + voxel_size (i, j, k).
+
+    values has shape (nx, ny, nz), x index first, each >= 2. The gradient is that of the
+    same interpolant (one-sided at cell faces: the cell is floor(u) clamped to the last
+    one, as on the device), so value and gradient are consistent. Outside the sample box B,
+    with c the closest point of B, d = |x - c| and g = g(c), the mean continues as
+        sqrt(g^2 + d^2) where g >= 0,    g + d where g < 0,
+    continuous (both are d at g = 0) and increasing away from B. For a signed distance g
+    that is positive on B's faces (a mesh with a margin) sqrt(g^2 + d^2) is a lower bound of
+    the true distance (Pythagoras: B is convex) and keeps |gradient| <= max(1, the face
+    slope), where g + d would reach sqrt(1 + slope^2) (up to sqrt(2)). The gradient there
+    combines the interpolant's along the unclamped axes with the unit vector (x - c) / d.
+    `lipschitz` is the maximum of |gradient| over all space (ws_intersect.h relies on it
+    bounding it). Note that the trilinear interpolant of a distance is steeper than 1
+    next to the distance's creases (medial axis): one-sided differences from a cell corner
+    add up to ~1.37 near a sphere's centre, at any resolution.
+    """
+    values: np.ndarray
+    origin: tuple = (0.0, 0.0, 0.0)
+    voxel_size: float = 1.0
+
+    def __post_init__(self):
+        v = np.asarray(self.values)
+        if v.ndim != 3 or min(v.shape) < 2:
+            raise ValueError(f"grid values must be a 3-D array (nx, ny, nz) with every "
+                             f"dimension >= 2 (got shape {v.shape})")
+        if not np.all(np.isfinite(v)):
+            raise ValueError("grid values contain NaN or infinite samples")
+        if not (np.isfinite(self.voxel_size) and self.voxel_size > 0.0):
+            raise ValueError(f"grid voxel_size must be positive (got {self.voxel_size})")
+
+    @property
+    def shape(self) -> tuple:
+        return tuple(np.shape(self.values))
+
+    @cached_property
+    def lipschitz(self) -> float:
+        """A bound on |gradient| (world units) over all space; >= 1 (the outside term)."""
+        return grid_slope_bound(np.asarray(self.values, np.float64), float(self.voxel_size))
+
+    def value_and_gradient(self, x):
+        x = _vec(x)
+        vals = np.asarray(self.values, np.float64)
+        h = float(self.voxel_size)
+        hi = np.asarray(vals.shape, np.float64) - 1.0
+        u = (x - _vec(self.origin)) / h
+        c = np.clip(u, 0.0, hi)
+        cell = np.minimum(np.floor(c), hi - 1.0)
+        t = c - cell
+        i, j, k = (cell[..., a].astype(np.intp) for a in range(3))
+        tx, ty, tz = t[..., 0], t[..., 1], t[..., 2]
+        corner = {(a, b, e): vals[i + a, j + b, k + e] for a in (0, 1) for b in (0, 1)
+                  for e in (0, 1)}
+
+        def lerp(p, q, s):
+            return p + (q - p) * s
+
+        # bilinear over the two other axes of the differences along one axis
+        def face(f):
+            return lerp(lerp(f(0, 0), f(0, 1), tz), lerp(f(1, 0), f(1, 1), tz), ty)
+
+        x0 = face(lambda b, e: corner[0, b, e])
+        x1 = face(lambda b, e: corner[1, b, e])
+        value = lerp(x0, x1, tx)
+        gx = x1 - x0
+        gy = lerp(lerp(corner[0, 1, 0] - corner[0, 0, 0], corner[0, 1, 1] - corner[0, 0, 1], tz),
+                  lerp(corner[1, 1, 0] - corner[1, 0, 0], corner[1, 1, 1] - corner[1, 0, 1], tz),
+                  tx)
+        gz = lerp(lerp(corner[0, 0, 1] - corner[0, 0, 0], corner[0, 1, 1] - corner[0, 1, 0], ty),
+                  lerp(corner[1, 0, 1] - corner[1, 0, 0], corner[1, 1, 1] - corner[1, 1, 0], ty),
+                  tx)
+        grad = np.stack([gx, gy, gz], axis=-1) / h
+        out = u - c
+        grad = np.where(out != 0.0, 0.0, grad)      # clamped axes: g(c(x)) is flat there
+        d, direction = _norm_and_dir(out)
+        d = h * d
+        outside = d > 0.0
+        negative = value < 0.0
+        r = np.sqrt(value**2 + d**2)
+        safe = np.where(outside, r, 1.0)[..., None]
+        g_pos = (value[..., None] * grad + d[..., None] * direction) / safe
+        v_out = np.where(negative, value + d, r)
+        g_out = np.where(negative[..., None], grad + direction, g_pos)
+        return (np.where(outside, v_out, value),
+                np.where(outside[..., None], g_out, grad))
+
+
+def _corner_gradients2(values: np.ndarray) -> np.ndarray:
+    """max over each cell's corners of |the interpolant's gradient there|^2 (voxel units),
+    which is the max over the cell: each partial derivative is linear in every other
+    coordinate, so |grad|^2 is convex in each coordinate separately and peaks at a corner.
+    Works in 2-D (face cells) and 3-D."""
+    nd = values.ndim
+    diffs = [np.diff(values, axis=a) for a in range(nd)]
+    best = None
+    for corner in np.ndindex(*(2,) * nd):
+        total = 0.0
+        for a in range(nd):
+            # the edge along axis a that starts at this corner of every cell
+            sl = tuple(slice(None) if b == a else slice(corner[b], values.shape[b] - 1
+                                                         + corner[b]) for b in range(nd))
+            total = total + diffs[a][sl] ** 2
+        best = total if best is None else np.maximum(best, total)
+    return best
+
+
+def grid_slope_bound(values: np.ndarray, h: float) -> float:
+    """The maximum of |grad| of GridMean (world units). Inside: the exact maximum over
+    each cell (_corner_gradients2). Outside, over a face cell whose bilinear gradient is at
+    most a: |grad| <= max(a, 1) where its samples are >= 0 (then g >= 0 on it, and
+    sqrt(g^2 + d^2) mixes slopes a and 1 in a weighted mean), sqrt(a^2 + 1) where any is
+    negative (g + d: orthogonal parts add). Edges and corners of the box take their values
+    and slopes from face cells, and slope 1 from d: the bound is never below 1."""
+    bound2 = max(float(np.max(_corner_gradients2(values))) / h**2, 1.0)
+    for axis in range(3):
+        for end in (0, -1):
+            f = np.take(values, end, axis=axis)
+            a2 = _corner_gradients2(f) / h**2
+            corners = [f[i:f.shape[0] - 1 + i, j:f.shape[1] - 1 + j] for i in (0, 1)
+                       for j in (0, 1)]
+            negative = np.minimum.reduce(corners) < 0.0
+            bound2 = max(bound2, float(np.max(np.where(negative, a2 + 1.0, a2))))
+    return float(np.sqrt(bound2))
+
 MEANS = {"constant": Constant, "plane": Plane, "linear": Plane, "sphere": Sphere,
          "box": Box, "rounded_box": RoundedBox, "torus": Torus, "capsule": Capsule,
          "union": Union, "intersection": Intersection, "difference": Difference,
-         "transform": Transform}
+         "transform": Transform, "grid": GridMean}

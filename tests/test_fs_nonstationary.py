@@ -1,0 +1,356 @@
+"""Spatially varying sigma(x) and l(x) (kernels.NonStationary, gp_kernel.h gp_cov_ns):
+derivative covariances against finite differences, positive definiteness, the stationary
+limit, device against numpy, joint samples against the model, Rice's rate where l(x) is
+constant, the scene rules and a white furnace render."""
+import math
+
+import numpy as np
+import pyopencl as cl
+import pytest
+
+from gpiscl import render_result
+from gpiscl.host.gp import Constant, RationalQuadratic, SquaredExponential, device_layout
+from gpiscl.host.gp import function_space_layout as FL
+from gpiscl.host.gp.kernels import (LinearField, LocallyPeriodic, NonStationary, Periodic,
+                                    RadialField, ThinPlate, covariance_matrix)
+from gpiscl.host.gpis_compile import build_kernel
+from gpiscl.host.scene import SceneError, load_scene
+from stats import assert_agree, z_threshold
+from test_fs_sampling import CAP_MAX, SAMPLES_MAX, WRAPPERS, flights
+
+EXTRA = r"""
+__kernel void covariances(__global const GpKernel* kp, __global const double* a,
+                          __global const double* u, __global const double* b,
+                          __global const double* v, __global double* out)
+{
+    int i = get_global_id(0);
+    GpKernel p = kp[0];
+    double3 A = vload3(i, a), U = vload3(i, u), B = vload3(i, b), V = vload3(i, v);
+    __global double* o = out + 8 * i;
+    o[0] = gp_cov_vv(p, A, B);
+    o[1] = gp_cov_dv(p, A, U, B);
+    o[2] = gp_cov_vd(p, A, B, V);
+    o[3] = gp_cov_dd(p, A, U, B, V);
+    o[4] = gp_cov(p, A, U, 0, B, V, 0);
+    o[5] = gp_cov(p, A, U, 1, B, V, 0);
+    o[6] = gp_cov(p, A, U, 0, B, V, 1);
+    o[7] = gp_cov(p, A, U, 1, B, V, 1);
+}
+
+/* One joint draw per item of n fixed observations (values and derivatives) through the
+ * free-flight sampler's factor and row sampler. */
+__kernel void joint(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
+                    __global const double* x, __global const double* u,
+                    __global const int* kind, int n, uint seed, int first,
+                    __global double* scratch, __global double* out)
+{
+    int i = get_global_id(0);
+    FsScratch S = fs_scratch(scratch, i);
+    for (int k = 0; k < n; ++k) S.rows[k] = fs_obs(vload3(k, x), vload3(k, u), kind[k], 0.0);
+    int st = fs_factor(kp[0], mean, mc, S, 0, n);
+    FsRng rng = {seed, (uint)(first + i), 0u, 0u, 0u};
+    for (int k = 0; k < n; ++k)
+        out[(size_t)i * n + k] = st ? NAN
+            : fs_sample_row(S.L, S.e, k, S.mu[k], fs_normal(rng, 0u, (uint)k));
+}
+"""
+
+# Parameters exact in float32 (GpKernel stores float), so host and device agree to double.
+ANISO = (1.0, 0.5, 2.0)
+LIN = LinearField(value=1.0, gradient=(0.25, -0.125, 0.1875), origin=(0.125, 0.0, -0.25))
+RAD = RadialField(center=(0.125, 0.25, -0.125), radius=0.625, width=0.25, inner=0.5,
+                  outer=1.5)
+SE = SquaredExponential(sigma=1.25, length_scale=0.75, aniso=ANISO)
+RQ = RationalQuadratic(sigma=0.875, length_scale=1.125, alpha=0.625, aniso=ANISO)
+CASES = {
+    "se-sigma-linear": NonStationary(SE, sigma_field=LIN),
+    "se-l-radial": NonStationary(SE, length_scale_field=RAD),
+    "se-both": NonStationary(SE, sigma_field=RAD, length_scale_field=LIN,
+                             step_length_scale=0.25),
+    "rq-both": NonStationary(RQ, sigma_field=LIN, length_scale_field=RAD),
+    "periodic-sigma": NonStationary(Periodic(1.125, 0.875, 0.625, ANISO), sigma_field=RAD),
+    "lp-sigma": NonStationary(LocallyPeriodic(0.75, 1.25, 0.5, 1.5, ANISO), sigma_field=LIN),
+    "thin-plate-sigma": NonStationary(ThinPlate(0.5, 4.0, ANISO), sigma_field=RAD),
+}
+
+
+def _points(rng, n):
+    """Pairs in [-1, 1]^3 (where LIN stays positive: its minimum there is 0.45) with
+    random unit directions; a quarter of the pairs coincide (a = b: variances)."""
+    a, b = rng.uniform(-1, 1, (2, n, 3))
+    b[: n // 4] = a[: n // 4]
+    u, v = rng.normal(size=(2, n, 3))
+    return a, u / np.linalg.norm(u, axis=1)[:, None], b, v / np.linalg.norm(v, axis=1)[:, None]
+
+
+@pytest.fixture(scope="module")
+def prg(device):
+    p = cl.Program(device.ctx, FL.program_source(WRAPPERS + EXTRA)).build(
+        options=FL.build_options(SAMPLES_MAX, CAP_MAX))
+    return {k.function_name: k for k in p.all_kernels()}
+
+
+def _buf(device, a):
+    return cl.Buffer(device.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                     hostbuf=np.ascontiguousarray(a))
+
+
+def _device_cov(device, prg, kernel, a, u, b, v):
+    n = len(a)
+    out = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 64 * n)
+    prg["covariances"](device.queue, (n,), None, _buf(device, device_layout.pack_kernel(kernel)),
+                       *(_buf(device, np.asarray(x, np.float64)) for x in (a, u, b, v)), out)
+    res = np.empty((n, 8))
+    cl.enqueue_copy(device.queue, res, out)
+    return res
+
+
+@pytest.mark.parametrize("name", CASES)
+def test01_derivative_covariances_are_derivatives_of_the_value_covariance(name):
+    """Central differences of k(a, b) in a along u and in b along v (h = 1e-4: truncation
+    and rounding both ~1e-8 of the scale sqrt(var_a var_b)); a quarter of the pairs have
+    a = b, where the field terms of the variances are checked."""
+    K = CASES[name]
+    a, u, b, v = _points(np.random.default_rng(1), 64)
+    h = 1e-4
+    c = K.cov
+    fd_dv = (c(a + h * u, b) - c(a - h * u, b)) / (2 * h)
+    fd_vd = (c(a, b + h * v) - c(a, b - h * v)) / (2 * h)
+    fd_dd = (c(a + h * u, b + h * v) - c(a + h * u, b - h * v)
+             - c(a - h * u, b + h * v) + c(a - h * u, b - h * v)) / (4 * h * h)
+    scale_v = np.sqrt(c(a, a) * c(b, b))
+    scale_d = np.sqrt(K.cov_dd(a, u, a, u) * K.cov_dd(b, v, b, v))
+    scale_m = np.sqrt(scale_v * scale_d)
+    np.testing.assert_array_less(np.abs(fd_dv - K.cov_dv(a, u, b)), 1e-6 * scale_m)
+    np.testing.assert_array_less(np.abs(fd_vd - K.cov_vd(a, b, v)), 1e-6 * scale_m)
+    # thin-plate's rho^3 has a Hessian of O(rho): at a = b central differences err O(h)
+    ok = slice(16, None) if "thin" in name else slice(None)
+    np.testing.assert_array_less(np.abs(fd_dd - K.cov_dd(a, u, b, v))[ok], 1e-5 * scale_d[ok])
+    # symmetry: cov(d_u f(a), f(b)) = cov(f(b), d_u f(a))
+    np.testing.assert_allclose(K.cov_dv(a, u, b), K.cov_vd(b, a, u), rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize("name", [n for n in CASES if "thin" not in n])
+def test02_joint_value_gradient_covariances_are_positive_definite(name):
+    """50 points (l(x) varies by 3x across them), 30 values and 20 derivative rows:
+    Cholesky succeeds and the smallest eigenvalue is >= 0 to rounding."""
+    K = CASES[name]
+    rng = np.random.default_rng(2)
+    for trial in range(5):
+        x = rng.uniform(-1, 1, (50, 3)) * 1.5
+        u = rng.normal(size=(50, 3))
+        u /= np.linalg.norm(u, axis=1)[:, None]
+        u[:30] = np.nan
+        C = covariance_matrix(K, x, u1=u)
+        np.testing.assert_allclose(C, C.T, rtol=1e-12, atol=1e-14)
+        np.linalg.cholesky(C)
+        w = np.linalg.eigvalsh(C)
+        assert w[0] >= -1e-12 * w[-1], (trial, w[0], w[-1])
+
+
+def test03_constant_fields_are_the_stationary_kernel(device, prg):
+    """m = 1 reproduces the stationary kernel to rounding (host and device: the
+    Paciorek-Schervish prefactor is exactly 1, the derivative terms take another
+    algebraic path); a constant
+    m_s = c gives c^2 k, a constant m_l = c the kernel with length scale c l."""
+    a, u, b, v = _points(np.random.default_rng(3), 128)
+    x = np.concatenate([a[:10], b[:10]])
+    dirs = np.concatenate([u[:10], np.full((10, 3), np.nan)])
+    one_lin, one_rad = LinearField(1.0), RadialField(radius=1.0, width=0.5, inner=1.0, outer=1.0)
+    for base, cls in ((SE, SquaredExponential), (RQ, RationalQuadratic)):
+        ns = NonStationary(base, sigma_field=one_rad, length_scale_field=one_lin,
+                           step_length_scale=base.length_scale)
+        ref = covariance_matrix(base, x, u1=dirs)
+        np.testing.assert_allclose(covariance_matrix(ns, x, u1=dirs), ref, rtol=1e-13,
+                                   atol=1e-14 * np.abs(ref).max())
+        ref = _device_cov(device, prg, base, a, u, b, v)
+        np.testing.assert_allclose(_device_cov(device, prg, ns, a, u, b, v), ref, rtol=1e-13,
+                                   atol=1e-14 * np.abs(ref).max())
+        c = 1.5
+        scaled = NonStationary(base, sigma_field=LinearField(c),
+                               length_scale_field=RadialField(radius=1.0, width=0.5,
+                                                              inner=c, outer=c))
+        params = {k: getattr(base, k) for k in base.__dataclass_fields__}
+        ref = cls(**{**params, "sigma": c * base.sigma, "length_scale": c * base.length_scale})
+        np.testing.assert_allclose(covariance_matrix(scaled, x, u1=dirs),
+                                   covariance_matrix(ref, x, u1=dirs), rtol=1e-13, atol=1e-15)
+
+
+@pytest.mark.parametrize("name", CASES)
+def test04_device_matches_numpy(device, prg, name):
+    """Double build, 256 random pairs: every entry to 1e-9 of its scale (the
+    Cauchy-Schwarz bound sqrt(var_a var_b) of the same pair of observations)."""
+    K = CASES[name]
+    a, u, b, v = _points(np.random.default_rng(4), 256)
+    dev = _device_cov(device, prg, K, a, u, b, v)
+    vv, dv, vd, dd = K._terms(a, u, b, v)
+    sa, sb = np.sqrt(K.cov(a, a)), np.sqrt(K.cov(b, b))
+    ga, gb = np.sqrt(K.cov_dd(a, u, a, u)), np.sqrt(K.cov_dd(b, v, b, v))
+    for j, (ref, scale) in enumerate([(vv, sa * sb), (dv, ga * sb), (vd, sa * gb),
+                                      (dd, ga * gb)] * 2):
+        err = np.abs(dev[:, j] - ref) / scale
+        assert err.max() < 1e-9, (j, err.max())
+
+
+def _joint(device, prg, kernel, x, u, kind, n_draws, seed):
+    n = len(x)
+    nodes = device_layout.pack_mean(Constant(0.0))
+    stride = FL.scratch_doubles(FL.max_rows(SAMPLES_MAX, CAP_MAX))
+    assert n <= FL.max_rows(SAMPLES_MAX, CAP_MAX)
+    chunk = 1024
+    scratch = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, 8 * stride * chunk)
+    out = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 8 * n * chunk)
+    args = [_buf(device, device_layout.pack_kernel(kernel)), _buf(device, nodes),
+            np.int32(len(nodes)), _buf(device, x.astype(np.float64)),
+            _buf(device, u.astype(np.float64)), _buf(device, kind.astype(np.int32)),
+            np.int32(n), np.uint32(seed)]
+    res = np.empty((n_draws, n))
+    for first in range(0, n_draws, chunk):
+        m = min(chunk, n_draws - first)
+        prg["joint"](device.queue, (m,), None, *args, np.int32(first), scratch, out)
+        cl.enqueue_copy(device.queue, res[first:first + m], out)
+    return res
+
+
+def test05_joint_samples_have_the_model_variance_and_covariance(device, prg):
+    """Values and slopes at 24 fixed points along a ray through a sigma(x) and l(x)
+    blend, jointly drawn by the free-flight factor/sampler in 20000 items: the per-point
+    variance matches sigma(x)^2 (resp. the slope variance), and the draws whitened by the
+    numpy covariance are uncorrelated standard normals (chi-square over all entries)."""
+    K = NonStationary(SquaredExponential(1.0, 0.5),
+                      sigma_field=RadialField((0.0, 0.0, 0.0), 0.75, 0.25, 2.0, 0.5),
+                      length_scale_field=RadialField((0.0, 0.25, 0.0), 0.5, 0.25, 0.5, 1.0))
+    t = np.linspace(-1.5, 1.5, 16)
+    line = np.stack([t, np.full(16, 0.125), np.zeros(16)], 1)
+    x = np.concatenate([line, line[::2]])         # values at 16 points, slopes at 8
+    d = np.array([1.0, 0.0, 0.0])
+    u = np.tile(d, (len(x), 1))
+    kind = np.r_[np.zeros(16, int), np.ones(8, int)]
+    n_draws = 20000
+    f = _joint(device, prg, K, x, u, kind, n_draws, seed=5)
+    assert np.all(np.isfinite(f))
+    C = covariance_matrix(K, x, u1=np.where(kind[:, None] == 1, u, np.nan))
+    var = np.diag(C)
+    sigma2 = K.cov(x[:16], x[:16])
+    m_s = K.sigma_field.eval(x[:16])[0]
+    np.testing.assert_allclose(sigma2, m_s**2, rtol=1e-12)   # sigma = 1: var = m_s(x)^2
+    # sample variance: (n-1) s^2 / var ~ chi2(n-1), ~normal with sd var sqrt(2 / (n-1))
+    z = (f.var(axis=0, ddof=1) - var) / (var * math.sqrt(2.0 / (n_draws - 1)))
+    tz = z_threshold(len(x) + 2)
+    assert np.abs(z).max() < tz, z
+    assert np.abs(f.mean(axis=0) / np.sqrt(var / n_draws)).max() < tz
+    L = np.linalg.cholesky(C + 1e-12 * np.mean(var) * np.eye(len(x)))
+    w = np.linalg.solve(L, f.T)                   # (n, draws): standard normal, independent
+    cov_w = w @ w.T / n_draws
+    off = cov_w[np.triu_indices(len(x), 1)] * math.sqrt(n_draws)
+    assert np.abs(off).max() < tz * 1.2, np.abs(off).max()   # Bonferroni over ~n^2/2: loose
+    chi2 = np.sum(w * w)
+    dof = w.size
+    assert abs(chi2 - dof) < tz * math.sqrt(2 * dof), (chi2, dof)
+
+
+def test06_step_rule_uses_the_smallest_length_scale(device, prg):
+    """sigma(x) alone keeps the stationary step; l(x) steps with l * min m_l (ls_step)."""
+    d = np.array([0.6, 0.0, 0.8]) * 1.5
+    base = SquaredExponential(1.0, 0.75)
+    out = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 8)
+    for kern, l in ((NonStationary(base, sigma_field=RAD), 0.75),
+                    (NonStationary(base, length_scale_field=RAD), 0.75 * 0.5),
+                    (NonStationary(base, length_scale_field=LIN, step_length_scale=0.25), 0.25)):
+        prg["step_rule"](device.queue, (1,), None, _buf(device, device_layout.pack_kernel(kern)),
+                         _buf(device, d), np.float64(0.9), out)
+        dt = np.empty(1)
+        cl.enqueue_copy(device.queue, dt, out)
+        assert abs(dt[0] - l * math.sqrt(-2 * math.log(0.9)) / 1.5) < 1e-6 * dt[0]
+
+
+def test07_rice_rate_where_the_length_scale_is_constant(device, prg):
+    """l(x) = 0.25 inside a sphere of radius 6 and 0.5 outside (blend width 0.2): a
+    continued ray (global memory, mean 0) inside the sphere, and one far outside it, each
+    cross level 0 at Rice's rate L / (2 pi l_local) per ray (+1/4 from f(0) >= 0), less
+    the grid's misses (between the bounds of test_fs_free_flight's test03). Outside, the
+    rays are also traced with the stationary kernel at l = 0.5 on the same grid (step
+    correlation chosen to give the same dt) and the same random numbers: the counts
+    agree ray by ray but for rounding-level flips at near-tangent crossings."""
+    K = NonStationary(SquaredExponential(1.0, 0.5),
+                      length_scale_field=RadialField((0.0, 0.0, 0.0), 6.0, 0.2, 0.5, 1.0))
+    c, n, L = 0.99, 600, 8.0
+    dt = 0.25 * math.sqrt(-2 * math.log(c))       # ls_step = 0.5 * min(0.5, 1.0)
+    for o, l_local in (((-4.0, 0.0, 0.0), 0.25), ((-4.0, 9.0, 0.0), 0.5)):
+        out = flights(device, prg, K, Constant(0.0), n, memory="global", samples=32, cap=64,
+                      c=c, o=o, t1=L, seed=21, restarts=200)
+        counts = out[:, 4]
+        rate = L / (2 * math.pi * l_local)
+        c_local = math.exp(-dt * dt / (2 * l_local**2))
+        hi = rate + 0.25
+        lo = rate * math.acos(c_local) * l_local / dt + 0.25
+        se = counts.std(ddof=1) / math.sqrt(n)
+        z = z_threshold(2)
+        print(f"l = {l_local}: crossings per ray {counts.mean():.3f} +- {se:.3f}, "
+              f"Rice {hi:.3f}, grid {lo:.3f}")
+        assert lo - z * se < counts.mean() < hi + z * se
+    ref = flights(device, prg, SquaredExponential(1.0, 0.5), Constant(0.0), n, memory="global",
+                  samples=32, cap=64, c=c_local, o=o, t1=L, seed=21, restarts=200)
+    same = np.mean(ref[:, 4] == counts)
+    print(f"same count as the stationary kernel on {same:.1%} of the rays")
+    assert same > 0.95
+
+
+def _gpis(sampler, kernel, proxy=None):
+    g = {"type": "gpis", "proxy": proxy or {"type": "box", "min": [-1.1] * 3, "max": [1.1] * 3},
+         "mean": {"type": "sphere", "radius": 0.7}, "kernel": kernel, "sampler": sampler}
+    return {"shapes": [g], "lights": [{"type": "environment"}]}
+
+
+def test08_scene_rules():
+    field = {"type": "radial", "radius": 0.5, "width": 0.1, "inner": 0.5, "outer": 1.0}
+    kern = {"type": "squared_exponential", "sigma": 0.3, "length_scale": 0.2}
+    for key in ("sigma_field", "length_scale_field"):
+        with pytest.raises(SceneError) as e:
+            load_scene(_gpis({"type": "weight_space"}, {**kern, key: field}))
+        assert e.value.key == f"shapes[0].kernel.{key}"
+        assert "weight space samples stationary kernels only" in e.value.reason
+    # a linear field must stay positive over the proxy (min over the box: 1 - 0.5*1.1*3)
+    lin = {"type": "linear", "value": 1.0, "gradient": [0.5, 0.5, 0.5]}
+    with pytest.raises(SceneError) as e:
+        load_scene(_gpis({"type": "function_space"}, {**kern, "sigma_field": lin}))
+    assert e.value.key == "shapes[0].kernel.sigma_field" and "-0.65" in e.value.reason
+    with pytest.raises(SceneError) as e:          # no l(x) on thin-plate
+        load_scene(_gpis({"type": "function_space"},
+                         {"type": "thin_plate", "radius": 4.0, "length_scale_field": field}))
+    assert e.value.key == "shapes[0].kernel.length_scale_field"
+    lin = {"type": "linear", "value": 1.0, "gradient": [0.25, 0.0, 0.0]}
+    s = load_scene(_gpis({"type": "function_space"}, {**kern, "length_scale_field": lin}))
+    g = s.data["shapes"][0]
+    k = build_kernel(g["kernel"], g["proxy"])
+    assert abs(k.step_length_scale - 0.2 * (1 - 0.25 * 1.1)) < 1e-12
+    assert device_layout.pack_kernel(k)["ls_field"] == device_layout.FIELD_KINDS["linear"]
+
+
+@pytest.mark.parametrize("bsdf, memory", [("mirror", "renewal_plus"), ("diffuse", "global")])
+def test09_white_furnace_with_a_varying_sigma(device, bsdf, memory):
+    """A rough ball whose sigma(x) = 0.3 + 0.1 x (0.19..0.41 in the proxy) and l(x)
+    blends 0.15 -> 0.25: albedo 1 in a unit environment gives 1, with no failed solve.
+    The mirror gives exactly 1 per path; the diffuse BSDF (NEE + MIS, shadow rays through
+    the same memory) is z-tested per 4x4 block."""
+    kern = {"type": "squared_exponential", "sigma": 1.0, "length_scale": 1.0,
+            "sigma_field": {"type": "linear", "value": 0.3, "gradient": [0.1, 0.0, 0.0]},
+            "length_scale_field": {"type": "radial", "center": [0.3, 0.3, 0.3], "radius": 0.5,
+                                   "width": 0.2, "inner": 0.15, "outer": 0.25}}
+    scene = _gpis({"type": "function_space", "samples": 16, "memory": memory}, kern)
+    scene["shapes"][0]["bsdf"] = {"type": bsdf, "albedo": 1.0}
+    scene["camera"] = {"position": [0, 0, 3.0], "look_at": [0, 0, 0], "up": [0, 1, 0],
+                       "fov": 40, "resolution": [12, 12]}
+    scene["render"] = {"spp": 4, "seed": 3, "max_depth": 256,
+                       "russian_roulette": {"start_depth": 100000}}
+    res = render_result(scene, device=device)
+    st = res.stats
+    assert st.gpis_failed == 0 and st.nan_paths == 0 and st.truncated_paths == 0, st.summary()
+    assert st.killed_paths == 0, st.summary()
+    assert st.rays > 1.5 * st.paths, st.summary()     # the ball is hit
+    if bsdf == "mirror":
+        np.testing.assert_allclose(res.image.mean, 1.0, rtol=1e-5)
+        assert np.all(res.image.stderr == 0)
+    else:
+        img = res.image
+        assert_agree(img.mean, img.stderr, np.ones_like(img.mean), block=4, what="furnace")
