@@ -8,6 +8,7 @@ import numpy as np
 from . import layouts
 from .gp import kernels as K
 from .gp import means as M
+from .gp.knob import knob_grid
 from .gp.weight_space import pack_order_tables
 from .gp.device_layout import GP_KERNEL, MEAN_NODE, pack_kernel, pack_mean
 from .gpis_schema import FIELD_KEYS, field_minimum
@@ -79,6 +80,8 @@ def build_mean(m: dict) -> M.Mean:
     if kind == "grid":
         from .sdf_bake import load_grid
         return load_grid(m["file"])
+    if kind == "procedural":
+        return knob_grid(m["function"], m["resolution"])
     raise AssertionError(kind)
 
 

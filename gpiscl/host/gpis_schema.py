@@ -61,6 +61,11 @@ MEANS.register("mesh", Record({"file": Field(File((".obj", ".ply", ".stl", ".off
                                "transform": Field(TRANSFORM, {})}))
 # A voxel grid of mean values (.npz with values (nx, ny, nz), origin, voxel_size).
 MEANS.register("grid", Record({"file": Field(File((".npz",), grid_problem))}))
+# the authors' procedural shapes (gp/knob.py), sampled on a grid like a baked mesh
+MEANS.register("procedural", Record({
+    "function": Field(Enum("knob", "knob_inner", "knob_outer")),
+    "resolution": Field(Int(ge=16, le=512), 128),
+}))
 
 # Spatially varying multipliers (function space only): sigma(x) = sigma m(x) on every
 # kernel ("sigma_field"), l(x) = l m(x) on SE and RQ ("length_scale_field", the
