@@ -63,6 +63,13 @@ def _parser() -> argparse.ArgumentParser:
     sub.add_parser("devices", help="list OpenCL platforms and devices")
     _add_uq_parser(sub)
     _add_sample_parser(sub)
+    v = sub.add_parser("convert-vdb", help="an OpenVDB grid to the .npz grid format",
+                       description="Copy one float grid of a .vdb file to an .npz grid "
+                       "(values, origin, voxel_size) usable as a grid mean. Needs OpenVDB's "
+                       "Python binding.")
+    v.add_argument("input", help=".vdb file")
+    v.add_argument("output", help=".npz file to write")
+    v.add_argument("--grid", help="grid name (default: the only grid, or 'density')")
     return ap
 
 
@@ -282,11 +289,19 @@ def cl_type(dev) -> str:
     return cl.device_type.to_string(dev.type).lower()
 
 
+def cmd_convert_vdb(args) -> int:
+    from .host.vdb import convert_vdb
+    info = convert_vdb(args.input, args.output, args.grid)
+    print(f"wrote {args.output}: grid '{info['grid']}', {info['shape']} samples, voxel "
+          f"{info['voxel_size']:g}, origin {info['origin']}", file=sys.stderr)
+    return 0
+
+
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     try:
         commands = {"render": cmd_render, "devices": cmd_devices, "uq": cmd_uq,
-                    "sample": cmd_sample}
+                    "sample": cmd_sample, "convert-vdb": cmd_convert_vdb}
         return commands[args.command](args)
     except (SceneError, DeviceError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -1,0 +1,69 @@
+"""convert-vdb: a clear way out without an OpenVDB binding, and a correct copy with one
+(a stand-in binding with OpenVDB's Python API, since none installs from PyPI)."""
+import types
+
+import numpy as np
+import pytest
+
+from gpiscl.host import vdb
+from gpiscl.host.scene import SceneError
+from gpiscl.host.sdf_bake import load_grid
+
+
+def test_without_a_binding_the_command_says_how_to_get_one(tmp_path, monkeypatch, capsys):
+    from gpiscl.__main__ import main
+    monkeypatch.setattr(vdb, "import_openvdb", lambda: None)  # as on a PyPI-only machine
+    code = main(["convert-vdb", str(tmp_path / "a.vdb"), str(tmp_path / "a.npz")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1
+    assert "conda install -c conda-forge openvdb" in err and not (tmp_path / "a.npz").exists()
+
+
+class FakeTransform:
+    def __init__(self, voxel, offset):
+        self.voxel, self.offset = voxel, np.asarray(offset, float)
+
+    def voxelSize(self):
+        return (self.voxel,) * 3
+
+    def indexToWorld(self, ijk):
+        return tuple(self.offset + self.voxel * np.asarray(ijk, float))
+
+
+class FakeGrid:
+    """OpenVDB's FloatGrid surface: sparse voxels, a background, copyToArray."""
+
+    def __init__(self, name, voxels: dict, background, voxel, offset):
+        self.name, self.voxels, self.background = name, voxels, background
+        self.transform = FakeTransform(voxel, offset)
+
+    def evalActiveVoxelBoundingBox(self):
+        ijk = np.array(list(self.voxels))
+        return tuple(ijk.min(0)), tuple(ijk.max(0))
+
+    def copyToArray(self, array, ijk):
+        for (i, j, k), value in self.voxels.items():
+            array[i - ijk[0], j - ijk[1], k - ijk[2]] = value
+
+
+def test_copy_keeps_values_origin_and_voxel_size(tmp_path, monkeypatch):
+    rng = np.random.default_rng(0)
+    voxels = {(i, j, k): float(rng.normal()) for i in range(-2, 3) for j in range(1, 4)
+              for k in range(0, 6) if rng.uniform() < 0.8}
+    voxels[(-2, 1, 0)], voxels[(2, 3, 5)] = 0.5, -0.5   # pin the bounding box
+    grid = FakeGrid("mean", voxels, 100.0, 0.25, (1.0, 2.0, 3.0))
+    fake = types.SimpleNamespace(readAll=lambda path: ([grid], {}))
+    monkeypatch.setattr(vdb, "import_openvdb", lambda: fake)
+    out = tmp_path / "g.npz"
+    info = vdb.convert_vdb("x.vdb", str(out))
+    g = load_grid(out)
+    assert g.shape == (5, 3, 6) and info["grid"] == "mean"
+    assert g.voxel_size == 0.25 and g.origin == pytest.approx((0.5, 2.25, 3.0))
+    for (i, j, k), value in voxels.items():
+        assert g.values[i + 2, j - 1, k] == pytest.approx(value)
+    inactive = [(i, j, k) for i in range(-2, 3) for j in range(1, 4) for k in range(6)
+                if (i, j, k) not in voxels]
+    assert all(g.values[i + 2, j - 1, k] == 100.0 for i, j, k in inactive)
+    with pytest.raises(SceneError) as info:
+        vdb.convert_vdb("x.vdb", str(out), grid_name="density")
+    assert info.value.key == "density" and "has: mean" in info.value.reason
