@@ -9,7 +9,8 @@ def _wall(center, u, v, albedo):
 
 
 def default_scene() -> dict:
-    """A Cornell-style box, 2 units on a side, lit by a rectangle in its ceiling."""
+    """A Cornell-style box, 2 units on a side, lit by a rectangle in its ceiling, holding a
+    box, a mirror sphere and a weight-space GPIS."""
     white, red, green = [0.73, 0.73, 0.73], [0.63, 0.065, 0.05], [0.14, 0.45, 0.091]
     return {
         # the open front of the box just fills the 40-degree view from here
@@ -24,7 +25,12 @@ def default_scene() -> dict:
             _wall([1, 1, 0], [0, 0, 2], [0, 2, 0], green),      # right
             {"type": "box", "min": [-0.75, 0, -0.75], "max": [-0.15, 0.25, -0.15],
              "bsdf": {"type": "diffuse", "albedo": white}},
-            {"type": "sphere", "center": [-0.45, 0.6, -0.45], "radius": 0.35,
+            # a rough blue blob: a GPIS around a sphere mean, averaged over realizations
+            {"type": "gpis", "proxy": {"type": "sphere", "center": [-0.45, 0.6, -0.45],
+                                       "radius": 0.6},
+             "mean": {"type": "sphere", "center": [-0.45, 0.6, -0.45], "radius": 0.32},
+             "kernel": {"type": "squared_exponential", "sigma": 0.04, "length_scale": 0.08},
+             "sampler": {"type": "weight_space"},
              "bsdf": {"type": "diffuse", "albedo": [0.25, 0.35, 0.7]}},
             {"type": "sphere", "center": [0.42, 0.38, 0.25], "radius": 0.38,
              "bsdf": {"type": "mirror", "albedo": 0.95}},

@@ -151,8 +151,10 @@ def test_factories_validate(factory):
 def test_factory_contents():
     d = load_scene(default_scene()).data
     assert d["camera"]["resolution"] == [256, 256] and d["render"]["spp"] == 16
-    bsdfs = [s["bsdf"]["type"] for s in d["shapes"] if s["type"] == "sphere"]
+    bsdfs = [s["bsdf"]["type"] for s in d["shapes"] if s["type"] in ("sphere", "gpis")]
     assert sorted(bsdfs) == ["diffuse", "mirror"]
+    gpis = [s for s in d["shapes"] if s["type"] == "gpis"]
+    assert len(gpis) == 1 and gpis[0]["sampler"] == {"type": "weight_space", "features": 256}
     assert [lt["type"] for lt in d["lights"]] == ["rectangle"]
     f = load_scene(furnace_sphere(albedo=[0.5, 0.6, 0.7])).data
     assert f["camera"]["resolution"] == [32, 32]
