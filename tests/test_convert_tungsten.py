@@ -107,3 +107,62 @@ def test_missing_environment_map_is_an_error_unless_substituted(tmp_path):
     assert r.returncode == 0, r.stderr
     assert load_scene(out).data["lights"][-1] == {"type": "environment",
                                                  "radiance": [0.3, 0.3, 0.3]}
+
+
+def _tungsten_rotation(degrees):
+    """The reference's Mat4f::rotYXZ: R = Ry Rx Rz, written out independently."""
+    ax, ay, az = np.radians(degrees)
+    c, s = np.cos, np.sin
+    rx = np.array([[1, 0, 0], [0, c(ax), -s(ax)], [0, s(ax), c(ax)]])
+    ry = np.array([[c(ay), 0, s(ay)], [0, 1, 0], [-s(ay), 0, c(ay)]])
+    rz = np.array([[c(az), -s(az), 0], [s(az), c(az), 0], [0, 0, 1]])
+    return ry @ rx @ rz
+
+
+def _mesh_doc(tmp_path, mean):
+    (tmp_path / "meshes").mkdir(exist_ok=True)
+    (tmp_path / "meshes" / "wedge.obj").write_bytes(
+        (ROOT / "scenes" / "assets" / "wedge.obj").read_bytes())
+    doc = _with(GP + ["left", "mean"], mean)
+    source = tmp_path / "scene.json"
+    source.write_text(json.dumps(doc))
+    return doc, str(source)
+
+
+def test_mesh_mean_maps_file_and_transform(tmp_path):
+    """A Tungsten mesh mean becomes our mesh mean: the file resolved against the scene's
+    folder and a transform that puts every vertex where the reference's T R S puts it."""
+    t = {"position": [0.1, 1.0, -0.49], "scale": [0.5, 0.25, 0.75], "rotation": [30, -50, 70]}
+    doc, source = _mesh_doc(tmp_path, {"type": "mesh", "file": "meshes/wedge.obj",
+                                       "transform": t, "signed": True})
+    scene, notes = convert_tungsten(doc, source, SKY)
+    mean = scene["shapes"][1]["mean"]
+    assert mean["type"] == "mesh" and mean["file"] == str(tmp_path / "meshes" / "wedge.obj")
+    data = load_scene(scene).data           # the strict loader accepts it
+    mt = data["shapes"][1]["mean"]["transform"]
+    from gpiscl.host.scene_compile import _euler_matrix
+    import trimesh
+    v = np.asarray(trimesh.load(ROOT / "scenes" / "assets" / "wedge.obj", process=False).vertices)
+    ours = v * mt["scale"] @ _euler_matrix(mt["rotate"]).T + mt["translate"]
+    theirs = v * t["scale"] @ _tungsten_rotation(t["rotation"]).T + t["position"]
+    np.testing.assert_allclose(ours, theirs, atol=1e-12)
+    assert any("signed" in n for n in notes) and any("baked" in n for n in notes)
+
+
+MESH = GP + ["left", "mean"]
+
+
+@pytest.mark.parametrize("mean,key,reason", [
+    ({"type": "mesh", "file": "meshes/wedge.wo3"}, "file", "convert it"),
+    ({"type": "mesh", "file": "meshes/none.obj"}, "file", "file not found"),
+    ({"type": "mesh", "file": "meshes/wedge.obj", "min": -0.1}, "min", "clamped"),
+    ({"type": "mesh", "file": "meshes/wedge.obj", "smooth": True}, "smooth", "unknown"),
+    ({"type": "mesh", "file": "meshes/wedge.obj", "transform": [1] * 16}, "transform",
+     "only {position, scale, rotation}"),
+], ids=["wo3", "missing", "min", "unknown", "matrix"])
+def test_unsupported_mesh_means_name_the_key(tmp_path, mean, key, reason):
+    doc, source = _mesh_doc(tmp_path, mean)
+    with pytest.raises(SceneError) as info:
+        convert_tungsten(doc, source, SKY)
+    assert info.value.key == "media[0].gaussian_process.left.mean." + key
+    assert reason in info.value.reason, info.value.reason

@@ -1,12 +1,18 @@
 """Cost of a posterior GPIS solve as the number of observations grows.
 
     python tools/bench_posterior.py [--sizes 100,1000,10000] [--normals]
+                                    [--device-sizes 0,100,1000] [--rays 256]
 
 Per size n (surface points on a sphere; --normals adds three derivative observations
 per point, so 4n in all): seconds to build K, factor it (Cholesky) and solve for the
 weights (and how much of that is building K), then per-point costs of the posterior mean
 and variance, and the setup of one pathwise (Matheron) realization (one more solve).
 Memory: two n x n float64 matrices (K and its factor), 1.6 GB at n = 10^4.
+
+Device (--device-sizes, 0 = the prior): function-space free flight through a posterior
+GPIS (fs_sampling.h with the observations of posterior_compile.py), rays through a
+sphere of observed points; microseconds per segment and per conditioned row (one row:
+n kernel evaluations, an n x n triangular solve, and its covariance entries).
 """
 from __future__ import annotations
 
@@ -29,11 +35,83 @@ from gpiscl.host.gp.posterior import Posterior, surface_observations  # noqa: E4
 from gpiscl.host.gp.spectral import RandomFeatures  # noqa: E402
 
 
+FLIGHT = r"""
+__kernel void flight(__global const GpKernel* kp, __global const MeanNode* means, int first,
+                     int mc, __global const double* dirs, __global double* scratch,
+                     __global int* out)
+{
+    int i = get_global_id(0);
+    FsScratch S = fs_scratch(scratch, i);
+    S.post = fs_posterior_of(means, first);
+    FsParams prm = {16, GPIS_MEMORY_RENEWAL_PLUS, 8, 6, 0.9};
+    double3 d = vload3(i, dirs);
+    FsRay r = {-2.0 * d, d, 0.0, 4.0};
+    FsRng rng = {1u, (uint)i, 0u, 0u, 0u};
+    FsVertex v = {0};
+    FsResult res = fs_free_flight(kp[0], means + first, mc, prm, r, v, 0, rng, S);
+    out[3 * i] = res.segments;
+    out[3 * i + 1] = res.samples;
+    out[3 * i + 2] = res.status;
+}
+"""
+
+
+def device_cost(sizes, rays: int):
+    import pyopencl as cl
+    from gpiscl.host import posterior_compile as PC
+    from gpiscl.host.device import KERNEL_DIR, PYOPENCL_CL_DIR, Device
+    from gpiscl.host.gp import device_layout
+    from gpiscl.host.gp import function_space_layout as FL
+    dev = Device()
+    kernel = SquaredExponential(sigma=0.2, length_scale=0.3)
+    mean = Sphere(radius=1.0)
+    rng = np.random.default_rng(1)
+    dirs = rng.standard_normal((rays, 3)) * [0.2, 0.2, 1.0]
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    src = FL.program_source((KERNEL_DIR / "fs_posterior.h").read_text() + FLIGHT)
+    print(f"\ndevice ({dev.name}), {rays} rays, N = 16, renewal_plus:")
+    print(f"{'n obs':>8}{'segments':>10}{'rows':>8}{'us/segment':>12}{'us/row':>9}")
+    for n in sizes:
+        prog = device_layout.pack_mean(mean)
+        nodes, first = prog, 0
+        if n:
+            d = rng.standard_normal((n, 3))
+            d /= np.linalg.norm(d, axis=1, keepdims=True)
+            post = Posterior(kernel, mean, surface_observations(0.9 * d, noise=1e-4))
+            block = PC.pack_posterior(post)
+            nodes, first = np.concatenate([block, prog]), len(block)
+        defs = FL.defines(16, 8)
+        defs["FS_POST_MAX"] = n
+        defs["FS_SCRATCH_DOUBLES"] += defs["FS_MAX_ROWS"] * n
+        opts = [f"-I{PYOPENCL_CL_DIR}"] + [f"-D{k}={v}" for k, v in sorted(defs.items())]
+        k = cl.Program(dev.ctx, src).build(options=opts).flight
+        mf = cl.mem_flags
+
+        def buf(a):
+            return cl.Buffer(dev.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR,
+                             hostbuf=np.ascontiguousarray(a))
+        scratch = cl.Buffer(dev.ctx, mf.READ_WRITE, 8 * defs["FS_SCRATCH_DOUBLES"] * rays)
+        out = np.zeros((rays, 3), np.int32)
+        ob = cl.Buffer(dev.ctx, mf.WRITE_ONLY, out.nbytes)
+        args = (buf(device_layout.pack_kernel(kernel)), buf(nodes), np.int32(first),
+                np.int32(len(prog)), buf(dirs), scratch, ob)
+        k(dev.queue, (rays,), None, *args).wait()      # warm-up (compilation per size)
+        t0 = time.perf_counter()
+        k(dev.queue, (rays,), None, *args).wait()
+        dt = time.perf_counter() - t0
+        cl.enqueue_copy(dev.queue, out, ob)
+        assert np.all(out[:, 2] == 0), np.unique(out[:, 2])
+        seg, rows = out[:, 0].sum(), out[:, 1].sum()
+        print(f"{n:>8}{seg:>10}{rows:>8}{dt / seg * 1e6:>12.1f}{dt / rows * 1e6:>9.1f}")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="100,1000,10000")
     ap.add_argument("--normals", action="store_true")
     ap.add_argument("--probes", type=int, default=2000)
+    ap.add_argument("--device-sizes", default="0,100,1000")
+    ap.add_argument("--rays", type=int, default=256)
     args = ap.parse_args()
     rng = np.random.default_rng(0)
     kernel = SquaredExponential(sigma=0.2, length_scale=0.3)
@@ -62,6 +140,8 @@ def main() -> int:
         t_k = time.perf_counter() - t5
         print(f"{len(obs):>8}{t1 - t0:>16.3f}{t_k:>13.3f}{(t2 - t1) / len(probes) * 1e6:>14.2f}"
               f"{(t3 - t2) / m * 1e6:>13.1f}{t4 - t3:>14.3f}{post.jitter:>9.0e}")
+    if args.device_sizes:
+        device_cost([int(v) for v in args.device_sizes.split(",")], args.rays)
     return 0
 
 

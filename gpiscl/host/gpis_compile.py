@@ -1,7 +1,9 @@
 """Resolved GPIS scene objects -> host GP model objects -> device arrays."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from statistics import NormalDist
 
 import numpy as np
 
@@ -12,7 +14,9 @@ from .gp.knob import knob_grid
 from .gp.weight_space import pack_order_tables
 from .gp.device_layout import GP_KERNEL, MEAN_NODE, pack_kernel, pack_mean
 from .gpis_schema import FIELD_KEYS, field_minimum
+from .gpis_fields import pack_field
 from .scene_schema import SceneError
+from .posterior_compile import build_posterior, pack_posterior
 
 _KERNELS = {"squared_exponential": K.SquaredExponential, "rational_quadratic": K.RationalQuadratic,
             "periodic": K.Periodic, "locally_periodic": K.LocallyPeriodic,
@@ -96,6 +100,40 @@ def kernel_length_scale(k: dict) -> float:
     return k["length_scale"] / max(k["aniso"]) ** 0.5
 
 
+# The occupancy bound's marches stop at steps below this fraction of the length scale:
+# finer clipping saves less sampling than the march costs (tools/bench_occupancy.py).
+OCCUPANCY_MIN_STEP = 0.1
+
+
+def occupancy_level(g: dict) -> float:
+    """z sigma_max for the object's occupancy bound epsilon (0: off): where the mean
+    exceeds it, P(f <= 0) = Phi(-mu / sigma(x)) < Phi(-z) = epsilon, because sigma(x) <=
+    sigma_max everywhere in the proxy. Rounded up to the next float32, as the device
+    compares in float."""
+    eps = (g.get("bounds") or {}).get("occupancy")
+    if eps is None:
+        return 0.0
+    kernel = build_kernel(g["kernel"], g["proxy"])
+    base = kernel.base if isinstance(kernel, K.NonStationary) else kernel
+    m_max, sf = 1.0, g["kernel"].get("sigma_field")
+    if sf is not None and sf["type"] == "radial":
+        m_max = max(sf["inner"], sf["outer"])
+    elif sf is not None:   # max of a linear field = -(min of its negation)
+        neg = dict(sf, value=-sf["value"], gradient=[-c for c in sf["gradient"]])
+        m_max = -field_minimum(neg, g["proxy"])
+    level = NormalDist().inv_cdf(1.0 - eps) * math.sqrt(base.variance) * m_max
+    return float(np.nextafter(np.float32(level), np.float32(np.inf)))
+
+
+def _posterior_block(g: dict, proxy: dict) -> np.ndarray:
+    try:
+        post = build_posterior(g["observations"], build_kernel(g["kernel"], proxy),
+                               build_mean(g["mean"]))
+    except np.linalg.LinAlgError as exc:
+        raise SceneError("<scene>", "gpis observations", str(exc)) from None
+    return pack_posterior(post)
+
+
 @dataclass
 class CompiledGpis:
     objects: np.ndarray     # GpisObject records
@@ -131,13 +169,31 @@ def compile_gpis(shapes: list, material_of) -> CompiledGpis:
         o["material"] = material_of(g["bsdf"])
         o["tolerance"] = ROOT_TOLERANCE * kernel_length_scale(g["kernel"])
         kernels[i] = pack_kernel(build_kernel(g["kernel"], proxy))[0]
+        o["occupancy_level"] = occupancy_level(g)
+        o["occupancy_step"] = OCCUPANCY_MIN_STEP * kernel_length_scale(g["kernel"])
         try:
             prog = pack_mean(build_mean(g["mean"]))
         except ValueError as exc:
             raise SceneError("<scene>", f"gpis mean", str(exc)) from None
+        if g.get("observations") is not None:
+            # the posterior block sits just before the mean program (fs_posterior.h)
+            block = _posterior_block(g, proxy)
+            first += len(block)
+            programs.append(block)
+            if "occupancy_level" in objects.dtype.names:
+                o["occupancy_level"] = 0.0   # the bound follows the prior mean, not this one
         o["mean_first"], o["mean_count"] = first, len(prog)
         first += len(prog)
         programs.append(prog)
+    # colour and emission fields follow every mean program, so index 0 (never a field)
+    # can stand for "no field" (gpis_fields.py)
+    for i, g in enumerate(shapes):
+        for key, slot in (("color", "color_field"), ("emission", "emission_field")):
+            if g.get(key) is not None:
+                records = pack_field(g[key])
+                objects[i][slot] = first
+                first += len(records)
+                programs.append(records)
     nodes = np.concatenate(programs) if programs else MEAN_NODE.zeros(0)
     table, t_first, t_count = pack_order_tables([build_kernel(g["kernel"]) for g in shapes])
     objects["order_first"], objects["order_count"] = t_first, t_count

@@ -16,7 +16,7 @@ from .device import Device, KernelTimings, Program
 from .gp import function_space_layout as FL
 
 STAGE_FILES = ("gpis_function_space.cl", "gpis_shadow_function_space.cl")
-HEADERS = ("gpis_proxy.h", "fs_linalg.h", "fs_sampling.h", "fs_objects.h")
+HEADERS = ("gpis_proxy.h", "fs_linalg.h", "fs_sampling.h", "fs_posterior.h", "fs_objects.h")
 RING_BUDGET = 256 << 20      # bytes of global-model rings per batch: caps the batch size
 SCRATCH_BUDGET = 256 << 20   # bytes of scratch per launch: sets the chunk size
 
@@ -37,28 +37,71 @@ def max_batch(objects: np.ndarray) -> int:
     return max(1, RING_BUDGET // (ring_stride(objects) * FL.FS_OBS.dtype.itemsize))
 
 
+def posterior_rows_on_device(device: Device, objects: np.ndarray, means) -> int:
+    """The most observation rows of any function-space object's posterior, read from the
+    header records just before the mean programs in the device's mean buffer
+    (fs_posterior.h): the stages are built from GpisObject records alone, which do not
+    carry it, and one record per object is all that is read."""
+    from .gp.device_layout import MEAN_NODE
+    from .posterior_compile import POSTERIOR_KIND
+    size, best = MEAN_NODE.dtype.itemsize, 0
+    for first in _fs_objects(objects)["mean_first"]:
+        if first <= 0:
+            continue
+        rec = MEAN_NODE.zeros(1)
+        cl.enqueue_copy(device.queue, rec, means, src_offset=int(first - 1) * size)
+        if rec["kind"][0] == POSTERIOR_KIND:
+            best = max(best, int(rec["p0"][0][0]))
+    return best
+
+
 class FunctionSpaceStages:
+    """mean_nodes: the host mean-node array, to size the posterior cache now. Without it
+    the stages are built for the prior and, if the first launch finds a posterior in the
+    device's mean buffer, rebuilt then (its compilation then counts as render time)."""
+
     def __init__(self, device: Device, objects: np.ndarray, batch: int,
-                 timings: KernelTimings | None = None):
-        self.device = device
-        fs = _fs_objects(objects)
+                 timings: KernelTimings | None = None, mean_nodes: np.ndarray | None = None):
+        self.device, self.objects, self.batch, self.timings = device, objects, batch, timings
         self.stride = ring_stride(objects)
-        rows_cap = self.stride if self.stride > 1 else 2
-        defines = FL.defines(int(fs["samples"].max()), rows_cap, int(fs["refine"].max()))
-        self.program = Program(device, STAGE_FILES, defines=defines, extra_headers=HEADERS,
-                               extra_c=FL.c_declarations())
-        if timings is not None:   # one kernel table for both programs
-            self.program.timings = timings
         self.local = 16 if device.device.type & cl.device_type.CPU else 64
-        slice_bytes = 8 * defines["FS_SCRATCH_DOUBLES"]
-        chunk = max(1, min(batch, SCRATCH_BUDGET // (2 * slice_bytes)))
-        self.chunk = int(-(-chunk // self.local) * self.local)
+        self.checked = mean_nodes is not None
+        rows = 0
+        if mean_nodes is not None:
+            from .posterior_compile import posterior_rows
+            rows = int(posterior_rows(mean_nodes, objects).max(initial=0))
+        self._build(rows)
         mf, ctx = cl.mem_flags, device.ctx
-        self.scratch = cl.Buffer(ctx, mf.READ_WRITE, 2 * slice_bytes * self.chunk)
         self.vertex = cl.Buffer(ctx, mf.READ_WRITE, FL.FS_VERTEX.dtype.itemsize * batch)
         self.vertex_object = cl.Buffer(ctx, mf.READ_WRITE, 4 * batch)
         self.rings = cl.Buffer(ctx, mf.READ_WRITE,
                                FL.FS_OBS.dtype.itemsize * self.stride * batch)
+
+    def _check_posterior(self, means):
+        if not self.checked:
+            self.checked = True
+            rows = posterior_rows_on_device(self.device, self.objects, means)
+            if rows > self.post_rows:
+                self._build(rows)
+
+    def _build(self, post_rows: int):
+        """Program and scratch: a posterior of n rows adds a v cache of n doubles per row
+        (fs_sampling.h, FsScratch.v) to every scratch slice."""
+        fs = _fs_objects(self.objects)
+        rows_cap = self.stride if self.stride > 1 else 2
+        defines = FL.defines(int(fs["samples"].max()), rows_cap, int(fs["refine"].max()))
+        self.post_rows = post_rows
+        defines["FS_POST_MAX"] = self.post_rows
+        defines["FS_SCRATCH_DOUBLES"] += defines["FS_MAX_ROWS"] * self.post_rows
+        self.program = Program(self.device, STAGE_FILES, defines=defines,
+                               extra_headers=HEADERS, extra_c=FL.c_declarations())
+        if self.timings is not None:   # one kernel table for both programs
+            self.program.timings = self.timings
+        slice_bytes = 8 * defines["FS_SCRATCH_DOUBLES"]
+        chunk = max(1, min(self.batch, SCRATCH_BUDGET // (2 * slice_bytes)))
+        self.chunk = int(-(-chunk // self.local) * self.local)
+        self.scratch = cl.Buffer(self.device.ctx, cl.mem_flags.READ_WRITE,
+                                 2 * slice_bytes * self.chunk)
 
     def _chunks(self, name, n, head, tail):
         """Launch over [0, n) in chunks with a fixed local size: PoCL compiles a kernel
@@ -73,6 +116,7 @@ class FunctionSpaceStages:
 
     def free_flight(self, params, paths, rays, n, gpis_objects, kernels, means, counters):
         """Rays [0, n) of `rays`: hits moved to function-space crossings, vertices recorded."""
+        self._check_posterior(means)
         self._chunks("gpis_function_space", n, (params,),
                      (*paths.args, *rays.args, gpis_objects, kernels, means, self.vertex,
                       self.vertex_object, self.rings, np.int32(self.stride), self.scratch,
@@ -80,6 +124,7 @@ class FunctionSpaceStages:
 
     def shadow(self, params, paths, shadow, n, gpis_objects, kernels, means, counters):
         """Shadow rays (at most n: one per hit) blocked by function-space crossings."""
+        self._check_posterior(means)
         self._chunks("gpis_shadow_function_space", n, (params,),
                      (*paths.args, *shadow.args, gpis_objects, kernels, means, self.vertex,
                       self.vertex_object, self.rings, np.int32(self.stride), self.scratch,

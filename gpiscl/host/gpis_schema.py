@@ -16,8 +16,11 @@ from __future__ import annotations
 
 from .scene import ALBEDO, SHAPES, TRANSFORM, VEC3, _box_extent, _mesh_problem
 from .gp import function_space_layout as FSL
-from .scene_schema import Enum, Field, File, Int, Nullable, Number, Record, Tagged, Vector
+from .scene_schema import (Bool, Enum, Field, File, Int, Nullable, Number, Record, Tagged,
+                           Vector)
 from .sdf_bake import grid_problem
+from . import posterior_compile as _posterior
+from .gpis_fields import COLOR, EMISSION
 
 DIRECTION = Vector(normalize=True)
 POSITIVE3 = Vector(broadcast=True, item=Number(gt=0))
@@ -198,10 +201,36 @@ def _fields_positive(g):
     return None
 
 
+# Occupancy bounds (gpis_proxy.h): rays sample only between the first and last points
+# inside the proxy where P(f(x) <= 0) can reach `occupancy` (epsilon); null: the whole
+# proxy. Realizations with f < 0 only where the occupancy is below epsilon are ignored
+# (about epsilon per correlation length of clipped ray); 1e-4 (mean > 3.72 sigma) keeps
+# that far below a render's noise. On for both samplers: function space saves samples
+# (3.4x faster on scenes/knob_no_csg.json), weight space is about even (its search
+# already strides where |f| >> sigma); tools/bench_occupancy.py measures.
+BOUNDS = Record({"occupancy": Field(Nullable(Number(gt=0, lt=0.5)), 1e-4)})
+
+# Posterior GPIS (posterior_compile.py): f conditioned on points observed on the surface,
+# f = 0 with standard deviation `noise` (world units), and with "normals": true also
+# grad f = n (three derivative rows per point, deviation `normal_noise`). Function space
+# only; the file holds rows "x y z [nx ny nz]" (.xyz/.txt) or an (n, 3|6) .npy.
+OBSERVATIONS = Record({
+    "file": Field(File(_posterior.EXTENSIONS, _posterior.points_problem)),
+    "noise": Field(Number(ge=0), 1e-3),
+    "normals": Field(Bool(), False),
+    "normal_noise": Field(Number(ge=0), 1e-2),
+})
+
 GPIS = SHAPES.register("gpis", Record({
     "proxy": Field(PROXIES),
     "mean": Field(MEANS),
     "kernel": Field(KERNELS),
     "sampler": Field(SAMPLERS, {"type": "weight_space"}),
     "bsdf": Field(MICRO_BSDFS, {"type": "diffuse"}),
-}, checks=[_weight_space_kernel, _thin_plate_span, _fields_positive]))
+    # albedo multiplier and emitted radiance over space (gpis_fields.py); null: none
+    "color": Field(COLOR, None),
+    "emission": Field(EMISSION, None),
+    "bounds": Field(BOUNDS, {}),
+    "observations": Field(Nullable(OBSERVATIONS), None),
+}, checks=[_weight_space_kernel, _thin_plate_span, _fields_positive,
+           _posterior.observations_problem]))

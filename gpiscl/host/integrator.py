@@ -20,7 +20,8 @@ from .scene_compile import CompiledScene
 STAGE_FILES = ("generate_camera_rays.cl", "intersect.cl", "gpis_weight_space.cl", "queue_hits.cl",
                "escaped_rays.cl", "emission.cl", "scatter.cl", "gpis_shadow_weight_space.cl",
                "shadow_rays.cl", "accumulate.cl")
-GPIS_HEADERS = ("gpis_proxy.h", "ws_features.h", "ws_intersect.h", "ws_objects.h")
+GPIS_HEADERS = ("gpis_proxy.h", "ws_features.h", "ws_intersect.h", "ws_objects.h",
+                "gpis_fields.h")
 DEFAULT_BATCH = 1 << 18
 
 
@@ -166,12 +167,14 @@ class WavefrontIntegrator:
 
     def emission(self, rays, n):
         self.program.launch("emission", n, self.params, *self.paths.args, *rays.args,
-                            *self.hits.args, self.counters, self.prims, self.lights)
+                            *self.hits.args, self.counters, self.prims, self.lights,
+                            self.gpis_objects, self.gpis_model[1])
 
     def scatter(self, rays, out, n):
         self.program.launch("scatter", n, self.params, *self.paths.args, *rays.args,
                             *out.args, *self.hits.args, *self.shadow.args, self.counters,
-                            self.prims, self.materials, self.lights, *self.env, self.gpis_objects)
+                            self.prims, self.materials, self.lights, *self.env, self.gpis_objects,
+                            self.gpis_model[1])
 
     def shadow_rays(self, n):
         self.program.launch("shadow_rays", n, self.params, *self.paths.args,

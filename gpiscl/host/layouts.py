@@ -141,6 +141,11 @@ GPIS_OBJECT = Struct("GpisObject", (
     ("int", "memory_cap"),     # function space, global memory: observations kept
     ("int", "refine"),         # function space: bisection steps in a crossing bracket
     ("float", "step_corr"),    # function space: correlation of neighbouring samples
+    ("int", "color_field"),    # albedo multiplier: its MeanNode record, 0 = none (gpis_fields.py)
+    ("int", "emission_field"), # emitted radiance: its MeanNode record, 0 = none
+    ("float", "occupancy_level"),  # z sigma_max: mean above it = occupancy below the
+                                   # object's epsilon (gpis_proxy.h); 0: bounds off
+    ("float", "occupancy_step"),   # world length: the bound's marches stop below it
 ))
 
 # Per-launch constants of the integrator.

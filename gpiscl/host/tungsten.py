@@ -27,11 +27,16 @@ Mapping (../shared/design/REFERENCE-ALGORITHMS.md section 8 describes their form
             object per leaf in the same proxy: first hits over independent objects are the
             union min(f_L, f_R), which is what the reference's csg computes
   means   homogeneous {offset} -> constant; spherical {center, radius} -> sphere;
-          linear {reference_point, direction, scale} -> plane
+          linear {reference_point, direction, scale} -> plane;
+          mesh {file (.obj/.ply/.stl/.off, relative to the scene file), transform} -> mesh
+            (the transform goes to the vertices before the bake, as the reference applies
+            it at load time; its rotY rotX rotZ rotation becomes our x-then-y-then-z Euler
+            angles of the same matrix; `signed` is ignored, as by the reference; the exact
+            distance becomes a 128^3 baked grid, listed in the notes)
   kernels squared_exponential, rational_quadratic (a -> alpha), thin_plate (R -> radius),
           with sigma, lengthScale and aniso; the reference's kernels and ours agree there
 
-Everything else (procedural, mesh and tabulated means, their radial periodic kernel, rough
+Everything else (procedural and tabulated means, a mesh mean's `min` clamp, their radial periodic kernel, rough
 conductors, mesh proxies, .hdr environment maps, rotated cubes) is an error naming the key
 path and the reason, never silently dropped. Pass `environment` to substitute a missing
 environment map.
@@ -54,6 +59,23 @@ KERNEL_KEYS = {
                            "aniso": "aniso"},
     "thin_plate": {"sigma": "sigma", "R": "radius", "aniso": "aniso"},
 }
+
+
+MESH_MEAN_KEYS = ("type", "file", "transform", "signed", "min")
+MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off")
+
+
+def euler_xyz(rot) -> list:
+    """Degrees (x, y, z) with Rz Ry Rx = rot: gpiscl's rotate order (x first) for any
+    rotation matrix, such as the reference's Ry Rx Rz."""
+    r = np.asarray(rot, float)
+    sy = -float(np.clip(r[2, 0], -1.0, 1.0))
+    ay = math.asin(sy)
+    if abs(r[2, 0]) < 1.0 - 1e-9:
+        ax, az = math.atan2(r[2, 1], r[2, 2]), math.atan2(r[1, 0], r[0, 0])
+    else:                   # gimbal lock: only ax - az (or ax + az) is defined; take az = 0
+        ax, az = math.atan2(-r[1, 2], r[1, 1]), 0.0
+    return [math.degrees(a) for a in (ax, ay, az)]
 
 
 class _Converter:
@@ -152,7 +174,40 @@ class _Converter:
                 self.fail(f"{key}.min", "a clamped linear mean is not supported")
             return {"type": "plane", "point": m.get("reference_point", [0, 0, 0]),
                     "normal": m.get("direction", [1, 0, 0]), "scale": m.get("scale", 1.0)}
-        self.fail(f"{key}.type", f'mean "{kind}" is not supported (homogeneous, spherical, linear)')
+        if kind == "mesh":
+            return self.mesh_mean(m, key)
+        self.fail(f"{key}.type", f'mean "{kind}" is not supported (homogeneous, spherical, '
+                  'linear, mesh)')
+
+    def mesh_mean(self, m: dict, key: str) -> dict:
+        for name in m:
+            if name not in MESH_MEAN_KEYS:
+                self.fail(f"{key}.{name}", f"unknown or unsupported mesh mean key (expected "
+                          f"one of: {', '.join(MESH_MEAN_KEYS)})")
+        if "min" in m:
+            self.fail(f"{key}.min", "a clamped mesh mean is not supported (the mesh mean's "
+                      "band clamps both signs)")
+        if not isinstance(m.get("file"), str):
+            self.fail(f"{key}.file", "expected the mesh file name")
+        path = (self.base / m["file"]).resolve()
+        if path.suffix.lower() not in MESH_SUFFIXES:
+            self.fail(f"{key}.file", f'mesh "{m["file"]}" is not one of '
+                      f'{", ".join(MESH_SUFFIXES)}; convert it (e.g. Tungsten .wo3 to .obj)')
+        if not path.is_file():
+            self.fail(f"{key}.file", f"file not found: {path}")
+        t = m.get("transform", {})
+        if not isinstance(t, dict):
+            self.fail(f"{key}.transform", "only {position, scale, rotation} transforms are "
+                      "supported")
+        pos, scale, rot = self.transform(t, f"{key}.transform")
+        if "signed" in m:
+            self.notes.append(f"{key}.signed: ignored, as by the reference (the sign is "
+                              "always the winding number's)")
+        self.notes.append(f"{key}: the mesh's distance is baked to a grid (resolution 128); "
+                          "the reference queries the mesh exactly")
+        return {"type": "mesh", "file": str(path),
+                "transform": {"scale": scale.tolist(), "rotate": euler_xyz(rot),
+                              "translate": pos.tolist()}}
 
     def kernel(self, k: dict, key: str) -> dict:
         kind = k.get("type")

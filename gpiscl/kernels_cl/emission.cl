@@ -1,13 +1,26 @@
 /* From: hit queue.  To: radiance emitted by area lights that rays hit, weighted by MIS
- * against light sampling from the previous vertex. */
+ * against light sampling from the previous vertex, and by GPIS emission fields where
+ * rays meet a realization (never light-sampled, so with weight 1). */
 __kernel void emission(__constant RenderParams* params, PATH_PARAMS(path), RAY_PARAMS(in),
                        INDEX_PARAMS(hits), __global int* counters,
-                       __global const Primitive* prims, __global const Light* lights)
+                       __global const Primitive* prims, __global const Light* lights,
+                       __global const GpisObject* gpis, __global const MeanNode* mean_nodes)
 {
     int i = get_global_id(0);
     if (i >= counters[COUNT_HITS]) return;
     int r = hits_ray[i];
-    if (in_hit_prim[r] < 0) return;  /* GPIS events do not emit */
+    int hp = in_hit_prim[r];
+    if (hp < 0) {
+        /* GPIS event: next-event estimation cannot sample an emission field (it is not a
+         * light), so this BSDF-sampled hit is its only estimator: MIS weight 1 */
+        int f = gpis[GPIS_HIT_BASE - hp].emission_field;
+        if (f <= 0) return;
+        int p = in_path[r];
+        float3 x = in_o[r].xyz + in_hit_t[r] * in_d[r].xyz;
+        float3 Le = gpis_field_eval(mean_nodes, f, x, 0.0f);
+        path_radiance[p] += (float4)(path_beta[p].xyz * Le, 0.0f);
+        return;
+    }
     __global const Primitive* prim = &prims[in_hit_prim[r]];
     if (prim->light < 0) return;
     int p = in_path[r];

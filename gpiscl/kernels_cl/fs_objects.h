@@ -6,11 +6,12 @@ inline uint fs_object_seed(uint seed, int k)
     return seed ^ ((uint)k * 0x9e3779b9u);   /* objects draw independent streams */
 }
 
-/* Free flight through object k along [o.w, t1] clipped to its proxy, conditioned on vertex
- * record v, with random stream `stream` (0: continuation, 1: shadow). res.hit = 0 when k is
- * not a function-space object or the ray misses its proxy; a failed solve is counted in
- * COUNT_GPIS_FAILED (reported by the host) and also returns no hit. *ray and *prm receive
- * what fs_vertex_at_hit needs. */
+/* Free flight through object k along [o.w, t1] clipped to its proxy and occupancy bounds
+ * (the start only for a fresh ray: a valid v conditions the ray at o.w), conditioned on
+ * vertex record v, with random stream `stream` (0: continuation, 1: shadow). res.hit = 0
+ * when k is not a function-space object or the ray misses its proxy; a failed solve is
+ * counted in COUNT_GPIS_FAILED (reported by the host) and also returns no hit. *ray and
+ * *prm receive what fs_vertex_at_hit needs. */
 inline FsResult fs_object_flight(__constant RenderParams* params,
                                  __global const GpisObject* gpis, int k,
                                  __global const GpKernel* kernels,
@@ -22,10 +23,12 @@ inline FsResult fs_object_flight(__constant RenderParams* params,
     FsResult none = {0};
     __global const GpisObject* g = &gpis[k];
     float t0 = o.w;
-    if (g->sampler != GPIS_SAMPLER_FUNCTION_SPACE || !gpis_proxy_clip(g, o.xyz, d.xyz, &t0, &t1))
+    if (g->sampler != GPIS_SAMPLER_FUNCTION_SPACE || !gpis_proxy_clip(g, o.xyz, d.xyz, &t0, &t1)
+        || !gpis_occupancy_clip(g, means, o.xyz, d.xyz, &t0, &t1, !v.valid))
         return none;
     FsParams pr = {g->samples, g->memory, g->memory_cap, g->refine, (double)g->step_corr};
     FsRay r = {convert_double3(o.xyz), convert_double3(d.xyz), (double)t0, (double)t1};
+    S.post = fs_posterior_of(means, g->mean_first);   /* none: the prior */
     FsRng rng = {fs_object_seed(params->seed, k), (uint)pixel, (uint)sample,
                  (uint)params->bounce, stream};
     FsResult res = fs_free_flight(kernels[k], means + g->mean_first, g->mean_count, pr, r, v,

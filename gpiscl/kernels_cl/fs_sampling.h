@@ -52,10 +52,18 @@
  *    ray, and cov(d_T f(x_h), anything on the ray) = 0, so the closed form
  *    N(T . grad mu(x_h), -2k'(0) I_2) is used; anisotropic/product kernels take the
  *    general conditional (four appended rows), and so do kernels with sigma(x) or l(x)
- *    fields (grad sigma, grad l correlate d_T f(x_h) with the ray's values). Global: all
+ *    fields (grad sigma, grad l correlate d_T f(x_h) with the ray's values), and so does a
+ *    posterior (observations correlate d_T f(x_h) with everything). Global: all
  *    three components are drawn given every row (three appended rows); the slope is then
  *    a draw that is < 0 except at grazing hits (probability ~ the bracket's relative
  *    width), whose normal faces away and which the integrator kills and counts.
+ *  - Posterior GPIS (FsPost, S.post; fs_posterior.h finds an object's): every mean and
+ *    covariance above is the posterior's, m + k alpha and k - v.v, so start values,
+ *    renewal slopes, segments, bisection and normals are all conditioned on the
+ *    observations exactly. Cost per conditioned row O(n^2) (a triangular solve; v is
+ *    cached per row in S.v, FS_POST_MAX n per row), so n stays at a few hundred.
+ *    The step rule keeps the prior's: the mean correction varies on the kernel's scale and
+ *    the residual's derivative variances never exceed the prior's.
  *  - Random numbers: philox4x32, key (seed, FS_PHILOX_KEY) (rng.h uses another key
  *    word), counter (pixel, sample, bounce, stream << 28 | segment << 12 | block): one
  *    block = two 53-bit uniforms; fixed block numbers per draw (targets by their index in
@@ -68,8 +76,12 @@ typedef char fs_gp_real_must_be_double[sizeof(GP_REAL) == 8 ? 1 : -1];
 #ifndef FS_MAX_ROWS
 #define FS_MAX_ROWS 107
 #endif
+#ifndef FS_POST_MAX
+#define FS_POST_MAX 0              /* observation rows of the largest posterior GPIS */
+#endif
 #ifndef FS_SCRATCH_DOUBLES
-#define FS_SCRATCH_DOUBLES (10 * FS_MAX_ROWS + FS_MAX_ROWS * (FS_MAX_ROWS + 1) / 2)
+#define FS_SCRATCH_DOUBLES (10 * FS_MAX_ROWS + FS_MAX_ROWS * (FS_MAX_ROWS + 1) / 2 \
+                            + FS_MAX_ROWS * FS_POST_MAX)
 #endif
 #ifndef FS_MAX_SEGMENTS
 #define FS_MAX_SEGMENTS 4096
@@ -85,11 +97,30 @@ typedef char fs_gp_real_must_be_double[sizeof(GP_REAL) == 8 ? 1 : -1];
 typedef struct { uint seed, pixel, sample, bounce, stream; } FsRng;
 typedef struct { int samples, memory, cap, refine; double step_corr; } FsParams;
 typedef struct { double3 o, d; double t0, t1; } FsRay;
+/* A posterior GPIS (gpiscl/host/gp/posterior.py; packed by posterior_compile.py): the
+ * prior conditioned on n observation rows X (values and directional derivatives, with
+ * noise). Every prior mean and covariance below becomes
+ *   m'(x) = m(x) + k(x, X) alpha,            alpha = K^-1 (y - m(X)),
+ *   k'(a, b) = k(a, b) - v_a . v_b,          v_a = L^-1 k(X, a),  K + noise = L L^T,
+ * which is exact: the observations join every segment's conditioning set, with their
+ * factor computed once on the host instead of per segment. n = 0: the prior. */
+typedef struct {
+    __global const FsObs* obs;
+    __global const double* alpha;
+    __global const double* L;      /* packed lower triangle (fs_tri) */
+    int n;
+} FsPost;
+
 typedef struct {
     __global FsObs* rows;
     __global double* L;
     __global double* e;
     __global double* mu;
+    /* The posterior rides along with the scratch because every function that needs it
+     * already takes S; v caches v_a of row i at v + i n (an O(n^2) solve per row, reused
+     * by all O(rows^2) covariance entries of the row). */
+    __global double* v;
+    FsPost post;
 } FsScratch;
 typedef struct {
     int status, hit;
@@ -107,6 +138,10 @@ inline FsScratch fs_scratch(__global double* base, int item)
     S.L = s + 8 * FS_MAX_ROWS;
     S.e = S.L + FS_MAX_ROWS * (FS_MAX_ROWS + 1) / 2;
     S.mu = S.e + FS_MAX_ROWS;
+    S.v = S.mu + FS_MAX_ROWS;
+    S.post.obs = 0;
+    S.post.alpha = S.post.L = 0;
+    S.post.n = 0;
     return S;
 }
 
@@ -223,18 +258,66 @@ inline double fs_prior_mean(__global const MeanNode* mean, int mc, double3 x, do
     return kind == FS_OBS_DERIV ? dot(convert_double3(g), u) : (double)v;
 }
 
-/* Prior means, covariance rows and factor of rows [from, n). */
+inline __global double* fs_post_v(FsScratch S, int i) { return S.v + (size_t)i * S.post.n; }
+
+/* v = L^-1 k(X, target) (forward substitution), and the mean correction k(target, X) alpha. */
+inline double fs_post_solve(GpKernel p, FsPost P, double3 x, double3 u, int kind,
+                            __global double* v)
+{
+    double corr = 0.0;
+    for (int j = 0; j < P.n; ++j) {
+        __global const FsObs* o = P.obs + j;
+        double k = gp_cov(p, fs_pos(o), fs_dir(o), o->kind, x, u, kind);
+        v[j] = k;
+        corr += k * P.alpha[j];
+    }
+    for (int i = 0; i < P.n; ++i) {
+        __global const double* Li = P.L + fs_tri(i);
+        double s = v[i];
+        for (int j = 0; j < i; ++j) s -= Li[j] * v[j];
+        v[i] = s / Li[i];
+    }
+    return corr;
+}
+
+inline double fs_post_dot(__global const double* a, __global const double* b, int n)
+{
+    double s = 0.0;
+    for (int j = 0; j < n; ++j) s += a[j] * b[j];
+    return s;
+}
+
+/* Mean and variance (posterior if any) of one value or derivative at x; row slot `slot`'s
+ * v is the work space (its row is refactored before it is used again). */
+inline double fs_mean_var(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
+                          double3 x, double3 u, int kind, int slot, double* var)
+{
+    double m = fs_prior_mean(mean, mc, x, u, kind);
+    double k = gp_cov(p, x, u, kind, x, u, kind);
+    if (S.post.n) {
+        __global double* v = fs_post_v(S, slot);
+        m += fs_post_solve(p, S.post, x, u, kind, v);
+        k -= fs_post_dot(v, v, S.post.n);
+    }
+    *var = fmax(k, 0.0);
+    return m;
+}
+
+/* Means, covariance rows and factor of rows [from, n) (posterior if S.post.n). */
 inline int fs_factor(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
                      int from, int n)
 {
+    int np = S.post.n;
     for (int i = from; i < n; ++i) {
         __global const FsObs* ri = S.rows + i;
         double3 xi = fs_pos(ri), ui = fs_dir(ri);
         S.mu[i] = fs_prior_mean(mean, mc, xi, ui, ri->kind);
+        if (np) S.mu[i] += fs_post_solve(p, S.post, xi, ui, ri->kind, fs_post_v(S, i));
         __global double* Li = S.L + fs_tri(i);
         for (int j = 0; j <= i; ++j) {
             __global const FsObs* rj = S.rows + j;
             Li[j] = gp_cov(p, fs_pos(rj), fs_dir(rj), rj->kind, xi, ui, ri->kind);
+            if (np) Li[j] -= fs_post_dot(fs_post_v(S, j), fs_post_v(S, i), np);
         }
     }
     return fs_cholesky(S.L, from, n, 0);
@@ -291,9 +374,19 @@ inline int fs_begin(GpKernel p, __global const MeanNode* mean, int mc, FsParams 
                     || prm.memory == GPIS_MEMORY_RENEWAL_PLUS)) {
         double3 x = convert_double3(v.pos.xyz);
         double s = dot(g, d);
-        if (prm.memory == GPIS_MEMORY_RENEWAL)   /* value and slope: independent at a point */
-            s = fs_truncnorm_pos(fs_prior_mean(mean, mc, x, d, FS_OBS_DERIV),
-                                 sqrt(gp_cov(p, x, d, 1, x, d, 1)), rng, 0, FS_U_START);
+        if (prm.memory == GPIS_MEMORY_RENEWAL) {   /* value and slope: independent at a point */
+            double vs, ms = fs_mean_var(p, mean, mc, S, x, d, FS_OBS_DERIV, 1, &vs);
+            if (S.post.n) {   /* ... of a stationary prior; observations correlate them */
+                double vf, mf = fs_mean_var(p, mean, mc, S, x, d, FS_OBS_VALUE, 0, &vf);
+                double c = gp_cov(p, x, d, 0, x, d, 1)
+                         - fs_post_dot(fs_post_v(S, 0), fs_post_v(S, 1), S.post.n);
+                if (vf > 0.0) {
+                    ms += c / vf * (v.pos.w - mf);
+                    vs = fmax(vs - c * c / vf, 0.0);
+                }
+            }
+            s = fs_truncnorm_pos(ms, sqrt(vs), rng, 0, FS_U_START);
+        }
         S.rows[0] = fs_obs(x, d, FS_OBS_VALUE, v.pos.w);
         S.rows[1] = fs_obs(x, d, FS_OBS_DERIV, s);
         *f0 = v.pos.w;
@@ -301,8 +394,8 @@ inline int fs_begin(GpKernel p, __global const MeanNode* mean, int mc, FsParams 
         return 2;
     }
     double3 x = ray.o + ray.t0 * ray.d;
-    *f0 = fs_truncnorm_pos(fs_prior_mean(mean, mc, x, d, FS_OBS_VALUE),
-                           sqrt(gp_cov_vv(p, x, x)), rng, 0, FS_U_START);
+    double var, m0 = fs_mean_var(p, mean, mc, S, x, d, FS_OBS_VALUE, 0, &var);
+    *f0 = fs_truncnorm_pos(m0, sqrt(var), rng, 0, FS_U_START);
     S.rows[0] = fs_obs(x, d, FS_OBS_VALUE, *f0);
     return 1;
 }
@@ -315,6 +408,7 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
                                __global const FsObs* ring, FsRng rng, FsScratch S)
 {
     FsResult res = {0, 0, ray.t1, (double3)(0.0), 0, 0, 0, 0};
+    if (S.post.n > FS_POST_MAX) { res.status = FS_STATUS_ROWS; return res; }   /* no v cache */
     double f_prev;
     int outside, n_old, factored = 0;
     int m = fs_begin(p, mean, mc, prm, ray, v, ring, rng, S, &f_prev, &outside, &n_old);
@@ -393,7 +487,7 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
                 res.new_end = row + 3;
                 return res;
             }
-            if (fs_isotropic_radial(p)) {
+            if (fs_isotropic_radial(p) && !S.post.n) {   /* observations break isotropy */
                 q1 = fs_prior_mean(mean, mc, x, T, FS_OBS_DERIV)
                    + sqrt(gp_cov(p, x, T, 1, x, T, 1)) * z1;
                 q2 = fs_prior_mean(mean, mc, x, B, FS_OBS_DERIV)
@@ -434,7 +528,10 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
             factored = 0;
         } else {
             if (prm.memory != GPIS_MEMORY_RENEWAL) {   /* none: a fresh start condition */
-                f_prev = fs_truncnorm_pos(S.mu[e], sqrt(gp_cov_vv(p, xe, xe)), rng, seg + 1,
+                double var = gp_cov_vv(p, xe, xe);
+                if (S.post.n) var = fmax(var - fs_post_dot(fs_post_v(S, e), fs_post_v(S, e),
+                                                           S.post.n), 0.0);
+                f_prev = fs_truncnorm_pos(S.mu[e], sqrt(var), rng, seg + 1,
                                           FS_U_START);
                 outside = 1;
             }

@@ -8,8 +8,7 @@
  *     deeper stack first (flag GP_MEAN_FLAG_SWAPPED restores the operand order). The host
  *     rejects deeper trees; a malformed program here yields NaN, never a stack overrun.
  * A grid leaf is followed by its samples, stored inline as payload records (flags = their
- * count; see device_layout.py): the evaluator jumps over them, and ws_mean_lipschitz skips
- * them because their kind is not a leaf kind.
+ * count; see device_layout.py): the evaluator and gp_mean_lipschitz jump over them.
  * Stack entries are float4: xyz = gradient, w = value, so blending and negation treat
  * value and gradient alike. Means are evaluated in float: they enter covariance-free
  * formulas (occupancy, conditioning right-hand sides) where float is ample.
@@ -196,4 +195,29 @@ inline float gp_mean_value(GP_MEAN_SPACE const MeanNode* nodes, int count, float
 {
     float3 g;
     return gp_mean_eval(nodes, count, x, &g);
+}
+
+/* Lipschitz constant of a packed mean program in world units: max over leaves of
+ * |scale| ||M||_2 Lip(primitive) (smooth/sharp unions, intersections and differences never
+ * exceed their children's). Distance primitives are 1-Lipschitz, a plane |scale|, a
+ * constant 0; pack_mean's transform scale 1/||M^-1|| keeps scale ||M|| ~ 1 for rigid and
+ * uniformly scaled transforms. ||M||_2^2 <= max row sum of |M M^T| (Gershgorin), exact for
+ * scaled rotations. Used by the weight-space search and the occupancy bounds (per ray:
+ * grid payloads are jumped over, so the cost is the number of leaves and ops). */
+inline float gp_mean_lipschitz(GP_MEAN_SPACE const MeanNode* nodes, int count)
+{
+    float lip = 0.0f;
+    for (int i = 0; i < count; ++i) {
+        GP_MEAN_SPACE const MeanNode* n = nodes + i;
+        if (n->kind >= GP_MEAN_FIRST_OP) continue;
+        if (n->kind == GP_MEAN_GRID) i += n->flags;   /* payload: not leaves, same result */
+        float prim = n->kind == GP_MEAN_CONSTANT ? 0.0f
+                   : n->kind == GP_MEAN_PLANE ? fabs(n->p0.y) : 1.0f;
+        float3 r0 = n->row0.xyz, r1 = n->row1.xyz, r2 = n->row2.xyz;
+        float g01 = fabs(dot(r0, r1)), g02 = fabs(dot(r0, r2)), g12 = fabs(dot(r1, r2));
+        float s2 = fmax(dot(r0, r0) + g01 + g02,
+                        fmax(dot(r1, r1) + g01 + g12, dot(r2, r2) + g02 + g12));
+        lip = fmax(lip, fabs(n->scale) * sqrt(s2) * prim);
+    }
+    return lip;
 }

@@ -6,7 +6,8 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
                       __global int* counters, __global const Primitive* prims,
                       __global const Material* materials, __global const Light* lights,
                       __global const float4* env_texels, __global const float* env_marginal,
-                      __global const float* env_conditional, __global const GpisObject* gpis)
+                      __global const float* env_conditional, __global const GpisObject* gpis,
+                      __global const MeanNode* mean_nodes)
 {
     int i = get_global_id(0);
     if (i >= counters[COUNT_HITS]) return;
@@ -19,15 +20,20 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
     float eps;
     __global const Primitive* prim = 0;
     __global const Material* mat;
+    float3 albedo;
     if (hp >= 0) {
         prim = &prims[hp];
         mat = &materials[prim->material];
         ng = primitive_normal(prim, x);
         eps = ray_epsilon(x);
+        albedo = mat->albedo.xyz;
     } else {
         /* GPIS event: the stage sampled the normal. Rays leave from the root itself: the
          * one-sided hit rule (only f >= 0 -> f < 0 counts) needs no offset. */
-        mat = &materials[gpis[GPIS_HIT_BASE - hp].material];
+        __global const GpisObject* g = &gpis[GPIS_HIT_BASE - hp];
+        mat = &materials[g->material];
+        /* the object's colour field scales the micro-BSDF albedo where the path hit */
+        albedo = mat->albedo.xyz * gpis_field_eval(mean_nodes, g->color_field, x, 1.0f);
         ng = in_hit_n[r].xyz;
         eps = 0.0f;
         if (!(dot(ng, wo) < 0.0f)) {  /* a crossing's gradient must face the ray */
@@ -47,7 +53,7 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
 
     int depth = path_depth[p];
     float3 beta = path_beta[p].xyz;
-    if (depth >= params->max_depth || max3(mat->albedo.xyz) <= 0.0f) return;
+    if (depth >= params->max_depth || max3(albedo) <= 0.0f) return;
     int pixel = path_pixel[p], sample = path_sample[p], bounce = params->bounce;
     float3 n = (dot(ng, wo) < 0.0f) ? ng : -ng;  /* shading normal on the side of wo */
     float3 xo = x + eps * n;                      /* origin for rays leaving that side */
@@ -65,7 +71,7 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
             float dist, pdf_light;
             float3 Le = sample_light(&lights[li], m, xo, ul.yz, &wl, &dist, &pdf_light);
             float pdf_f;
-            float3 f = diffuse_eval(mat->albedo.xyz, n, wl, &pdf_f);
+            float3 f = diffuse_eval(albedo, n, wl, &pdf_f);
             float w = (pdf_light > 0.0f) ? power_heuristic(pdf_light, pdf_f) : 1.0f;
             float inv_pdf = (pdf_light > 0.0f) ? 1.0f / pdf_light : 1.0f;
             float3 c = beta * f * Le * (w * inv_pdf * params->num_lights);
@@ -80,11 +86,11 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
         /* --- BSDF sampling: cosine-weighted, so f cos / pdf = albedo --- */
         float4 ub = rng4(params->seed, pixel, sample, bounce, DIM_BSDF);
         wi = cosine_hemisphere(ub.xy, n, &pdf_bsdf);
-        beta *= mat->albedo.xyz;
+        beta *= albedo;
     } else {
         wi = wo - 2.0f * dot(wo, n) * n;
         pdf_bsdf = 0.0f;
-        beta *= mat->albedo.xyz;
+        beta *= albedo;
     }
 
     /* --- Russian roulette --- */

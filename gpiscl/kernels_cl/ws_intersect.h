@@ -36,27 +36,10 @@
 #define WS_MAX_ITER 16384
 #endif
 
-/* Lipschitz constant of a packed mean program in world units: max over leaves of
- * |scale| ||M||_2 Lip(primitive) (smooth/sharp unions, intersections and differences never
- * exceed their children's). Distance primitives are 1-Lipschitz, a plane |scale|, a
- * constant 0; pack_mean's transform scale 1/||M^-1|| keeps scale ||M|| ~ 1 for rigid and
- * uniformly scaled transforms. ||M||_2^2 <= max row sum of |M M^T| (Gershgorin), exact for
- * scaled rotations. */
+/* Shared with the occupancy bounds (gpis_proxy.h): see gp_mean_lipschitz. */
 inline float ws_mean_lipschitz(__global const MeanNode* nodes, int count)
 {
-    float lip = 0.0f;
-    for (int i = 0; i < count; ++i) {
-        __global const MeanNode* n = nodes + i;
-        if (n->kind >= GP_MEAN_FIRST_OP) continue;
-        float prim = n->kind == GP_MEAN_CONSTANT ? 0.0f
-                   : n->kind == GP_MEAN_PLANE ? fabs(n->p0.y) : 1.0f;
-        float3 r0 = n->row0.xyz, r1 = n->row1.xyz, r2 = n->row2.xyz;
-        float g01 = fabs(dot(r0, r1)), g02 = fabs(dot(r0, r2)), g12 = fabs(dot(r1, r2));
-        float s2 = fmax(dot(r0, r0) + g01 + g02,
-                        fmax(dot(r1, r1) + g01 + g12, dot(r2, r2) + g02 + g12));
-        lip = fmax(lip, fabs(n->scale) * sqrt(s2) * prim);
-    }
-    return lip;
+    return gp_mean_lipschitz(nodes, count);
 }
 
 /* Piecewise-linear bounds of f over [a, b]: lo through (a, lo_a), (lo_k, lo_m), (b, lo_b)

@@ -2,8 +2,9 @@
  * the shadow stage so both see exactly the same realization and root rule. */
 
 /* First crossing of object k's realization (path key `key`) along [t0, t1] clipped to its
- * proxy, or T_INFINITY (also when k is not a weight-space object). A search that cannot
- * decide is counted in COUNT_GPIS_FAILED and reported by the host as undecided. */
+ * proxy and its occupancy bounds, or T_INFINITY (also when k is not a weight-space
+ * object). A search that cannot decide is counted in COUNT_GPIS_FAILED and reported by
+ * the host as undecided. */
 inline float ws_object_first_root(__global const GpisObject* gpis, int k,
                                   __global const GpKernel* kernels,
                                   __global const MeanNode* means,
@@ -12,7 +13,8 @@ inline float ws_object_first_root(__global const GpisObject* gpis, int k,
                                   __global int* counters)
 {
     __global const GpisObject* g = &gpis[k];
-    if (g->sampler != GPIS_SAMPLER_WEIGHT_SPACE || !gpis_proxy_clip(g, o, d, &t0, &t1))
+    if (g->sampler != GPIS_SAMPLER_WEIGHT_SPACE || !gpis_proxy_clip(g, o, d, &t0, &t1)
+        || !gpis_occupancy_clip(g, means, o, d, &t0, &t1, 1))
         return T_INFINITY;
     int status = 0;
     float t = ws_first_root(kernels[k], means + g->mean_first, g->mean_count,

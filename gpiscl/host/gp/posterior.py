@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .kernels import Kernel, covariance_matrix
+from .kernels import Kernel, NonStationary, covariance_matrix
 from .means import Constant, Mean
 from .spectral import RandomFeatures
 
@@ -161,6 +161,8 @@ class Posterior:
         out = np.empty((len(x), n))
         # values only (the common case of surface points): k(r) needs no derivative jet
         values_only = bool(np.all(self.obs.is_value)) and (u is None or np.all(np.isnan(u)))
+        # a sigma(x) or l(x) field is no function of x - x' (kernels.NonStationary)
+        values_only = values_only and not isinstance(self.kernel, NonStationary)
         for s in range(0, len(x), rows):
             if values_only:
                 out[s:s + rows] = self.kernel.value(self.obs.x[None] - x[s:s + rows, None])
@@ -195,7 +197,9 @@ class Posterior:
     def variance(self, x) -> np.ndarray:
         x = np.atleast_2d(np.asarray(x, float))
         V = solve_triangular(self.L, self.cross(x).T)
-        return np.maximum(self.kernel.variance - np.sum(V * V, 0), 0.0)
+        prior = (self.kernel.variance_at(x) if isinstance(self.kernel, NonStationary)
+                 else self.kernel.variance)
+        return np.maximum(prior - np.sum(V * V, 0), 0.0)
 
     def occupancy(self, x) -> np.ndarray:
         """Posterior occupancy P(f(x) <= 0) = Phi(-mean / sd)."""

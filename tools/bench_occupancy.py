@@ -1,0 +1,76 @@
+"""Render time with and without occupancy bounds (gpis_proxy.h), same run, median of N.
+
+    python tools/bench_occupancy.py [--repeats 3] [--resolution 96] [--spp 8]
+                                    [--eps 1e-4] [scenes...]
+
+Each scene is rendered with every GPIS object's "bounds": {"occupancy": eps} and with
+null (the whole proxy); the two variants alternate so that load from other users of the
+machine hits both alike. Only the integrator's render is timed (the scene is compiled and
+the programs built before). Prints seconds per render, rays traced and the ratio
+off / on (> 1: the bounds pay).
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from gpiscl.host.device import Device  # noqa: E402
+from gpiscl.host.integrator import WavefrontIntegrator  # noqa: E402
+from gpiscl.host.scene import load_scene  # noqa: E402
+from gpiscl.host.scene_compile import compile_scene  # noqa: E402
+
+SCENES = ("scenes/knob_no_csg.json", "scenes/knob.json", "scenes/ws_sphere_se.json")
+
+
+def variant(path: str, eps, resolution: int):
+    data = copy.deepcopy(load_scene(str(ROOT / path)).data)
+    data["camera"]["resolution"] = [resolution, resolution]
+    for shape in data["shapes"]:
+        if shape["type"] == "gpis":
+            shape["bounds"] = {"occupancy": eps}
+    return load_scene(data).data
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("scenes", nargs="*", default=SCENES)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--resolution", type=int, default=96)
+    ap.add_argument("--spp", type=int, default=8)
+    ap.add_argument("--eps", type=float, default=1e-4)
+    ap.add_argument("--device", default=None)
+    args = ap.parse_args()
+    dev = Device(args.device)
+    print(f"device: {dev.name}; {args.resolution}^2 px, {args.spp} spp, eps {args.eps:g}, "
+          f"median of {args.repeats}")
+    print(f"{'scene':28s} {'off s':>8s} {'on s':>8s} {'off/on':>7s} {'rays off':>10s} "
+          f"{'rays on':>10s}")
+    for path in args.scenes:
+        compiled, times, rays = {}, {"off": [], "on": []}, {}
+        for name, eps in (("off", None), ("on", args.eps)):
+            data = variant(path, eps, args.resolution)
+            compiled[name] = (compile_scene(data), dict(data["render"], spp=args.spp))
+            WavefrontIntegrator(dev, *compiled[name], None).render(1)   # warm-up: builds
+        for _ in range(args.repeats):
+            for name in ("off", "on"):
+                # a fresh integrator per render: its statistics accumulate over renders
+                integ = WavefrontIntegrator(dev, *compiled[name], None)
+                t = time.perf_counter()
+                res = integ.render(args.spp)
+                times[name].append(time.perf_counter() - t)
+                rays[name] = res.stats.rays
+        off, on = (statistics.median(times[n]) for n in ("off", "on"))
+        print(f"{Path(path).stem:28s} {off:8.2f} {on:8.2f} {off / on:7.2f} "
+              f"{rays['off']:10d} {rays['on']:10d}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
