@@ -95,7 +95,8 @@ class WavefrontIntegrator:
         if gpis.uses("function_space"):
             self.batch = min(self.batch, gpis_function_space.max_batch(gpis.objects))
             self.function_space = gpis_function_space.FunctionSpaceStages(
-                device, gpis.objects, self.batch, self.program.timings)
+                device, gpis.objects, self.batch, self.program.timings,
+                mean_nodes=gpis.mean_nodes)   # sizes a posterior's program up front
         # work queues, sized for one batch
         cap = self.batch
         self.paths = DeviceQueue(ctx, layouts.PATH_STATE, cap)
