@@ -9,7 +9,7 @@ import pyopencl as cl
 import pytest
 
 from gpiscl import load_scene, render_result
-from gpiscl.host import layouts
+from gpiscl.host.device import PYOPENCL_CL_DIR, join_sources
 from gpiscl.host.gpis_fields import FIELD_KINDS, evaluate, pack_field, save_rgb_grid
 from gpiscl.host.scene_schema import SceneError
 from reference import hit_sphere, pixel_rays
@@ -62,8 +62,9 @@ def test02_device_evaluator_matches_numpy(device, tmp_path):
               {"type": "gradient", "start": [0.5, -1, 0], "end": [-0.5, 1, 0.5],
                "a": [0, 0.5, 1], "b": [1, 0.5, 0]},
               {"type": "grid", "file": str(grid)}]
-    src = "\n".join([layouts.c_header(), (KERNEL_DIR / "gpis_fields.h").read_text(), WRAPPER])
-    kernel = cl.Kernel(cl.Program(device.ctx, src).build(), "field_eval")
+    # the renderer's header order: gpis_fields.h builds on gp_mean.h's grid cells
+    src = join_sources((), ("gpis_fields.h",)) + WRAPPER
+    kernel = cl.Kernel(cl.Program(device.ctx, src).build([f"-I{PYOPENCL_CL_DIR}"]), "field_eval")
     x = rng.uniform(-1.5, 2.0, (4096, 3)).astype(np.float32)
     for field in fields:
         # a dummy record first: index 0 means "no field"

@@ -35,6 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from .gp.device_layout import GRID_PAYLOAD_FLOATS, MEAN_KINDS, MEAN_NODE
+from .sdf_bake import check_grid_values, read_grid_arrays
 from .scene_schema import (Field, File, Number, Record, Spec, Tagged, Vector, _is_number,
                            _is_sequence)
 
@@ -54,43 +55,16 @@ GRID_FIELD_KEYS = ("values", "origin", "voxel_size")
 def load_rgb_grid(path, upper: float | None = None):
     """(values (nx, ny, nz, 3) float64, origin (3,), voxel_size) of an RGB grid file;
     ValueError naming the array when it is unusable. upper: the largest allowed value."""
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            arrays = {k: np.asarray(z[k]) for k in z.files}
-    except Exception as exc:  # zipfile, pickle and format errors alike
-        raise ValueError(f"cannot read as an .npz archive ({type(exc).__name__})") from None
-    missing = [k for k in GRID_FIELD_KEYS if k not in arrays]
-    if missing:
-        raise ValueError(f"grid lacks array(s) {', '.join(repr(k) for k in missing)} "
-                         f"(has: {', '.join(sorted(arrays)) or 'none'})")
-    extra = sorted(set(arrays) - set(GRID_FIELD_KEYS))
-    if extra:
-        raise ValueError(f"grid has unknown array(s) {', '.join(repr(k) for k in extra)} "
-                         f"(expected {', '.join(GRID_FIELD_KEYS)})")
-    values, origin, h = arrays["values"], arrays["origin"], arrays["voxel_size"]
-    if values.ndim != 4 or values.shape[3] != 3 or min(values.shape[:3]) < 2:
-        raise ValueError(f"grid array 'values' must be (nx, ny, nz, 3): RGB per sample, "
-                         f"every n >= 2 (got shape {values.shape})")
-    if not np.issubdtype(values.dtype, np.number) or np.iscomplexobj(values):
-        raise ValueError(f"grid array 'values' must be real numbers (got {values.dtype})")
-    values = values.astype(np.float64)
-    bad = np.count_nonzero(~np.isfinite(values))
-    if bad:
-        raise ValueError(f"grid array 'values' has {bad} NaN or infinite sample(s)")
+    arrays = read_grid_arrays(path, GRID_FIELD_KEYS)
+    v = arrays["values"]
+    values = check_grid_values(v, v.ndim == 4 and v.shape[3] == 3 and min(v.shape[:3]) >= 2,
+                               "(nx, ny, nz, 3): RGB per sample, every n >= 2")
     if values.min() < 0.0:
         raise ValueError(f"grid array 'values' must be >= 0 (min {values.min():.4g})")
     if upper is not None and values.max() > upper:
         raise ValueError(f"grid array 'values' must be <= {upper:g}: a colour multiplies "
                          f"the albedo, which must stay <= 1 (max {values.max():.4g})")
-    if origin.shape != (3,) or not np.issubdtype(origin.dtype, np.number) \
-            or not np.all(np.isfinite(origin)):
-        raise ValueError(f"grid array 'origin' must be 3 finite numbers (got shape "
-                         f"{origin.shape})")
-    if h.size != 1 or not np.issubdtype(h.dtype, np.number) or not np.isfinite(h.item()) \
-            or not h.item() > 0:
-        raise ValueError(f"grid array 'voxel_size' must be one positive number (got "
-                         f"{h.ravel()[:3].tolist()})")
-    return values, origin.astype(np.float64), float(h.item())
+    return values, arrays["origin"].astype(np.float64), float(arrays["voxel_size"].item())
 
 
 def save_rgb_grid(path, values, origin, voxel_size):

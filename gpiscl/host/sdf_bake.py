@@ -50,30 +50,23 @@ def grid_problem(path) -> str | None:
     return None
 
 
-def load_grid(path) -> GridMean:
-    """A GridMean from an .npz file; ValueError naming the array key when it is unusable."""
+def read_grid_arrays(path, keys=GRID_KEYS) -> dict:
+    """The arrays of an .npz grid: exactly `keys`, with a valid origin and voxel size
+    (ValueError naming the array otherwise). Values are left to the caller to check."""
     try:
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: np.asarray(z[k]) for k in z.files}
     except Exception as exc:  # zipfile, pickle and format errors alike
         raise ValueError(f"cannot read as an .npz archive ({type(exc).__name__})") from None
-    missing = [k for k in GRID_KEYS if k not in arrays]
+    missing = [k for k in keys if k not in arrays]
     if missing:
         raise ValueError(f"grid lacks array(s) {', '.join(repr(k) for k in missing)} "
                          f"(has: {', '.join(sorted(arrays)) or 'none'})")
-    extra = sorted(set(arrays) - set(GRID_KEYS))
+    extra = sorted(set(arrays) - set(keys))
     if extra:
         raise ValueError(f"grid has unknown array(s) {', '.join(repr(k) for k in extra)} "
-                         f"(expected {', '.join(GRID_KEYS)})")
-    values, origin, h = arrays["values"], arrays["origin"], arrays["voxel_size"]
-    if values.ndim != 3 or min(values.shape) < 2:
-        raise ValueError(f"grid array 'values' must be 3-D (nx, ny, nz) with every "
-                         f"dimension >= 2 (got shape {values.shape})")
-    if not np.issubdtype(values.dtype, np.number) or np.iscomplexobj(values):
-        raise ValueError(f"grid array 'values' must be real numbers (got {values.dtype})")
-    bad = np.count_nonzero(~np.isfinite(values))
-    if bad:
-        raise ValueError(f"grid array 'values' has {bad} NaN or infinite sample(s)")
+                         f"(expected {', '.join(keys)})")
+    origin, h = arrays["origin"], arrays["voxel_size"]
     if origin.shape != (3,) or not np.issubdtype(origin.dtype, np.number) \
             or not np.all(np.isfinite(origin)):
         raise ValueError(f"grid array 'origin' must be 3 finite numbers (got shape "
@@ -82,8 +75,30 @@ def load_grid(path) -> GridMean:
             or not h.item() > 0:
         raise ValueError(f"grid array 'voxel_size' must be one positive number (got "
                          f"{h.ravel()[:3].tolist()})")
-    return GridMean(values.astype(np.float64), tuple(float(o) for o in origin),
-                    float(h.item()))
+    return arrays
+
+
+def check_grid_values(values, shape_ok: bool, expected: str) -> np.ndarray:
+    """values as float64 if real, finite and of the expected shape; ValueError otherwise."""
+    if not shape_ok:
+        raise ValueError(f"grid array 'values' must be {expected} (got shape {values.shape})")
+    if not np.issubdtype(values.dtype, np.number) or np.iscomplexobj(values):
+        raise ValueError(f"grid array 'values' must be real numbers (got {values.dtype})")
+    values = values.astype(np.float64)
+    bad = np.count_nonzero(~np.isfinite(values))
+    if bad:
+        raise ValueError(f"grid array 'values' has {bad} NaN or infinite sample(s)")
+    return values
+
+
+def load_grid(path) -> GridMean:
+    """A GridMean from an .npz file; ValueError naming the array key when it is unusable."""
+    arrays = read_grid_arrays(path)
+    v = arrays["values"]
+    values = check_grid_values(v, v.ndim == 3 and min(v.shape) >= 2,
+                               "3-D (nx, ny, nz) with every dimension >= 2")
+    return GridMean(values, tuple(float(o) for o in arrays["origin"]),
+                    float(arrays["voxel_size"].item()))
 
 
 def save_grid(path, grid: GridMean):

@@ -60,16 +60,32 @@ inline float gp_grid_sample(GP_MEAN_SPACE const MeanNode* payload, int j)
  * distance (p0.x = 1 / S converts voxels to the normalised samples' units):
  * sqrt(g^2 + d^2) where g >= 0, g + d where g < 0 (means.GridMean says why); either
  * keeps |gradient| <= 1 in these units (device_layout.py). */
+/* The trilinear cell of index coordinates u in a grid of `dims` samples per axis (x index
+ * first): u clamped to the sample box, its cell (floor, the last cell at the far faces),
+ * the weights t inside it, the first sample's index and the x and y strides. Shared by
+ * grid means and grid colour fields so both index samples the same way. */
+typedef struct { float3 c, t; int base, sx, sy; } GpGridCell;
+
+inline GpGridCell gp_grid_cell(float3 dims, float3 u)
+{
+    float3 hi = dims - 1.0f;
+    GpGridCell r;
+    r.c = fmin(fmax(u, (float3)(0.0f)), hi);
+    float3 cell = fmin(floor(r.c), hi - 1.0f);
+    r.t = r.c - cell;
+    int ny = (int)dims.y, nz = (int)dims.z;
+    r.sx = ny * nz;
+    r.sy = nz;
+    r.base = ((int)cell.x * ny + (int)cell.y) * nz + (int)cell.z;
+    return r;
+}
+
 inline float gp_mean_grid(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* g)
 {
     GP_MEAN_SPACE const MeanNode* payload = n + 1;
-    float3 hi = n->p1.xyz - 1.0f;
-    float3 c = fmin(fmax(u, (float3)(0.0f)), hi);
-    float3 cell = fmin(floor(c), hi - 1.0f);
-    float3 t = c - cell;
-    int ny = (int)n->p1.y, nz = (int)n->p1.z;
-    int sx = ny * nz;
-    int b = ((int)cell.x * ny + (int)cell.y) * nz + (int)cell.z;
+    GpGridCell q = gp_grid_cell(n->p1.xyz, u);
+    float3 c = q.c, t = q.t;
+    int b = q.base, sx = q.sx, nz = q.sy;
     float c000 = gp_grid_sample(payload, b), c001 = gp_grid_sample(payload, b + 1);
     float c010 = gp_grid_sample(payload, b + nz), c011 = gp_grid_sample(payload, b + nz + 1);
     float c100 = gp_grid_sample(payload, b + sx), c101 = gp_grid_sample(payload, b + sx + 1);

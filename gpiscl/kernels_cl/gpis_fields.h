@@ -30,13 +30,9 @@ inline float3 gpis_field_sample(__global const MeanNode* payload, int j)
 inline float3 gpis_field_grid(__global const MeanNode* n, float3 u)
 {
     __global const MeanNode* payload = n + 1;
-    float3 hi = n->p1.xyz - 1.0f;
-    float3 c = fmin(fmax(u, (float3)(0.0f)), hi);
-    float3 cell = fmin(floor(c), hi - 1.0f);
-    float3 t = c - cell;
-    int ny = (int)n->p1.y, nz = (int)n->p1.z;
-    int sx = ny * nz;
-    int b = ((int)cell.x * ny + (int)cell.y) * nz + (int)cell.z;
+    GpGridCell q = gp_grid_cell(n->p1.xyz, u);
+    float3 t = q.t;
+    int b = q.base, sx = q.sx, nz = q.sy;
     float3 c000 = gpis_field_sample(payload, b), c001 = gpis_field_sample(payload, b + 1);
     float3 c010 = gpis_field_sample(payload, b + nz);
     float3 c011 = gpis_field_sample(payload, b + nz + 1);
