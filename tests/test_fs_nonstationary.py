@@ -16,27 +16,10 @@ from gpiscl.host.gp.kernels import (LinearField, LocallyPeriodic, NonStationary,
 from gpiscl.host.gpis_compile import build_kernel
 from gpiscl.host.scene import SceneError, load_scene
 from stats import assert_agree, z_threshold
+from test_gp_device import COV_WRAPPER
 from test_fs_sampling import CAP_MAX, SAMPLES_MAX, WRAPPERS, flights
 
-EXTRA = r"""
-__kernel void covariances(__global const GpKernel* kp, __global const double* a,
-                          __global const double* u, __global const double* b,
-                          __global const double* v, __global double* out)
-{
-    int i = get_global_id(0);
-    GpKernel p = kp[0];
-    double3 A = vload3(i, a), U = vload3(i, u), B = vload3(i, b), V = vload3(i, v);
-    __global double* o = out + 8 * i;
-    o[0] = gp_cov_vv(p, A, B);
-    o[1] = gp_cov_dv(p, A, U, B);
-    o[2] = gp_cov_vd(p, A, B, V);
-    o[3] = gp_cov_dd(p, A, U, B, V);
-    o[4] = gp_cov(p, A, U, 0, B, V, 0);
-    o[5] = gp_cov(p, A, U, 1, B, V, 0);
-    o[6] = gp_cov(p, A, U, 0, B, V, 1);
-    o[7] = gp_cov(p, A, U, 1, B, V, 1);
-}
-
+EXTRA = COV_WRAPPER + r"""
 /* One joint draw per item of n fixed observations (values and derivatives) through the
  * free-flight sampler's factor and row sampler. */
 __kernel void joint(__global const GpKernel* kp, __global const MeanNode* mean, int mc,

@@ -13,7 +13,7 @@ from gpiscl.host.gp import device_layout
 
 KERNEL_DIR = Path(__file__).resolve().parent.parent / "gpiscl" / "kernels_cl"
 
-WRAPPERS = r"""
+COV_WRAPPER = r"""
 __kernel void covariances(__global const GpKernel* kp, __global const GP_REAL* a,
                           __global const GP_REAL* u, __global const GP_REAL* b,
                           __global const GP_REAL* v, __global GP_REAL* out)
@@ -31,7 +31,9 @@ __kernel void covariances(__global const GpKernel* kp, __global const GP_REAL* a
     o[6] = gp_cov(p, A, U, 0, B, V, 1);
     o[7] = gp_cov(p, A, U, 1, B, V, 1);
 }
+"""
 
+MEAN_WRAPPER = r"""
 __kernel void mean_eval(__global const MeanNode* nodes, int count, __global const float* x,
                         __global float4* out)
 {
@@ -41,6 +43,7 @@ __kernel void mean_eval(__global const MeanNode* nodes, int count, __global cons
     out[i] = (float4)(g, value);
 }
 """
+WRAPPERS = COV_WRAPPER + MEAN_WRAPPER
 
 # Parameters are exact in float32 so the double build can be compared tightly.
 ANISO = (1.0, 0.5, 2.0)
