@@ -17,16 +17,9 @@ from gpiscl.host.gp.means import (Box, Difference, GridMean, Sphere, Transform, 
 from gpiscl.host import sdf_bake
 from gpiscl.host.scene_schema import SceneError
 from stats import assert_agree
+from test_gp_device import MEAN_WRAPPER
 
-KERNELS = r"""
-__kernel void mean_eval(__global const MeanNode* nodes, int count, __global const float* x,
-                        __global float4* out)
-{
-    int i = get_global_id(0);
-    float3 g;
-    float value = gp_mean_eval(nodes, count, vload3(i, x), &g);
-    out[i] = (float4)(g, value);
-}
+KERNELS = MEAN_WRAPPER + r"""
 
 __kernel void lipschitz(__global const MeanNode* nodes, int count, __global float* out)
 {
@@ -39,7 +32,8 @@ ROT = np.array([[0.36, 0.48, -0.8], [-0.8, 0.6, 0.0], [0.48, 0.64, 0.6]])
 
 @pytest.fixture(scope="module")
 def prg(device):
-    src = join_sources((), ("ws_features.h", "ws_intersect.h")) + KERNELS
+    src = join_sources(
+        (), ("ws_features.h", "ws_posterior.h", "ws_intersect.h")) + KERNELS
     p = cl.Program(device.ctx, src).build(options=[f"-I{PYOPENCL_CL_DIR}"])
     return {k.function_name: k for k in p.all_kernels()}
 

@@ -294,8 +294,8 @@ def test05_observations_key_is_validated(tmp_path):
     (tmp_path / "text.xyz").write_text("1 2 three\n")
     x = fibonacci_sphere(PC.MAX_ROWS // 4 + 1)
     np.save(tmp_path / "big.npy", np.concatenate([x, x], 1))
+    # (the weight_space sampler's own checks: test_ws_posterior.test06)
     cases = [
-        ({"file": good}, {"type": "weight_space"}, "function_space sampler only"),
         ({"file": str(tmp_path / "bad.npy")}, None, "rows of 3"),
         ({"file": str(tmp_path / "nan.npy")}, None, "non-finite"),
         ({"file": str(tmp_path / "text.xyz")}, None, "cannot read points"),

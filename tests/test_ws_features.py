@@ -71,7 +71,8 @@ __kernel void ws_lambda2_k(__global const GpKernel* kp, __global const float* d,
 
 def build(device, extra="", options=()):
     """The ws headers, WRAPPERS and extra kernels as one program: name -> kernel."""
-    src = join_sources((), ("ws_features.h", "ws_intersect.h")) + WRAPPERS + extra
+    src = join_sources(
+        (), ("ws_features.h", "ws_posterior.h", "ws_intersect.h")) + WRAPPERS + extra
     prg = cl.Program(device.ctx, src).build(options=[f"-I{PYOPENCL_CL_DIR}", *options])
     return {k.function_name: k for k in prg.all_kernels()}
 

@@ -312,7 +312,8 @@ def numpy_first_roots(feats, amp, h0, o, d, t01, tol):
 def build_device(device, lanes):
     load = (f"#define WS_LOAD(i0, p) vload{lanes}(i0 / {lanes}, p)\n" if lanes > 1
             else "#define WS_LOAD(i0, p) (p)[i0]\n")
-    src = join_sources((), ("ws_features.h", "ws_intersect.h")) + load + BENCH_KERNELS
+    src = join_sources(
+        (), ("ws_features.h", "ws_posterior.h", "ws_intersect.h")) + load + BENCH_KERNELS
     prg = cl.Program(device.ctx, src).build(options=[f"-I{PYOPENCL_CL_DIR}", f"-DWS_LANES={lanes}"])
     return {k.function_name: k for k in prg.all_kernels()}
 

@@ -213,7 +213,8 @@ BOUNDS = Record({"occupancy": Field(Nullable(Number(gt=0, lt=0.5)), 1e-4)})
 # Posterior GPIS (posterior_compile.py): f conditioned on points observed on the surface,
 # f = 0 with standard deviation `noise` (world units), and with "normals": true also
 # grad f = n (three derivative rows per point, deviation `normal_noise`). Function space
-# only; the file holds rows "x y z [nx ny nz]" (.xyz/.txt) or an (n, 3|6) .npy.
+# conditions exactly; weight space pathwise (SE and RQ kernels, posterior_compile.py); the
+# file holds rows "x y z [nx ny nz]" (.xyz/.txt) or an (n, 3|6) .npy.
 OBSERVATIONS = Record({
     "file": Field(File(_posterior.EXTENSIONS, _posterior.points_problem)),
     "noise": Field(Number(ge=0), 1e-3),

@@ -20,8 +20,8 @@ from .scene_compile import CompiledScene
 STAGE_FILES = ("generate_camera_rays.cl", "intersect.cl", "gpis_weight_space.cl", "queue_hits.cl",
                "escaped_rays.cl", "emission.cl", "scatter.cl", "gpis_shadow_weight_space.cl",
                "shadow_rays.cl", "accumulate.cl")
-GPIS_HEADERS = ("gpis_proxy.h", "ws_features.h", "ws_intersect.h", "ws_objects.h",
-                "gpis_fields.h")
+GPIS_HEADERS = ("gpis_proxy.h", "ws_features.h", "ws_posterior.h", "ws_intersect.h",
+                "ws_objects.h", "gpis_fields.h")
 DEFAULT_BATCH = 1 << 18
 
 

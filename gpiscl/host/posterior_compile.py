@@ -11,7 +11,7 @@ so this is the points' scatter across the surface); with "normals": true the fil
 normals are observed as the gradient (three derivative rows per point, standard
 deviation `normal_noise`), which also tells inside from outside.
 
-Function space only: the observations join every segment's conditioning set exactly
+Function space: the observations join every segment's conditioning set exactly
 (fs_sampling.h, FsPost). Cost on the device: for each conditioned row, n kernel
 evaluations and an n x n triangular solve (n = observation rows: points, times 4 with
 normals), so a segment of R rows costs ~R n^2 / 2 multiply-adds; tools/bench_posterior.py
@@ -20,6 +20,10 @@ measures it. Measured on PoCL, 2 shared cores (SE, N = 16): 17 us per prior segm
 (prior), 0.5 s (n = 100), 1.8 s (200), 6.6 s (400), ~45 s (1000). So a few hundred rows
 are practical, a thousand only for small images. MAX_ROWS bounds n: the factor (n^2 / 2
 doubles) and the per-row v cache (FS_MAX_ROWS n doubles per work item) grow with it.
+
+Weight space: each ray conditions its path's realization by Matheron's rule
+(ws_posterior.h), reading the same block plus the noise deviations appended after the
+factor; SE and RQ kernels only, at most WS_MAX_ROWS rows.
 """
 from __future__ import annotations
 
@@ -29,8 +33,12 @@ from .gp.device_layout import MEAN_NODE
 from .gp.function_space_layout import FS_OBS, OBS_KINDS
 from .gp.posterior import Posterior, surface_observations
 
-POSTERIOR_KIND = 48          # FS_POSTERIOR_KIND in fs_posterior.h
+POSTERIOR_KIND = 48          # FS_POSTERIOR_KIND in fs_posterior.h, WS_POSTERIOR_KIND
 MAX_ROWS = 4096
+# WS_POST_MAX in ws_posterior.h: a ray's solve vector lives in private memory (8 bytes a row)
+WS_MAX_ROWS = 512
+# kernels whose cross-covariance slopes ws_posterior.h bounds along a ray
+WS_KERNELS = ("squared_exponential", "rational_quadratic")
 EXTENSIONS = (".xyz", ".txt", ".npy")
 
 
@@ -78,9 +86,12 @@ def observations_problem(g: dict):
     o = g.get("observations")
     if o is None:
         return None
-    if g["sampler"]["type"] != "function_space":
-        return "observations", ("conditioning on observations is implemented for the "
-                                "function_space sampler only; use it")
+    weight_space = g["sampler"]["type"] == "weight_space"
+    if weight_space and g["kernel"]["type"] not in WS_KERNELS:
+        return "kernel.type", (f"weight-space posteriors (pathwise conditioning) support the "
+                               f"{' and '.join(WS_KERNELS)} kernels only, whose "
+                               f"cross-covariance slopes the root search bounds; use one, or "
+                               f"the function_space sampler")
     pts = load_points(o["file"])
     if o["normals"]:
         if pts.shape[1] != 6:
@@ -94,6 +105,12 @@ def observations_problem(g: dict):
         return "observations.file", (f"{rows} observation rows ({what}) exceed {MAX_ROWS}: "
                                      f"every conditioned sample costs O(rows^2) on the "
                                      f"device; subsample the points")
+    if weight_space and rows > WS_MAX_ROWS:
+        what = "points x 4 (normals)" if o["normals"] else "points"
+        return "observations.file", (f"{rows} observation rows ({what}) exceed "
+                                     f"{WS_MAX_ROWS} for the weight_space sampler (every ray "
+                                     f"solves with them in private memory); subsample the "
+                                     f"points or use the function_space sampler")
     return None
 
 
@@ -119,8 +136,11 @@ def pack_posterior(post: Posterior) -> np.ndarray:
     rows["value"] = obs.y
     rows["kind"] = np.where(obs.is_value, OBS_KINDS["value"], OBS_KINDS["deriv"])
     tri = post.L[np.tril_indices(n)]          # row-major packed, as fs_tri
+    # the noise deviations trail the factor: weight space draws each path's noise with them
+    # (ws_posterior.h); fs_posterior.h never reads past the factor
     raw = (rows.tobytes() + np.ascontiguousarray(post.alpha, "<f8").tobytes()
-           + np.ascontiguousarray(tri, "<f8").tobytes())
+           + np.ascontiguousarray(tri, "<f8").tobytes()
+           + np.ascontiguousarray(np.sqrt(obs.noise), "<f8").tobytes())
     size = MEAN_NODE.dtype.itemsize
     raw += bytes(-len(raw) % size)
     block = np.frombuffer(raw, MEAN_NODE.dtype).copy()

@@ -1,7 +1,9 @@
 /* First root of a weight-space realization along a ray, with guaranteed range bounds.
- * Needs ws_features.h (and gp_mean.h). The one-sided convention of the reference: a hit is
- * a crossing from f >= 0 to f < 0; a ray that starts inside (f(t0) < 0) must first come
- * back to f >= 0.
+ * Needs ws_features.h, ws_posterior.h (and gp_mean.h). A posterior object's realization
+ * carries its pathwise correction (ws_posterior.h), which the bounds below fold into the
+ * mean's cone or the features' affine form. The one-sided convention of the reference: a
+ * hit is a crossing from f >= 0 to f < 0; a ray that starts inside (f(t0) < 0) must first
+ * come back to f >= 0.
  *
  * Bounds over a ray interval [a, b]: the features' affine form (ws_affine) plus the mean's
  * Lipschitz cone through both end values,
@@ -27,6 +29,7 @@
 #define WS_STATUS_OK 0
 #define WS_STATUS_ITER_CAP 1   /* WS_MAX_ITER loop passes without a decision */
 #define WS_STATUS_NAN 2        /* NaN realization (thin-plate kernel, bad mean program) */
+#define WS_STATUS_ROWS 3       /* more posterior rows than WS_POST_MAX */
 /* Each pass costs one bound or point evaluation (M cached features and two mean
  * evaluations). A segment costs about (length / marching step) + ~10 per crossing passes,
  * the step being ~l/2 where |f| ~ sigma; a ray grazing the surface walks the stretch where
@@ -50,10 +53,30 @@ typedef struct {
     float round;   /* the rounding part: point evaluations are within it of the true f */
 } WsTents;
 
-inline WsTents ws_tents_cached(const float* cache, GpKernel k, __global const MeanNode* mean,
-                               int mean_count, __global const float* order_cdf,
-                               int order_count, int M, uint2 key, int object, float3 o,
-                               float3 d, float a, float b, float lip)
+/* The realization at x, conditioned by P when given (ws_posterior.h), with its gradient. */
+inline float ws_eval_post(const float* cache, const WsPost* P, GpKernel k,
+                          __global const MeanNode* mean, int mean_count,
+                          __global const float* order_cdf, int order_count, int M, uint2 key,
+                          int object, float3 x, float3* grad)
+{
+    float f = ws_eval_cached(cache, k, mean, mean_count, order_cdf, order_count, M, key,
+                             object, x, grad);
+    if (P) {
+        double3 g;
+        f = (float)((double)f + ws_post_eval(k, P, convert_double3(x), &g));
+        *grad += convert_float3(g);
+    }
+    return f;
+}
+
+/* Bounds of the realization, conditioned by P when given: the correction joins the mean's
+ * cone (end values and slope bound add to the mean's) or the features' affine form, so the
+ * tents keep one kink. */
+inline WsTents ws_tents_post(const float* cache, const WsPost* P, GpKernel k,
+                             __global const MeanNode* mean, int mean_count,
+                             __global const float* order_cdf, int order_count, int M,
+                             uint2 key, int object, float3 o, float3 d, float a, float b,
+                             float lip)
 {
     float tm = 0.5f * (a + b), h = 0.5f * (b - a);
     WsAffine af = ws_affine(cache, k, order_cdf, order_count, M, key, object, o, d, tm, h);
@@ -65,6 +88,29 @@ inline WsTents ws_tents_cached(const float* cache, GpKernel k, __global const Me
     float3 xabs = fabs(o) + fmax(fabs(a), fabs(b)) * fabs(d);
     float round = af.round
                 + 8.0f * FLT_EPSILON * (fabs(ma) + fabs(mb) + lip * (xabs.x + xabs.y + xabs.z));
+    if (P) {
+        /* the correction as a second-order form (error curv h^2 / 2, like the features')
+         * or as a cone (2 slope h): the narrower; the form wins near roots, where
+         * intervals are short, the cone on long intervals near observations */
+        WsPostBound C = ws_post_bound(k, P, o, d, a, b);
+        float slope = (float)C.slope, curv = (float)C.curv;
+        if (0.25f * curv * h < slope) {
+            af.f0 += (float)C.cm;
+            af.f1 += (float)C.dm;
+            af.err += (0.5f * curv * h * h) * (1.0f + 4.0f * FLT_EPSILON);
+            round += 8.0f * FLT_EPSILON * (fabs((float)C.cm) + fabs((float)C.dm) * h);
+        } else {
+            ma = (float)((double)ma + C.ca);
+            mb = (float)((double)mb + C.cb);
+            /* rounded up: a cone a hair too shallow could cut the correction */
+            lt = (lt + slope) * (1.0f + 4.0f * FLT_EPSILON);
+            round += 8.0f * FLT_EPSILON * (fabs((float)C.ca) + fabs((float)C.cb));
+        }
+        /* the rounded point moved by the correction's slope, and the double sums' own
+         * rounding (n terms of magnitude mag) */
+        round += 8.0f * FLT_EPSILON * (float)C.slope_any * (xabs.x + xabs.y + xabs.z)
+               + (float)(4.0 * (P->n + 2) * 2.3e-16 * C.mag);
+    }
     float r = af.err + round;
     float inv2l = 0.5f / fmax(lt, FLT_MIN);
     WsTents T;
@@ -81,6 +127,15 @@ inline WsTents ws_tents_cached(const float* cache, GpKernel k, __global const Me
     T.hi_m = af.f0 + af.f1 * (T.hi_k - tm) + r
            + fmin(ma + lt * (T.hi_k - a), mb + lt * (b - T.hi_k));
     return T;
+}
+
+inline WsTents ws_tents_cached(const float* cache, GpKernel k, __global const MeanNode* mean,
+                               int mean_count, __global const float* order_cdf,
+                               int order_count, int M, uint2 key, int object, float3 o,
+                               float3 d, float a, float b, float lip)
+{
+    return ws_tents_post(cache, 0, k, mean, mean_count, order_cdf, order_count, M, key, object,
+                         o, d, a, b, lip);
 }
 
 inline WsTents ws_tents(GpKernel k, __global const MeanNode* mean, int mean_count,
@@ -108,11 +163,11 @@ inline float ws_first_negative(float a, float pa, float k, float pk, float b, fl
  * kill such rays: "no hit" is then not proven). d need not be unit length; t is in units
  * of d. tol is raised to the float resolution of t where needed. *evaluations counts the
  * M-feature passes (bounds and point evaluations), the search's cost. */
-inline float ws_first_root_counted(GpKernel k, __global const MeanNode* mean,
-                                   int mean_count, __global const float* order_cdf,
-                                   int order_count, int M, uint2 key, int object, float3 o,
-                                   float3 d, float t0, float t1, float tol, float3* normal,
-                                   int* status, int* evaluations)
+inline float ws_first_root_post(WsPostBlock B, GpKernel k, __global const MeanNode* mean,
+                                int mean_count, __global const float* order_cdf,
+                                int order_count, int M, uint2 key, int object, float3 o,
+                                float3 d, float t0, float t1, float tol, float3* normal,
+                                int* status, int* evaluations)
 {
     *status = WS_STATUS_OK;
     *evaluations = 0;
@@ -135,10 +190,29 @@ inline float ws_first_root_counted(GpKernel k, __global const MeanNode* mean,
 #else
     const float* cache = 0;
 #endif
+    /* a posterior conditions this ray's realization once, here; with the constant empty
+     * block of the prior's callers all posterior code compiles away */
+    double post_v[WS_POST_MAX];
+    WsPost post;
+    const WsPost* P = 0;
+    int evals = 0;
+    if (B.n > 0) {
+        if (B.n > WS_POST_MAX) {
+            *status = WS_STATUS_ROWS;
+            return T_INFINITY;
+        }
+        ws_post_prepare(cache, k, mean, mean_count, order_cdf, order_count, M, key, object, B,
+                        post_v);
+        post.rows = B.rows;
+        post.v = post_v;
+        post.n = B.n;
+        P = &post;
+        evals = B.n;
+    }
     float3 g;
-    float f = ws_eval_cached(cache, k, mean, mean_count, order_cdf, order_count, M, key, object,
-                             o + t0 * d, &g);
-    int evals = 1;
+    float f = ws_eval_post(cache, P, k, mean, mean_count, order_cdf, order_count, M, key, object,
+                           o + t0 * d, &g);
+    ++evals;
     if (isnan(f)) {
         *status = WS_STATUS_NAN;
         *evaluations = evals;
@@ -181,8 +255,8 @@ inline float ws_first_root_counted(GpKernel k, __global const MeanNode* mean,
              * deciding intervals narrower than tol by their end point, without the bound
              * (which would only straddle zero again), until f clears the floor */
             float b = fmin(fmin(a + hmin, t1), c);
-            f = ws_eval_cached(cache, k, mean, mean_count, order_cdf, order_count, M, key,
-                               object, o + b * d, &g);
+            f = ws_eval_post(cache, P, k, mean, mean_count, order_cdf, order_count, M, key,
+                             object, o + b * d, &g);
             ++evals;
             if (sgn > 0.0f ? f < 0.0f : f > noise) {
                 c = b;
@@ -197,8 +271,8 @@ inline float ws_first_root_counted(GpKernel k, __global const MeanNode* mean,
         /* intervals never narrower than hmin: below tol the end-point sign decides
          * (below), and a bound cannot certify anything within its rounding floor */
         float b = fmin(fmin(a + fmax(step, hmin), t1), c);
-        WsTents T = ws_tents_cached(cache, k, mean, mean_count, order_cdf, order_count, M, key,
-                                    object, o, d, a, b, lip);
+        WsTents T = ws_tents_post(cache, P, k, mean, mean_count, order_cdf, order_count, M, key,
+                                  object, o, d, a, b, lip);
         ++evals;
         noise = T.round;
         /* bounds of phi = sgn f: certified "same sign" where phi_lo >= 0, opposite
@@ -244,8 +318,8 @@ inline float ws_first_root_counted(GpKernel k, __global const MeanNode* mean,
              * noise, so accepting the interval misses nothing resolvable. Leaving the
              * inside needs f clear of rounding noise, else noise just after an
              * up-crossing could fake a hit there. */
-            f = ws_eval_cached(cache, k, mean, mean_count, order_cdf, order_count, M, key,
-                               object, o + b * d, &g);
+            f = ws_eval_post(cache, P, k, mean, mean_count, order_cdf, order_count, M, key,
+                             object, o + b * d, &g);
             ++evals;
             if (sgn > 0.0f ? f < 0.0f : f > T.round) {
                 c = b;
@@ -272,8 +346,8 @@ inline float ws_first_root_counted(GpKernel k, __global const MeanNode* mean,
     }
     if (hit < T_INFINITY) {
         if (!g_at_c) {
-            ws_eval_cached(cache, k, mean, mean_count, order_cdf, order_count, M, key, object,
-                           o + hit * d, &g);
+            ws_eval_post(cache, P, k, mean, mean_count, order_cdf, order_count, M, key, object,
+                         o + hit * d, &g);
             ++evals;
         }
         float gl = length(g);
@@ -281,6 +355,18 @@ inline float ws_first_root_counted(GpKernel k, __global const MeanNode* mean,
     }
     *evaluations = evals;
     return hit;
+}
+
+/* The prior's search (no posterior). */
+inline float ws_first_root_counted(GpKernel k, __global const MeanNode* mean,
+                                   int mean_count, __global const float* order_cdf,
+                                   int order_count, int M, uint2 key, int object, float3 o,
+                                   float3 d, float t0, float t1, float tol, float3* normal,
+                                   int* status, int* evaluations)
+{
+    WsPostBlock none = {0, 0, 0, 0};
+    return ws_first_root_post(none, k, mean, mean_count, order_cdf, order_count, M, key,
+                              object, o, d, t0, t1, tol, normal, status, evaluations);
 }
 
 /* ws_first_root_counted without the evaluation count (the count is for profiling). */

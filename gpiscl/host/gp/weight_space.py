@@ -6,7 +6,8 @@ The device regenerates feature i of a realization from Philox4x32-10 with counte
     periodic orders from;
   * philox4x32 and regenerate_features: the same streams in numpy (SE and periodic
     kinds; RQ's rejection sampler is compared through features dumped from the device);
-  * evaluate / dense_scan_first_root: the reference realization and root finder of tests.
+  * evaluate / dense_scan_first_root: the reference realization and root finder of tests;
+  * noise_normals / pathwise_sample: a posterior realization (ws_posterior.h) in numpy.
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from .spectral import RandomFeatures, periodic_order_weights
 
 WS_PHILOX_KEY1 = 0x3C6EF372
 CALL_MAIN, CALL_ORDERS = 0, 1
+CALL_NOISE = 26             # WS_CALL_NOISE: after the RQ gamma calls 2 .. 25
 _PHILOX_M = (0xD2511F53, 0xCD9E8D57)
 _PHILOX_W = (0x9E3779B9, 0xBB67AE85)
 _MASK = np.uint64(0xFFFFFFFF)
@@ -152,3 +154,34 @@ def spectral_moment2(kernel: Kernel, d) -> float:
     """E[(theta . d)^2] = Var(d/dt f(o + t d)) / k(0): Rice's lambda_2 / lambda_0."""
     d = np.asarray(d, float)
     return float(kernel.cov_dd(np.zeros(3), d, np.zeros(3), d) / kernel.variance)
+
+
+# --- posterior realizations (pathwise conditioning) --------------------------------------
+
+def noise_normals(key, obj: int, n: int) -> np.ndarray:
+    """The standard normals z_j (n,) that scale observation row j's noise draw e_j = sd_j z_j
+    in realization `key` of object `obj` (ws_post_prepare), in float64."""
+    i = np.arange(n, dtype=np.uint64)
+    ctr = np.stack(np.broadcast_arrays(np.uint64(key[0]), np.uint64(key[1]),
+                                       np.uint64(obj), i), -1)
+    r = philox4x32(ctr, CALL_NOISE)
+    return _normal2(r[:, 0], r[:, 1])[0]
+
+
+class _Draws:
+    """An rng whose standard normals are given (PathwiseSample draws its noise from one)."""
+
+    def __init__(self, z):
+        self.z = np.asarray(z, float)
+
+    def standard_normal(self, n):
+        assert n == len(self.z)
+        return self.z
+
+
+def pathwise_sample(post, theta, tau, w, key, obj: int = 0):
+    """The posterior realization the device builds for `key` from these features (e.g.
+    dumped from the device): Matheron's rule with the device's noise draws, in float64."""
+    feats = RandomFeatures(np.asarray(theta, float), np.asarray(tau, float),
+                           float(np.sqrt(post.kernel.variance)))
+    return post.pathwise(feats, w, _Draws(noise_normals(key, obj, len(post.obs))))
