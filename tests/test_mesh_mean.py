@@ -425,7 +425,7 @@ def test12_bounds_and_first_roots_hold_with_a_grid_mean(device, ws_prg, tmp_path
     from gpiscl.host.gp import SquaredExponential
     from gpiscl.host.gp import weight_space as ws
     from test_ws_features import buf, dump, gp_args, keys_for, run
-    from test_ws_intersect import host_values, random_rays
+    from test_ws_intersect import assert_tents_contain, host_values, random_rays
     kernel = SquaredExponential(sigma=0.1, length_scale=0.25)
     mean = _sphere_grid(tmp_path)
     rng = np.random.default_rng(12)
@@ -443,12 +443,7 @@ def test12_bounds_and_first_roots_hold_with_a_grid_mean(device, ws_prg, tmp_path
     theta, tau, w = dump(device, ws_prg, kernel, keys, m)
     t = vals[..., 0].astype(float)
     exact = host_values(theta, tau, w, kernel, mean, o, d, t)
-    for r in range(n):
-        (lk, la, lm, lb, hk, ha, hm, hb, _), (a_, b_) = tents[r].astype(float), ab[r]
-        lo = np.interp(t[r], [a_, lk, b_], [la, lm, lb])
-        hi = np.interp(t[r], [a_, hk, b_], [ha, hm, hb])
-        for v in (vals[r, :, 1], exact[r]):
-            assert np.all((lo <= v) & (v <= hi)), (r, np.min(v - lo), np.min(hi - v))
+    assert_tents_contain(tents, ab, t, vals[..., 1], exact)
     # first roots against a dense scan (spacing l / 200) over rays crossing the sphere
     n, t0, t1 = 128, 0.0, 4.0
     tol = 1e-4 * kernel.length_scale

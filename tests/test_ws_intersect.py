@@ -110,6 +110,17 @@ MEANS = [Transform(Sphere(radius=1.0), RIGID), Constant(0.3),
                Transform(Torus(major=0.75, minor=0.25), np.diag([1.5, 1.0, 0.75, 1.0])))]
 
 
+def assert_tents_contain(tents, ab, t, *values):
+    """Each ray's piecewise-linear bounds (ws_tents_k's 9 numbers on [a, b]) contain every
+    one of the given value arrays (rays x points at parameters t)."""
+    for r in range(len(tents)):
+        (lk, la, lm, lb, hk, ha, hm, hb, _), (a_, b_) = tents[r].astype(float), ab[r]
+        lo = np.interp(t[r], [a_, lk, b_], [la, lm, lb])
+        hi = np.interp(t[r], [a_, hk, b_], [ha, hm, hb])
+        for v in values:
+            assert np.all((lo <= v[r]) & (v[r] <= hi)), (r, np.min(v[r] - lo), np.min(hi - v[r]))
+
+
 @pytest.fixture(scope="module")
 def prg(device):
     return build(device, EXTRA)
@@ -150,12 +161,7 @@ def test_bounds_contain_every_point_evaluation(device, prg, case):
     theta, tau, w = dump(device, prg, kernel, keys, m)
     t = vals[..., 0].astype(float)
     exact = host_values(theta, tau, w, kernel, mean, o, d, t)
-    for r in range(n):
-        (lk, la, lm, lb, hk, ha, hm, hb, _), (a_, b_) = tents[r].astype(float), ab[r]
-        lo = np.interp(t[r], [a_, lk, b_], [la, lm, lb])
-        hi = np.interp(t[r], [a_, hk, b_], [ha, hm, hb])
-        for v in (vals[r, :, 1], exact[r]):
-            assert np.all((lo <= v) & (v <= hi)), (r, np.min(v - lo), np.min(hi - v))
+    assert_tents_contain(tents, ab, t, vals[..., 1], exact)
 
 
 ROOT_CASES = [(KERNELS[0], MEANS[0], 512), (KERNELS[1], MEANS[1], 256),

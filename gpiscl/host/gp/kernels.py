@@ -233,6 +233,27 @@ KERNELS = {cls.kind: cls for cls in
            (SquaredExponential, RationalQuadratic, Periodic, LocallyPeriodic, ThinPlate)}
 
 
+def _observation_rows(x1, x2, u1, u2):
+    """Points and derivative directions of two observation sets: (x1, u1, d1, x2, u2, d2),
+    d marking derivative rows (u given and not NaN), u zero on value rows; x2 = None means
+    the first set again."""
+    x1 = _vec(x1)
+    x2 = x1 if x2 is None else _vec(x2)
+    if x2 is x1 and u2 is None:
+        u2 = u1
+
+    def split(x, u):
+        if u is None:
+            return np.zeros_like(x), np.zeros(len(x), bool)
+        u = _vec(u)
+        d = ~np.any(np.isnan(u), axis=-1)
+        return np.where(d[:, None], u, 0.0), d
+
+    u1, d1 = split(x1, u1)
+    u2, d2 = split(x2, u2)
+    return x1, u1, d1, x2, u2, d2
+
+
 def covariance_matrix(kernel: Kernel, x1, x2=None, u1=None, u2=None):
     """Joint covariance of observations at points x (n, 3).
 
@@ -241,18 +262,7 @@ def covariance_matrix(kernel: Kernel, x1, x2=None, u1=None, u2=None):
     """
     if isinstance(kernel, NonStationary):
         return kernel.covariance_matrix(x1, x2, u1, u2)
-    x1 = _vec(x1)
-    x2 = x1 if x2 is None else _vec(x2)
-    if x2 is x1 and u2 is None:
-        u2 = u1
-    def split(x, u):
-        if u is None:
-            return np.zeros_like(x), np.zeros(len(x), bool)
-        u = _vec(u)
-        d = ~np.any(np.isnan(u), axis=-1)
-        return np.where(d[:, None], u, 0.0), d
-    u1, d1 = split(x1, u1)
-    u2, d2 = split(x2, u2)
+    x1, u1, d1, x2, u2, d2 = _observation_rows(x1, x2, u1, u2)
     j = kernel.jet(x2[None, :, :] - x1[:, None, :])
     ug1 = np.einsum("ik,ijk->ij", u1, j.g)
     ug2 = np.einsum("jk,ijk->ij", u2, j.g)
@@ -458,18 +468,7 @@ class NonStationary(Kernel):
         return self._terms(a, u, b, v)[3]
 
     def covariance_matrix(self, x1, x2=None, u1=None, u2=None):
-        x1 = _vec(x1)
-        x2 = x1 if x2 is None else _vec(x2)
-        if x2 is x1 and u2 is None:
-            u2 = u1
-        def split(x, u):
-            if u is None:
-                return np.zeros_like(x), np.zeros(len(x), bool)
-            u = _vec(u)
-            d = ~np.any(np.isnan(u), axis=-1)
-            return np.where(d[:, None], u, 0.0), d
-        u1, d1 = split(x1, u1)
-        u2, d2 = split(x2, u2)
+        x1, u1, d1, x2, u2, d2 = _observation_rows(x1, x2, u1, u2)
         vv, dv, vd, dd = self._terms(x1[:, None, :], u1[:, None, :], x2[None, :, :],
                                      u2[None, :, :])
         D1, D2 = d1[:, None], d2[None, :]
