@@ -179,3 +179,19 @@ def test10_posterior_maps_honour_the_observed_surface(tmp_path):
     bad.write_text("1 2\n3 4\n")
     with pytest.raises(SceneError, match="expected finite rows"):
         load_observations(bad)
+
+
+def test_spatially_varying_kernels_are_refused_with_the_key(tmp_path, capsys):
+    import json
+    from pathlib import Path
+    from gpiscl.__main__ import main
+    scene = json.loads((Path(__file__).resolve().parent.parent / "scenes" /
+                        "fs_sphere_se.json").read_text())
+    scene["shapes"][1]["kernel"]["sigma_field"] = {
+        "type": "radial", "center": [0, 0, 0], "radius": 1.0, "width": 0.1,
+        "inner": 0.5, "outer": 1.5}
+    path = tmp_path / "s.json"
+    path.write_text(json.dumps(scene))
+    assert main(["sample", str(path), "-o", str(tmp_path / "f")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "kernel.sigma_field" in err

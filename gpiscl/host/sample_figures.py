@@ -318,6 +318,11 @@ def write_figures(target: Target, out_dir, features=(10, 100, 1000), realization
     if not spectral_ok(target.kernel):
         raise SceneError("<command line>", "kernel", "thin_plate has no spectral density, "
                          "so weight-space figures cannot be drawn")
+    varying = [k for k in ("sigma_field", "length_scale_field") if target.kernel_spec.get(k)]
+    if varying:
+        raise SceneError("<command line>", f"kernel.{varying[0]}", "a spatially varying "
+                         "kernel has no spectral density, so weight-space figures cannot be "
+                         "drawn; remove the field to see the stationary kernel")
     _pyplot()   # fail before any work if matplotlib is missing
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
