@@ -166,3 +166,18 @@ def test_unsupported_mesh_means_name_the_key(tmp_path, mean, key, reason):
         convert_tungsten(doc, source, SKY)
     assert info.value.key == "media[0].gaussian_process.left.mean." + key
     assert reason in info.value.reason, info.value.reason
+
+
+def test_mesh_proxy_maps_to_a_convex_mesh_proxy(tmp_path):
+    """The authors' wedge: the medium's proxy is a mesh with a forward BSDF."""
+    doc, source = _mesh_doc(tmp_path, {"type": "spherical"})
+    doc["primitives"][1] = {"type": "mesh", "file": "meshes/wedge.obj", "bsdf": "processBox",
+                            "int_medium": "gp",
+                            "transform": {"position": [0, 1, -0.49], "scale": 0.5}}
+    scene, _ = convert_tungsten(doc, source, SKY)
+    data = load_scene(scene).data   # the strict loader accepts it: closed and convex
+    proxies = [s["proxy"] for s in data["shapes"] if s["type"] == "gpis"]
+    assert len(proxies) == 2 and all(p["type"] == "mesh" for p in proxies)
+    assert proxies[0]["file"] == str(tmp_path / "meshes" / "wedge.obj")
+    assert proxies[0]["transform"]["translate"] == pytest.approx([0, 1, -0.49])
+    assert proxies[0]["transform"]["scale"] == pytest.approx([0.5] * 3)

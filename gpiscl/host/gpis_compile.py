@@ -11,6 +11,7 @@ from . import layouts
 from .gp import kernels as K
 from .gp import means as M
 from .gp.knob import knob_grid
+from .mesh_proxy import analyse, bounding_proxy, pack_planes
 from .gp.weight_space import pack_order_tables
 from .gp.device_layout import GP_KERNEL, MEAN_NODE, pack_kernel, pack_mean
 from .gpis_schema import FIELD_KEYS, field_minimum
@@ -155,10 +156,11 @@ def compile_gpis(shapes: list, material_of) -> CompiledGpis:
         o = objects[i]
         proxy = g["proxy"]
         o["proxy_kind"] = layouts.GPIS_PROXIES[proxy["type"]]
-        if proxy["type"] == "box":
-            o["proxy_p0"][:3], o["proxy_p1"][:3] = proxy["min"], proxy["max"]
+        box = bounding_proxy(proxy)
+        if box["type"] == "box":
+            o["proxy_p0"][:3], o["proxy_p1"][:3] = box["min"], box["max"]
         else:
-            o["proxy_p0"][:] = (*proxy["center"], proxy["radius"])
+            o["proxy_p0"][:] = (*box["center"], box["radius"])
         o["sampler"] = layouts.GPIS_SAMPLERS[g["sampler"]["type"]]
         o["features"] = g["sampler"].get("features") or 0
         if g["sampler"]["type"] == "function_space":
@@ -185,6 +187,14 @@ def compile_gpis(shapes: list, material_of) -> CompiledGpis:
         o["mean_first"], o["mean_count"] = first, len(prog)
         first += len(prog)
         programs.append(prog)
+    # mesh proxies' face planes, after every mean program like the fields below
+    for i, g in enumerate(shapes):
+        if g["proxy"]["type"] == "mesh":
+            planes = analyse(g["proxy"])[0]
+            records = pack_planes(planes, MEAN_NODE.dtype)
+            objects[i]["proxy_first"], objects[i]["proxy_count"] = first, len(planes)
+            first += len(records)
+            programs.append(records)
     # colour and emission fields follow every mean program, so index 0 (never a field)
     # can stand for "no field" (gpis_fields.py)
     for i, g in enumerate(shapes):

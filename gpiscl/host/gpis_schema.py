@@ -18,6 +18,7 @@ from .scene import ALBEDO, SHAPES, TRANSFORM, VEC3, _box_extent, _mesh_problem
 from .gp import function_space_layout as FSL
 from .scene_schema import (Bool, Enum, Field, File, Int, Nullable, Number, Record, Tagged,
                            Vector)
+from .mesh_proxy import bounding_proxy, mesh_proxy_problem
 from .sdf_bake import grid_problem
 from . import posterior_compile as _posterior
 from .gpis_fields import COLOR, EMISSION
@@ -28,6 +29,9 @@ POSITIVE3 = Vector(broadcast=True, item=Number(gt=0))
 PROXIES = Tagged("proxy", {
     "box": Record({"min": Field(VEC3), "max": Field(VEC3)}, [_box_extent]),
     "sphere": Record({"center": Field(VEC3, [0, 0, 0]), "radius": Field(Number(gt=0))}),
+    # a closed convex mesh (mesh_proxy.py), e.g. the authors' wedge prism
+    "mesh": Record({"file": Field(File((".obj", ".ply", ".stl", ".off"), _mesh_problem)),
+                    "transform": Field(TRANSFORM, {})}),
 })
 
 # Means are signed distances, positive outside (gpiscl/host/gp/means.py).
@@ -117,9 +121,11 @@ KERNELS = Tagged("kernel", {
 
 def field_minimum(field: dict, proxy: dict) -> float:
     """The smallest multiplier of a resolved field over a resolved proxy (exact for
-    linear fields; min(inner, outer) for radial ones)."""
+    linear fields over boxes and spheres, a lower bound over a mesh's bounding box;
+    min(inner, outer) for radial ones)."""
     if field["type"] == "radial":
         return min(field["inner"], field["outer"])
+    proxy = bounding_proxy(proxy)
     g, o, v = field["gradient"], field["origin"], field["value"]
     if proxy["type"] == "box":
         return v + sum(min(gi * (lo - oi), gi * (hi - oi))
@@ -174,7 +180,7 @@ def _thin_plate_span(g):
     """Thin-plate covariances are positive definite only among points within `radius`
     (anisotropic distance); function space samples anywhere in the proxy, so the proxy's
     diameter must fit (a conservative bound through the largest aniso weight)."""
-    k, proxy = g["kernel"], g["proxy"]
+    k, proxy = g["kernel"], bounding_proxy(g["proxy"])
     if k["type"] != "thin_plate" or g["sampler"]["type"] != "function_space":
         return None
     if proxy["type"] == "box":
@@ -233,5 +239,5 @@ GPIS = SHAPES.register("gpis", Record({
     "emission": Field(EMISSION, None),
     "bounds": Field(BOUNDS, {}),
     "observations": Field(Nullable(OBSERVATIONS), None),
-}, checks=[_weight_space_kernel, _thin_plate_span, _fields_positive,
+}, checks=[mesh_proxy_problem, _weight_space_kernel, _thin_plate_span, _fields_positive,
            _posterior.observations_problem]))

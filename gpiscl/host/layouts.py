@@ -146,6 +146,8 @@ GPIS_OBJECT = Struct("GpisObject", (
     ("float", "occupancy_level"),  # z sigma_max: mean above it = occupancy below the
                                    # object's epsilon (gpis_proxy.h); 0: bounds off
     ("float", "occupancy_step"),   # world length: the bound's marches stop below it
+    ("int", "proxy_first"),    # mesh proxy: its face planes (float4 n, w: n.x <= w) start
+    ("int", "proxy_count"),    # at this record of the mean-node array; how many planes
 ))
 
 # Per-launch constants of the integrator.
@@ -210,7 +212,7 @@ LIGHT_KINDS = {"environment": 0, "environment_map": 1, "point": 2, "sphere": 3,
 COUNTERS = {"rays_out": 0, "hits": 1, "escaped": 2, "shadow": 3, "nan_paths": 4,
             "killed": 5, "gpis_failed": 6}
 NUM_COUNTERS = 8
-GPIS_PROXIES = {"box": 0, "sphere": 1}
+GPIS_PROXIES = {"box": 0, "sphere": 1, "mesh": 2}
 GPIS_SAMPLERS = {"weight_space": 0, "function_space": 1}
 GPIS_MEMORIES = {"none": 0, "renewal": 1, "renewal_plus": 2, "global": 3}
 GPIS_HIT_BASE = -2

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from .gp.kernels import Kernel, covariance_matrix
+from .mesh_proxy import bounding_proxy
 from .gp.means import Mean
 from .gp.spectral import RandomFeatures, sample_frequencies
 from .scene_schema import SceneError
@@ -70,7 +71,7 @@ def resolve_target(spec: str, obj: int = 0) -> Target:
         raise SceneError("<command line>", "--object",
                          f"must be in [0, {len(gpis)}) for this scene (got {obj})")
     g = gpis[obj]
-    proxy = g["proxy"]
+    proxy = bounding_proxy(g["proxy"])
     if proxy["type"] == "box":
         lo, hi = np.asarray(proxy["min"], float), np.asarray(proxy["max"], float)
         center, half = (lo + hi) / 2, float(np.max(hi - lo)) / 2

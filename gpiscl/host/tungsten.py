@@ -312,8 +312,15 @@ class _Converter:
             lights.append({"type": "directional", "direction": (rot @ [0, 1, 0]).tolist(),
                            "angular_radius": math.degrees(theta),
                            "irradiance": [L * math.pi * math.sin(theta) ** 2 for L in radiance]})
+        elif kind == "mesh" and "int_medium" in p:
+            # a (convex, closed) mesh proxy: the file and transform map as for a mesh mean
+            m = self.mesh_mean({k: v for k, v in p.items() if k in ("file", "transform")}, key)
+            self.notes.pop()   # nothing is baked for a proxy
+            shapes += self.gpis(p["int_medium"], {"type": "mesh", "file": m["file"],
+                                                  "transform": m["transform"]},
+                                f"{key}.int_medium", render)
         elif "int_medium" in p:
-            self.fail(f"{key}.type", f'a "{kind}" proxy is not supported (cube or sphere)')
+            self.fail(f"{key}.type", f'a "{kind}" proxy is not supported (cube, sphere, mesh)')
         else:
             self.fail(f"{key}.type", f'primitive "{kind}" is not supported')
 

@@ -23,7 +23,8 @@ inline FsResult fs_object_flight(__constant RenderParams* params,
     FsResult none = {0};
     __global const GpisObject* g = &gpis[k];
     float t0 = o.w;
-    if (g->sampler != GPIS_SAMPLER_FUNCTION_SPACE || !gpis_proxy_clip(g, o.xyz, d.xyz, &t0, &t1)
+    if (g->sampler != GPIS_SAMPLER_FUNCTION_SPACE
+        || !gpis_proxy_clip(g, means, o.xyz, d.xyz, &t0, &t1)
         || !gpis_occupancy_clip(g, means, o.xyz, d.xyz, &t0, &t1, !v.valid))
         return none;
     FsParams pr = {g->samples, g->memory, g->memory_cap, g->refine, (double)g->step_corr};

@@ -1,12 +1,25 @@
-/* GPIS proxies are analytic (box or sphere) and clipped here, not traced in the BVH:
- * a GPIS stage needs the interval a ray spends inside, not a surface to shade. */
+/* GPIS proxies (box, sphere, convex mesh) are clipped here, not traced in the BVH: a GPIS
+ * stage needs the interval a ray spends inside, not a surface to shade. */
 
-/* Clip [t0, t1] to the part of the ray inside the proxy; false if empty. */
-inline int gpis_proxy_clip(__global const GpisObject* g, float3 o, float3 d, float* t0,
-                           float* t1)
+/* Clip [t0, t1] to the part of the ray inside the proxy; false if empty. A mesh proxy's
+ * face planes (n, w: inside where n.x <= w) are float4s stored from mean-node record
+ * g->proxy_first on (mesh_proxy.py). */
+inline int gpis_proxy_clip(__global const GpisObject* g, __global const MeanNode* means,
+                           float3 o, float3 d, float* t0, float* t1)
 {
     float enter, leave;
-    if (g->proxy_kind == GPIS_PROXY_BOX) {
+    if (g->proxy_kind == GPIS_PROXY_MESH) {
+        __global const float4* planes = (__global const float4*)(means + g->proxy_first);
+        enter = -T_INFINITY;
+        leave = T_INFINITY;
+        for (int j = 0; j < g->proxy_count; ++j) {
+            float4 p = planes[j];
+            float dn = dot(p.xyz, d), gap = p.w - dot(p.xyz, o);
+            if (dn > 0.0f) leave = fmin(leave, gap / dn);
+            else if (dn < 0.0f) enter = fmax(enter, gap / dn);
+            else if (gap < 0.0f) return 0;     /* parallel to a face, outside it */
+        }
+    } else if (g->proxy_kind == GPIS_PROXY_BOX) {
         float3 inv = 1.0f / d;
         float3 a = (g->proxy_p0.xyz - o) * inv, b = (g->proxy_p1.xyz - o) * inv;
         float3 lo = fmin(a, b), hi = fmax(a, b);

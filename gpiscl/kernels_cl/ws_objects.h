@@ -14,7 +14,7 @@ inline float ws_object_first_root(__global const GpisObject* gpis, int k,
                                   __global int* counters)
 {
     __global const GpisObject* g = &gpis[k];
-    if (g->sampler != GPIS_SAMPLER_WEIGHT_SPACE || !gpis_proxy_clip(g, o, d, &t0, &t1)
+    if (g->sampler != GPIS_SAMPLER_WEIGHT_SPACE || !gpis_proxy_clip(g, means, o, d, &t0, &t1)
         || !gpis_occupancy_clip(g, means, o, d, &t0, &t1, 1))
         return T_INFINITY;
     int status = 0, evaluations;
