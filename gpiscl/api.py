@@ -30,7 +30,8 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
     _check_realization(data, scene.source)
     if not isinstance(device, Device):
         device = Device(device)
-    integrator = WavefrontIntegrator(device, compile_scene(data), settings, batch_size)
+    integrator = WavefrontIntegrator(device, compile_scene(data, scene.source), settings,
+                                     batch_size)
     return integrator.render(settings["spp"], time_limit=time_limit, progress=progress)
 
 

@@ -95,3 +95,26 @@ def test_realization_flag_sets_and_clears_the_fixed_realization(tmp_path):
         assert resolved["render"]["realization"] == expected
     r = gpiscl_cli("render", str(scene), "-o", str(tmp_path / "x.exr"), "--realization", "-1")
     assert r.returncode == 2 and "--realization" in r.stderr
+
+
+def test_errors_found_while_compiling_name_file_and_shape(tmp_path):
+    """A mean CSG tree too deep for the device's stack is found only when the scene is
+    compiled: still one line naming the file and the shape's key path."""
+    def balanced(depth, x=0.0):
+        if depth == 0:
+            return {"type": "sphere", "center": [x, 0, 0], "radius": 0.01}
+        return {"type": "union", "left": balanced(depth - 1, x), "right":
+                balanced(depth - 1, x + 2.0 ** (depth - 1) * 0.03)}
+    scene = {"lights": [{"type": "environment"}], "camera": {"resolution": [4, 4]},
+             "shapes": [{"type": "sphere", "radius": 0.1},
+                        {"type": "gpis", "proxy": {"type": "sphere", "radius": 20},
+                         "mean": balanced(9),
+                         "kernel": {"type": "squared_exponential", "sigma": 0.01,
+                                    "length_scale": 0.1}}]}
+    path = tmp_path / "deep.json"
+    path.write_text(json.dumps(scene))
+    r = gpiscl_cli("render", str(path), "-o", str(tmp_path / "x.exr"), "--spp", "1")
+    assert r.returncode == 2, r.stderr
+    err = [line for line in r.stderr.splitlines() if line.startswith("error:")]
+    assert len(err) == 1 and f"{path}: shapes[1].mean: " in err[0] and "stack" in err[0]
+    assert "Traceback" not in r.stderr

@@ -126,12 +126,12 @@ def occupancy_level(g: dict) -> float:
     return float(np.nextafter(np.float32(level), np.float32(np.inf)))
 
 
-def _posterior_block(g: dict, proxy: dict) -> np.ndarray:
+def _posterior_block(g: dict, proxy: dict, source: str, key: str) -> np.ndarray:
     try:
         post = build_posterior(g["observations"], build_kernel(g["kernel"], proxy),
                                build_mean(g["mean"]))
     except np.linalg.LinAlgError as exc:
-        raise SceneError("<scene>", "gpis observations", str(exc)) from None
+        raise SceneError(source, f"{key}.observations", str(exc)) from None
     return pack_posterior(post)
 
 
@@ -146,8 +146,11 @@ class CompiledGpis:
         return bool(np.any(self.objects["sampler"] == layouts.GPIS_SAMPLERS[sampler]))
 
 
-def compile_gpis(shapes: list, material_of) -> CompiledGpis:
-    """shapes: the resolved "gpis" shapes in scene order; material_of(bsdf) -> index."""
+def compile_gpis(shapes: list, material_of, source: str = "<scene>",
+                 keys: list | None = None) -> CompiledGpis:
+    """shapes: the resolved "gpis" shapes in scene order; material_of(bsdf) -> index;
+    source and keys (each shape's key path) name what a compile-time error is about."""
+    keys = keys or [f"gpis[{i}]" for i in range(len(shapes))]
     objects = layouts.GPIS_OBJECT.zeros(len(shapes))
     kernels = GP_KERNEL.zeros(len(shapes))
     programs = []
@@ -176,10 +179,10 @@ def compile_gpis(shapes: list, material_of) -> CompiledGpis:
         try:
             prog = pack_mean(build_mean(g["mean"]))
         except ValueError as exc:
-            raise SceneError("<scene>", f"gpis mean", str(exc)) from None
+            raise SceneError(source, f"{keys[i]}.mean", str(exc)) from None
         if g.get("observations") is not None:
             # the posterior block sits just before the mean program (fs_posterior.h)
-            block = _posterior_block(g, proxy)
+            block = _posterior_block(g, proxy, source, keys[i])
             first += len(block)
             programs.append(block)
             if "occupancy_level" in objects.dtype.names:

@@ -184,13 +184,16 @@ def _bounds(prims: np.ndarray):
     return lo - pad, hi + pad
 
 
-def compile_scene(data: dict) -> CompiledScene:
+def compile_scene(data: dict, source: str = "<scene>") -> CompiledScene:
+    """source: the scene's file, for errors found only while compiling (e.g. a mesh bake)."""
     b = _Builder()
     env = {}
     for s in data.get("shapes", []):
         if s["type"] != "gpis":
             _add_shape(b, s)
-    gpis = compile_gpis([s for s in data.get("shapes", []) if s["type"] == "gpis"], b.material)
+    gpis_at = [i for i, s in enumerate(data.get("shapes", [])) if s["type"] == "gpis"]
+    gpis = compile_gpis([data["shapes"][i] for i in gpis_at], b.material, source,
+                        [f"shapes[{i}]" for i in gpis_at])
     for lt in data["lights"]:
         _add_light(b, lt, env)
     prims = np.array(b.prims, dtype=layouts.PRIMITIVE.dtype)

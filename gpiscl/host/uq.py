@@ -236,7 +236,7 @@ def render_realizations(scene, realizations: int, spp: int, seed: int | None = N
     seed = data["render"]["seed"] if seed is None else int(seed)
     if not isinstance(device, Device):
         device = Device(device)
-    compiled = compile_scene(data)          # once: only the ids and seeds change
+    compiled = compile_scene(data, scene.source)   # once: only the ids and seeds change
     ids, seeds = realization_ids(seed, first, realizations)
     w, h = data["camera"]["resolution"]
     sums = UqSums.empty((h, w, 3))
