@@ -5,7 +5,7 @@ import copy
 
 import numpy as np
 
-from .host.device import Device
+from .host.device import Device, shared_device
 from .host.integrator import RenderResult, WavefrontIntegrator
 from .host.scene import Scene, SceneError, load_scene
 from .host.scene_compile import compile_scene
@@ -29,7 +29,7 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
         data["camera"]["resolution"] = [int(resolution[0]), int(resolution[1])]
     _check_realization(data, scene.source)
     if not isinstance(device, Device):
-        device = Device(device)
+        device = shared_device(device)
     integrator = WavefrontIntegrator(device, compile_scene(data, scene.source), settings,
                                      batch_size)
     return integrator.render(settings["spp"], time_limit=time_limit, progress=progress)

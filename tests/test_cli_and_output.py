@@ -118,3 +118,16 @@ def test_errors_found_while_compiling_name_file_and_shape(tmp_path):
     err = [line for line in r.stderr.splitlines() if line.startswith("error:")]
     assert len(err) == 1 and f"{path}: shapes[1].mean: " in err[0] and "stack" in err[0]
     assert "Traceback" not in r.stderr
+
+
+def test_api_renders_share_one_device_and_its_programs():
+    """Built programs are cached per context (and keep it alive): API calls without a
+    device must reuse one, or a loop of renders would grow memory without bound."""
+    from gpiscl.host import device as device_mod
+    from gpiscl.scenes import furnace_sphere
+    render_result(furnace_sphere(), spp=1, resolution=(4, 4))
+    built = len(device_mod._BUILT)
+    for _ in range(3):
+        render_result(furnace_sphere(), spp=1, resolution=(4, 4))
+    assert len(device_mod._BUILT) == built
+    assert device_mod.shared_device() is device_mod.shared_device()

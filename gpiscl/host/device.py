@@ -1,6 +1,7 @@
 """OpenCL device selection, the one program builder, and named, timed launches."""
 from __future__ import annotations
 
+import functools
 import os
 import tempfile
 import time
@@ -97,6 +98,13 @@ def join_sources(stage_files, extra_headers=(), extra_c="") -> str:
         text = (KERNEL_DIR / name).read_text()
         parts.append(f'#line 1 "{name}"\n{text}')
     return "\n".join(parts)
+
+
+@functools.lru_cache(maxsize=None)
+def shared_device(spec: str | None = None) -> "Device":
+    """One Device per spec for the Python API: the program cache below keeps every context
+    it has built for alive, so a fresh context per render call would grow without bound."""
+    return Device(spec)
 
 
 WORK_GROUP = 64

@@ -218,7 +218,7 @@ def render_realizations(scene, realizations: int, spp: int, seed: int | None = N
                         first: int = 0, resolution=None, device=None, batch_size=None,
                         progress=None) -> UqRun:
     """Render realizations first .. first+realizations-1 with spp samples each."""
-    from .device import Device
+    from .device import Device, shared_device
     from .integrator import WavefrontIntegrator
     from .scene import load_scene
     from .scene_compile import compile_scene
@@ -235,7 +235,7 @@ def render_realizations(scene, realizations: int, spp: int, seed: int | None = N
         data["camera"]["resolution"] = [int(resolution[0]), int(resolution[1])]
     seed = data["render"]["seed"] if seed is None else int(seed)
     if not isinstance(device, Device):
-        device = Device(device)
+        device = shared_device(device)
     compiled = compile_scene(data, scene.source)   # once: only the ids and seeds change
     ids, seeds = realization_ids(seed, first, realizations)
     w, h = data["camera"]["resolution"]
