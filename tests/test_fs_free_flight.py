@@ -4,26 +4,16 @@ the step shrinks, Rice's crossing rate along long rays that continue through eac
 import math
 
 import numpy as np
-import pyopencl as cl
-import pytest
 
 from gpiscl.host.gp import Constant, Plane, SquaredExponential
 from gpiscl.host.gp import function_space as FS
-from gpiscl.host.gp import function_space_layout as FL
 from stats import z_threshold
-from test_fs_sampling import CAP_MAX, SAMPLES_MAX, WRAPPERS, flights, ks_two_sample
+from test_fs_sampling import flights, ks_two_sample, prg  # noqa: F401 (fixture)
 
 SE = SquaredExponential(sigma=1.0, length_scale=0.5)
 # mean 3 - x along the ray (0,0,0) + t (1,0,0): the surface sits near t = 3
 RAMP = Plane(point=(3.0, 0.0, 0.0), normal=(-1.0, 0.0, 0.0))
 MEMORIES = ("none", "renewal", "renewal_plus", "global")
-
-
-@pytest.fixture(scope="module")
-def prg(device):
-    p = cl.Program(device.ctx, FL.program_source(WRAPPERS)).build(
-        options=FL.build_options(SAMPLES_MAX, CAP_MAX))
-    return {k.function_name: k for k in p.all_kernels()}
 
 
 def test01_one_segment_is_the_same_under_every_memory_model(device, prg):

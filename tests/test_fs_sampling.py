@@ -1,5 +1,6 @@
 """fs_sampling.h on the device: truncated normal, step rule, free flight and normals
 against analytic laws, dense joint samples and the numpy reference."""
+import functools
 import math
 from statistics import NormalDist
 
@@ -65,11 +66,17 @@ SE = SquaredExponential(sigma=1.0, length_scale=1.0)
 RQ = RationalQuadratic(sigma=1.0, length_scale=1.0, alpha=1.0)
 
 
-@pytest.fixture(scope="module")
-def prg(device):
-    p = cl.Program(device.ctx, FL.program_source(WRAPPERS)).build(
+@functools.lru_cache(maxsize=None)
+def _program(ctx):
+    p = cl.Program(ctx, FL.program_source(WRAPPERS)).build(
         options=FL.build_options(SAMPLES_MAX, CAP_MAX))
     return {k.function_name: k for k in p.all_kernels()}
+
+
+@pytest.fixture(scope="module")
+def prg(device):
+    """The sampler with WRAPPERS, built once per context for every module importing it."""
+    return _program(device.ctx)
 
 
 def _buf(device, a, rw=False):

@@ -2,12 +2,10 @@
 weight-space realization is (nearly) Gaussian, and its first root and normal must have
 the law of the function-space free flight with the same start condition f(t0) >= 0."""
 import numpy as np
-import pyopencl as cl
-import pytest
 
-from gpiscl.host.gp import function_space_layout as FL
 from test_fs_free_flight import RAMP, SE
-from test_fs_sampling import CAP_MAX, SAMPLES_MAX, WRAPPERS, flights, ks_two_sample
+from test_fs_sampling import flights, ks_two_sample
+from test_fs_sampling import prg  # noqa: F401 (fixture)
 from test_ws_features import build, buf, gp_args, keys_for, run
 
 WS_FRESH = r"""
@@ -28,14 +26,7 @@ __kernel void ws_fresh(__global const GpKernel* kp, __global const MeanNode* mea
 M_FEATURES, N = 1024, 10_000
 
 
-@pytest.fixture(scope="module")
-def prg_fs(device):
-    p = cl.Program(device.ctx, FL.program_source(WRAPPERS)).build(
-        options=FL.build_options(SAMPLES_MAX, CAP_MAX))
-    return {k.function_name: k for k in p.all_kernels()}
-
-
-def test01_first_hit_and_normal_match_weight_space(device, prg_fs):
+def test01_first_hit_and_normal_match_weight_space(device, prg):
     """Two-sample KS on the hit distance and the three normal components (Bonferroni over
     4), global memory over several segments (c = 0.99) against M = 1024 features."""
     ws = build(device, WS_FRESH)
@@ -45,7 +36,7 @@ def test01_first_hit_and_normal_match_weight_space(device, prg_fs):
     assert not np.isnan(hit).any(), "weight-space root search failed"
     keep = f0 >= 0.0
     t_ws = np.where(hit[keep, 3] < 1e29, hit[keep, 3], -1.0)
-    out = flights(device, prg_fs, SE, RAMP, N, memory="global", samples=32, cap=64, c=0.99,
+    out = flights(device, prg, SE, RAMP, N, memory="global", samples=32, cap=64, c=0.99,
                   seed=33)
     assert np.mean(out[:, 6] > 1) > 0.5, "most hits should need more than one segment"
     t_fs = out[:, 0]
