@@ -54,16 +54,16 @@ def test_white_furnace(device, kernel, bsdf):
     st = res.stats
     assert st.nan_paths == 0 and st.truncated_paths == 0
     assert st.gpis_failed == 0, st.summary()
-    # a killed path (normal facing away at a crossing) would darken its pixel by 1
-    assert st.killed_paths <= 2, st.summary()
+    # a down-crossing's gradient faces the ray, so no path may be killed (each would
+    # darken its pixel by 1 and is counted in the summary)
+    assert st.killed_paths == 0, st.summary()
     img = res.image
     # 4x4 blocks (256 samples each) keep the sample variance a trustworthy estimate
     assert_agree(img.mean, img.stderr, np.ones_like(img.mean), block=4,
                  what=f"{kernel} {bsdf} furnace")
     # the whole image at once is the sharper test of a small bias
     se = math.sqrt(np.sum(img.stderr.astype(float) ** 2)) / img.stderr.size
-    killed = st.killed_paths / (16 * 12 * 12)
-    assert abs(img.mean.mean() - 1.0) <= z_threshold(1) * se + killed
+    assert abs(img.mean.mean() - 1.0) <= z_threshold(1) * se
 
 
 def test_small_sigma_converges_to_the_mean_surface(device):
