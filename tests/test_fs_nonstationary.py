@@ -11,8 +11,8 @@ import pytest
 from gpiscl import render_result
 from gpiscl.host.gp import Constant, RationalQuadratic, SquaredExponential, device_layout
 from gpiscl.host.gp import function_space_layout as FL
-from gpiscl.host.gp.kernels import (LinearField, LocallyPeriodic, NonStationary, Periodic,
-                                    RadialField, ThinPlate, covariance_matrix)
+from gpiscl.host.gp.kernels import (GridField, LinearField, LocallyPeriodic, NonStationary,
+                                    Periodic, RadialField, ThinPlate, covariance_matrix)
 from gpiscl.host.gpis_compile import build_kernel
 from gpiscl.host.scene import SceneError, load_scene
 from stats import assert_agree, z_threshold
@@ -35,6 +35,33 @@ __kernel void joint(__global const GpKernel* kp, __global const MeanNode* mean, 
     for (int k = 0; k < n; ++k)
         out[(size_t)i * n + k] = st ? NAN
             : fs_sample_row(S.L, S.e, k, S.mu[k], fs_normal(rng, 0u, (uint)k));
+}
+
+/* The kernel's field multipliers (grid fields read from `nodes`) at x, and the four
+ * covariances of test04 with them. */
+__kernel void fields_at(__global const GpKernel* kp, __global const MeanNode* nodes,
+                        __global const double* x, __global double* out)
+{
+    int i = get_global_id(0);
+    GpFieldsAt f = fs_fields(kp[0], nodes, vload3(i, x));
+    __global double* o = out + 8 * i;
+    o[0] = f.ms;
+    vstore3(f.gs, 0, o + 1);
+    o[4] = f.ml;
+    vstore3(f.gl, 0, o + 5);
+}
+
+__kernel void covariances_at(__global const GpKernel* kp, __global const MeanNode* nodes,
+                             __global const double* a, __global const double* u,
+                             __global const double* b, __global const double* v,
+                             __global double* out)
+{
+    int i = get_global_id(0);
+    GpKernel p = kp[0];
+    double3 A = vload3(i, a), U = vload3(i, u), B = vload3(i, b), V = vload3(i, v);
+    GpFieldsAt fa = fs_fields(p, nodes, A), fb = fs_fields(p, nodes, B);
+    __global double* o = out + 4 * i;
+    for (int k = 0; k < 4; ++k) o[k] = gp_cov_at(p, A, U, k & 1, fa, B, V, k >> 1, fb);
 }
 """
 
@@ -175,16 +202,25 @@ def test04_device_matches_numpy(device, prg, name):
         assert err.max() < 1e-9, (j, err.max())
 
 
+def _kernel_and_nodes(kernel, mean=Constant(0.0)):
+    """The packed kernel and a mean program followed by the kernel's grid-field records,
+    laid out as the scene compiler does."""
+    kp = device_layout.pack_kernel(kernel)
+    nodes = device_layout.pack_mean(mean)
+    grids = device_layout.pack_kernel_grids(kernel, kp, len(nodes))
+    return kp, np.concatenate([nodes, *grids]), len(nodes)
+
+
 def _joint(device, prg, kernel, x, u, kind, n_draws, seed):
     n = len(x)
-    nodes = device_layout.pack_mean(Constant(0.0))
+    kp, nodes, mc = _kernel_and_nodes(kernel)
     stride = FL.scratch_doubles(FL.max_rows(SAMPLES_MAX, CAP_MAX))
     assert n <= FL.max_rows(SAMPLES_MAX, CAP_MAX)
     chunk = 1024
     scratch = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, 8 * stride * chunk)
     out = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 8 * n * chunk)
-    args = [_buf(device, device_layout.pack_kernel(kernel)), _buf(device, nodes),
-            np.int32(len(nodes)), _buf(device, x.astype(np.float64)),
+    args = [_buf(device, kp), _buf(device, nodes),
+            np.int32(mc), _buf(device, x.astype(np.float64)),
             _buf(device, u.astype(np.float64)), _buf(device, kind.astype(np.int32)),
             np.int32(n), np.uint32(seed)]
     res = np.empty((n_draws, n))
@@ -195,14 +231,31 @@ def _joint(device, prg, kernel, x, u, kind, n_draws, seed):
     return res
 
 
-def test05_joint_samples_have_the_model_variance_and_covariance(device, prg):
+def _sampled(field, origin, h, n):
+    """A grid field holding field's values at the samples of an n^3 grid."""
+    idx = np.stack(np.meshgrid(*[np.arange(n)] * 3, indexing="ij"), -1)
+    return GridField(field.eval(np.asarray(origin) + h * idx)[0], tuple(origin), h)
+
+
+_SIGMA_BLEND = RadialField((0.0, 0.0, 0.0), 0.75, 0.25, 2.0, 0.5)
+_L_BLEND = RadialField((0.0, 0.25, 0.0), 0.5, 0.25, 0.5, 1.0)
+JOINT_CASES = {
+    "radial": (_SIGMA_BLEND, _L_BLEND),
+    # the same blends sampled every 0.125 on [-2, 2]^3 (33^3 samples, trilinear)
+    "grid": (_sampled(_SIGMA_BLEND, (-2.0,) * 3, 0.125, 33),
+             _sampled(_L_BLEND, (-2.0,) * 3, 0.125, 33)),
+}
+
+
+@pytest.mark.parametrize("fields", JOINT_CASES)
+def test05_joint_samples_have_the_model_variance_and_covariance(device, prg, fields):
     """Values and slopes at 24 fixed points along a ray through a sigma(x) and l(x)
-    blend, jointly drawn by the free-flight factor/sampler in 20000 items: the per-point
-    variance matches sigma(x)^2 (resp. the slope variance), and the draws whitened by the
-    numpy covariance are uncorrelated standard normals (chi-square over all entries)."""
-    K = NonStationary(SquaredExponential(1.0, 0.5),
-                      sigma_field=RadialField((0.0, 0.0, 0.0), 0.75, 0.25, 2.0, 0.5),
-                      length_scale_field=RadialField((0.0, 0.25, 0.0), 0.5, 0.25, 0.5, 1.0))
+    blend (analytic, or trilinear grid fields read from the mean-node array), jointly
+    drawn by the free-flight factor/sampler in 20000 items: the per-point variance
+    matches sigma(x)^2 (resp. the slope variance), and the draws whitened by the numpy
+    covariance are uncorrelated standard normals (chi-square over all entries)."""
+    sf, lf = JOINT_CASES[fields]
+    K = NonStationary(SquaredExponential(1.0, 0.5), sigma_field=sf, length_scale_field=lf)
     t = np.linspace(-1.5, 1.5, 16)
     line = np.stack([t, np.full(16, 0.125), np.zeros(16)], 1)
     x = np.concatenate([line, line[::2]])         # values at 16 points, slopes at 8
@@ -210,7 +263,7 @@ def test05_joint_samples_have_the_model_variance_and_covariance(device, prg):
     u = np.tile(d, (len(x), 1))
     kind = np.r_[np.zeros(16, int), np.ones(8, int)]
     n_draws = 20000
-    f = _joint(device, prg, K, x, u, kind, n_draws, seed=5)
+    f = _joint(device, prg, K, x, u, kind, n_draws, seed=5 + len(fields))
     assert np.all(np.isfinite(f))
     C = covariance_matrix(K, x, u1=np.where(kind[:, None] == 1, u, np.nan))
     var = np.diag(C)
@@ -337,3 +390,176 @@ def test09_white_furnace_with_a_varying_sigma(device, bsdf, memory):
     else:
         img = res.image
         assert_agree(img.mean, img.stderr, np.ones_like(img.mean), block=4, what="furnace")
+
+
+# --- grid fields ------------------------------------------------------------------------
+
+GRID_ORIGIN, GRID_H = (-0.8, -0.9, -0.7), 0.4     # 5 x 6 x 4 samples: [-0.8, 0.8] x ...
+
+
+def _random_grid(seed, lo, hi):
+    rng = np.random.default_rng(seed)
+    return GridField(rng.uniform(lo, hi, (5, 6, 4)), GRID_ORIGIN, GRID_H)
+
+
+def _device_fields(device, prg, kernel, x):
+    kp, nodes, _ = _kernel_and_nodes(kernel)
+    out = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 64 * len(x))
+    prg["fields_at"](device.queue, (len(x),), None, _buf(device, kp), _buf(device, nodes),
+                     _buf(device, np.asarray(x, np.float64)), out)
+    res = np.empty((len(x), 8))
+    cl.enqueue_copy(device.queue, res, out)
+    return res
+
+
+def test10_grid_fields_are_trilinear_with_the_border_held(device, prg):
+    """Host: a grid sampled from a linear field reproduces it (value and gradient) inside
+    the sample box, and outside holds the clamped point's value with a zero gradient
+    along every clamped axis; the gradient inside equals central differences. Device
+    (fs_fields, float samples): the host's values to 1e-6 of the largest sample and the
+    gradients to 1e-6 of the largest sample per voxel (float32 storage, ~10 roundings)."""
+    lin = LinearField(1.0, (0.25, -0.5, 0.375), (0.1, 0.2, -0.3))
+    grid = _sampled(lin, GRID_ORIGIN, GRID_H, 5)
+    rng = np.random.default_rng(10)
+    inside = np.asarray(GRID_ORIGIN) + rng.uniform(0, 4 * GRID_H, (200, 3))
+    m, g = grid.eval(inside)
+    ml, gl = lin.eval(inside)
+    np.testing.assert_allclose(m, ml, rtol=1e-12)
+    np.testing.assert_allclose(g, gl, rtol=1e-12)
+    far = inside.copy()
+    far[:, 0] = 5.0                               # beyond the +x face
+    m_far, g_far = grid.eval(far)
+    clamp = inside.copy()
+    clamp[:, 0] = GRID_ORIGIN[0] + 4 * GRID_H
+    np.testing.assert_allclose(m_far, grid.eval(clamp)[0], rtol=1e-12)
+    assert np.all(g_far[:, 0] == 0) and np.allclose(g_far[:, 1:], gl[:, 1:], rtol=1e-12)
+
+    rough = _random_grid(11, 0.5, 2.0)
+    h = 1e-6
+    fd = np.stack([(rough.eval(inside + h * e)[0] - rough.eval(inside - h * e)[0]) / (2 * h)
+                   for e in np.eye(3)], 1)
+    # a point within h of a cell face may difference across it: skip those
+    u = (inside - np.asarray(GRID_ORIGIN)) / GRID_H
+    away = np.all(np.abs(u - np.round(u)) > 1e-4, axis=1)
+    np.testing.assert_allclose(fd[away], rough.eval(inside[away])[1], rtol=1e-6, atol=1e-6)
+
+    K = NonStationary(SE, sigma_field=rough, length_scale_field=_random_grid(12, 0.25, 1.5))
+    pts = rng.uniform(-1.5, 1.5, (400, 3))       # half of them outside the sample box
+    dev = _device_fields(device, prg, K, pts)
+    for field, cols in ((K.sigma_field, slice(0, 4)), (K.length_scale_field, slice(4, 8))):
+        m, g = field.eval(pts)
+        top = field.maximum()
+        assert np.abs(dev[:, cols][:, 0] - m).max() < 1e-6 * top
+        assert np.abs(dev[:, cols][:, 1:] - g).max() < 1e-6 * top / GRID_H
+
+
+@pytest.mark.parametrize("base", [SE, RQ])
+def test11_grid_field_covariances_on_the_device_match_numpy(device, prg, base):
+    """Random grid fields for sigma(x) and l(x) (a factor 4 and 6 across the grid), pairs
+    inside and outside the sample box: every covariance entry to 1e-5 of its
+    Cauchy-Schwarz scale. The fields agree to ~1e-6 relative (test10); a covariance's
+    logarithmic sensitivity to them is 1 per m_s and 3/2 + 2 s/S per m_l, <= 10 here."""
+    K = NonStationary(base, sigma_field=_random_grid(13, 0.5, 2.0),
+                      length_scale_field=_random_grid(14, 0.25, 1.5))
+    a, u, b, v = _points(np.random.default_rng(15), 256)
+    a, b = 1.4 * a, 1.4 * b
+    kp, nodes, _ = _kernel_and_nodes(K)
+    out = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 32 * len(a))
+    prg["covariances_at"](device.queue, (len(a),), None, _buf(device, kp), _buf(device, nodes),
+                          *(_buf(device, np.asarray(x, np.float64)) for x in (a, u, b, v)),
+                          out)
+    dev = np.empty((len(a), 4))
+    cl.enqueue_copy(device.queue, dev, out)
+    vv, dv, vd, dd = K._terms(a, u, b, v)
+    sa, sb = np.sqrt(K.cov(a, a)), np.sqrt(K.cov(b, b))
+    ga, gb = np.sqrt(K.cov_dd(a, u, a, u)), np.sqrt(K.cov_dd(b, v, b, v))
+    for j, (ref, scale) in enumerate([(vv, sa * sb), (dv, ga * sb), (vd, sa * gb),
+                                      (dd, ga * gb)]):
+        err = np.abs(dev[:, j] - ref) / scale
+        assert err.max() < 1e-5, (j, err.max())
+    C = covariance_matrix(K, np.concatenate([a[:40], b[:20]]),
+                          u1=np.concatenate([np.full((40, 3), np.nan), v[:20]]))
+    assert np.linalg.eigvalsh(C)[0] >= -1e-12 * np.abs(C).max()   # PD with kinks in m
+
+
+def _save_field_grid(path, values, origin=(-1.2, -1.2, -1.2), h=0.6):
+    np.savez(path, values=values, origin=np.asarray(origin, float), voxel_size=np.float64(h))
+    return str(path)
+
+
+def test12_grid_field_scene_rules(tmp_path):
+    """Bad grids name the file key and the reason; weight space refuses a grid field;
+    the occupancy bound uses the grid's largest sigma and the step rule its smallest l."""
+    from gpiscl.host.gpis_compile import occupancy_level
+    kern = {"type": "squared_exponential", "sigma": 0.3, "length_scale": 0.2}
+    good = np.full((5, 5, 5), 1.0)
+    bad = {"shape": (np.ones((5, 5)), "3-D (nx, ny, nz)"),
+           "nan": (np.where(np.arange(125).reshape(5, 5, 5) == 7, np.nan, good), "NaN"),
+           "negative": (good - 1.5, "must be > 0"),
+           "zero": (np.zeros((5, 5, 5)), "must be > 0")}
+    for key in ("sigma_field", "length_scale_field"):
+        for name, (values, reason) in bad.items():
+            path = _save_field_grid(tmp_path / f"{key}_{name}.npz", values)
+            with pytest.raises(SceneError) as e:
+                load_scene(_gpis({"type": "function_space"},
+                                 {**kern, key: {"type": "grid", "file": path}}))
+            assert e.value.key == f"shapes[0].kernel.{key}.file", (name, e.value.key)
+            assert reason in e.value.reason, (name, e.value.reason)
+    values = good.copy()
+    values[1, 2, 3], values[3, 1, 0] = 2.5, 0.4
+    path = _save_field_grid(tmp_path / "ok.npz", values)
+    with pytest.raises(SceneError) as e:
+        load_scene(_gpis({"type": "weight_space"},
+                         {**kern, "sigma_field": {"type": "grid", "file": path}}))
+    assert "weight space samples stationary kernels only" in e.value.reason
+    s = load_scene(_gpis({"type": "function_space"},
+                         {**kern, "sigma_field": {"type": "grid", "file": path},
+                          "length_scale_field": {"type": "grid", "file": path}}))
+    g = s.data["shapes"][0]
+    stationary = occupancy_level({**g, "kernel": kern})
+    assert abs(occupancy_level(g) / stationary - 2.5) < 1e-6
+    k = build_kernel(g["kernel"], g["proxy"])
+    assert abs(k.step_length_scale - 0.2 * 0.4) < 1e-12
+    packed = device_layout.pack_kernel(k)
+    assert packed["sigma_field"] == packed["ls_field"] == device_layout.FIELD_KINDS["grid"]
+
+
+def test13_a_grid_sampled_from_a_linear_field_renders_like_it(device, tmp_path):
+    """sigma(x) = 0.3 + 0.1 x and l(x) = 0.2 + 0.05 y given analytically, and as grids of
+    their samples (trilinear reproduces them exactly up to float32 storage): the same
+    seed draws the same realizations, so the two renders agree pixel by pixel far more
+    closely than independent renders could. Also proves that the scene compiler's grid
+    offsets reach the sampler (a wrong offset reads mean samples)."""
+    sig = LinearField(0.3, (0.1, 0.0, 0.0))
+    ls = LinearField(0.2, (0.0, 0.05, 0.0))
+    paths = {}
+    for name, f in (("sigma", sig), ("ls", ls)):
+        grid = _sampled(f, (-1.2,) * 3, 0.3, 9)
+        paths[name] = _save_field_grid(tmp_path / f"{name}.npz", grid.values, (-1.2,) * 3, 0.3)
+    images = []
+    for fields in ({"sigma_field": {"type": "linear", "value": 0.3, "gradient": [0.1, 0, 0]},
+                    "length_scale_field": {"type": "linear", "value": 0.2,
+                                           "gradient": [0, 0.05, 0]}},
+                   {"sigma_field": {"type": "grid", "file": paths["sigma"]},
+                    "length_scale_field": {"type": "grid", "file": paths["ls"]}}):
+        kern = {"type": "squared_exponential", "sigma": 1.0, "length_scale": 1.0, **fields}
+        # the proxy is the grid's box: the step rule's smallest l and the occupancy
+        # bound's largest sigma are then the same for both forms, hence the samples
+        scene = _gpis({"type": "function_space", "samples": 16}, kern,
+                      {"type": "box", "min": [-1.2] * 3, "max": [1.2] * 3})
+        scene["camera"] = {"position": [0, 0, 3.0], "look_at": [0, 0, 0], "up": [0, 1, 0],
+                           "fov": 40, "resolution": [16, 16]}
+        scene["render"] = {"spp": 4, "seed": 7, "max_depth": 8}
+        res = render_result(scene, device=device)
+        assert res.stats.gpis_failed == 0 and res.stats.nan_paths == 0, res.stats.summary()
+        images.append(res.image)
+    a, b = images
+    # Same law: a per-pixel z-test. Same realizations: independent renders would differ
+    # by sqrt(2) x their standard error (rms); float32 field values perturb the joint
+    # covariances by ~1e-7, which the factorisation of strongly correlated samples
+    # amplifies into small continuous shifts of hits (measured: rms 0.005 x stderr),
+    # so 0.05 separates the two by ~10x either way.
+    rms = np.sqrt(np.mean((a.mean - b.mean) ** 2) / np.mean(a.stderr**2))
+    print(f"rms difference / standard error: {rms:.2g}")
+    assert rms < 0.05
+    assert_agree(a.mean, a.stderr, b.mean, block=4, what="grid vs linear field")

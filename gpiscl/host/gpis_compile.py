@@ -13,7 +13,7 @@ from .gp import means as M
 from .gp.knob import knob_grid
 from .mesh_proxy import analyse, bounding_proxy, pack_planes
 from .gp.weight_space import pack_order_tables
-from .gp.device_layout import GP_KERNEL, MEAN_NODE, pack_kernel, pack_mean
+from .gp.device_layout import GP_KERNEL, MEAN_NODE, pack_kernel, pack_kernel_grids, pack_mean
 from .gpis_schema import FIELD_KEYS, field_minimum
 from .gpis_fields import pack_field
 from .scene_schema import SceneError
@@ -29,6 +29,9 @@ ROOT_TOLERANCE = 1e-4
 
 
 def _build_field(f: dict):
+    if f["type"] == "grid":
+        from .sdf_bake import load_field_grid
+        return load_field_grid(f["file"])
     params = {key: (tuple(v) if isinstance(v, list) else v) for key, v in f.items()
               if key != "type"}
     return K.FIELDS[f["type"]](**params)
@@ -119,6 +122,8 @@ def occupancy_level(g: dict) -> float:
     m_max, sf = 1.0, g["kernel"].get("sigma_field")
     if sf is not None and sf["type"] == "radial":
         m_max = max(sf["inner"], sf["outer"])
+    elif sf is not None and sf["type"] == "grid":
+        m_max = kernel.sigma_field.maximum()
     elif sf is not None:   # max of a linear field = -(min of its negation)
         neg = dict(sf, value=-sf["value"], gradient=[-c for c in sf["gradient"]])
         m_max = -field_minimum(neg, g["proxy"])
@@ -153,7 +158,7 @@ def compile_gpis(shapes: list, material_of, source: str = "<scene>",
     keys = keys or [f"gpis[{i}]" for i in range(len(shapes))]
     objects = layouts.GPIS_OBJECT.zeros(len(shapes))
     kernels = GP_KERNEL.zeros(len(shapes))
-    programs = []
+    programs, built = [], []
     first = 0
     for i, g in enumerate(shapes):
         o = objects[i]
@@ -173,7 +178,8 @@ def compile_gpis(shapes: list, material_of, source: str = "<scene>",
                 o[key] = fs[key]
         o["material"] = material_of(g["bsdf"])
         o["tolerance"] = ROOT_TOLERANCE * kernel_length_scale(g["kernel"])
-        kernels[i] = pack_kernel(build_kernel(g["kernel"], proxy))[0]
+        built.append(build_kernel(g["kernel"], proxy))
+        kernels[i] = pack_kernel(built[-1])[0]
         o["occupancy_level"] = occupancy_level(g)
         o["occupancy_step"] = OCCUPANCY_MIN_STEP * kernel_length_scale(g["kernel"])
         try:
@@ -196,6 +202,13 @@ def compile_gpis(shapes: list, material_of, source: str = "<scene>",
             planes = analyse(g["proxy"])[0]
             records = pack_planes(planes, MEAN_NODE.dtype)
             objects[i]["proxy_first"], objects[i]["proxy_count"] = first, len(planes)
+            first += len(records)
+            programs.append(records)
+    # grid fields of sigma(x) and l(x): the kernel holds their offsets from the object's
+    # mean program (fs_sampling.h fs_fields)
+    for i, kern in enumerate(built):
+        offset = first - objects[i]["mean_first"]
+        for records in pack_kernel_grids(kern, kernels[i:i + 1], offset):
             first += len(records)
             programs.append(records)
     # colour and emission fields follow every mean program, so index 0 (never a field)

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .gp.device_layout import GRID_PAYLOAD_FLOATS, MEAN_KINDS, MEAN_NODE
+from .gp.device_layout import MEAN_NODE, pack_payload
 from .sdf_bake import check_grid_values, read_grid_arrays
 from .scene_schema import (Field, File, Number, Record, Spec, Tagged, Vector, _is_number,
                            _is_sequence)
@@ -184,16 +184,8 @@ def pack_field(field: dict) -> np.ndarray:
         values, origin, h = load_rgb_grid(field["file"])
         m = np.concatenate([np.eye(3) / h, -origin[:, None] / h], 1)
         rec["p1"][0, :3] = values.shape[:3]
-        flat = values.astype(np.float32).ravel()    # ((i ny + j) nz + k) 3 + channel
-        n_rec = -(-flat.size // GRID_PAYLOAD_FLOATS)
-        floats = np.zeros(n_rec * GRID_PAYLOAD_FLOATS, np.float32)
-        floats[:flat.size] = flat
-        floats = floats.reshape(n_rec, GRID_PAYLOAD_FLOATS // 4, 4)
-        payload = MEAN_NODE.zeros(n_rec)
-        for f, name in enumerate(("row0", "row1", "row2", "p0", "p1")):
-            payload[name] = floats[:, f]
-        payload["kind"] = MEAN_KINDS["payload"]
-        rec["flags"] = n_rec
+        payload = pack_payload(values)    # ((i ny + j) nz + k) 3 + channel
+        rec["flags"] = len(payload)
     rec["row0"], rec["row1"], rec["row2"] = m
     rec["scale"] = 1.0
     if kind == "grid":

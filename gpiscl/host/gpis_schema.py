@@ -19,7 +19,7 @@ from .gp import function_space_layout as FSL
 from .scene_schema import (Bool, Enum, Field, File, Int, Nullable, Number, Record, Tagged,
                            Vector)
 from .mesh_proxy import bounding_proxy, mesh_proxy_problem
-from .sdf_bake import grid_problem
+from .sdf_bake import field_grid_problem, grid_problem, load_field_grid
 from . import posterior_compile as _posterior
 from .gpis_fields import COLOR, EMISSION
 
@@ -81,12 +81,15 @@ MEANS.register("procedural", Record({
 #   radial  m = inner + (outer - inner) (1 + tanh((|x - center|^2 - radius^2)
 #               / (2 radius width))) / 2: inner inside the sphere, outer beyond, blended
 #               over about `width`
+#   grid    trilinear in an .npz laid out like a mean grid (values (nx, ny, nz) > 0,
+#           origin, voxel_size), the border value held outside the sample box
 FIELDS = Tagged("field", {
     "linear": Record({"value": Field(Number(gt=0), 1.0), "gradient": Field(VEC3, [0, 0, 0]),
                       "origin": Field(VEC3, [0, 0, 0])}),
     "radial": Record({"center": Field(VEC3, [0, 0, 0]), "radius": Field(Number(gt=0)),
                       "width": Field(Number(gt=0)), "inner": Field(Number(gt=0)),
                       "outer": Field(Number(gt=0))}),
+    "grid": Record({"file": Field(File((".npz",), field_grid_problem))}),
 })
 _SIGMA_FIELD = Field(Nullable(FIELDS), None)
 _LS_FIELD = Field(Nullable(FIELDS), None)
@@ -122,9 +125,11 @@ KERNELS = Tagged("kernel", {
 def field_minimum(field: dict, proxy: dict) -> float:
     """The smallest multiplier of a resolved field over a resolved proxy (exact for
     linear fields over boxes and spheres, a lower bound over a mesh's bounding box;
-    min(inner, outer) for radial ones)."""
+    min(inner, outer) for radial ones, the smallest sample of a grid)."""
     if field["type"] == "radial":
         return min(field["inner"], field["outer"])
+    if field["type"] == "grid":
+        return load_field_grid(field["file"]).minimum()
     proxy = bounding_proxy(proxy)
     g, o, v = field["gradient"], field["origin"], field["value"]
     if proxy["type"] == "box":

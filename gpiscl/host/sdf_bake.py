@@ -101,6 +101,31 @@ def load_grid(path) -> GridMean:
                     float(arrays["voxel_size"].item()))
 
 
+def load_field_grid(path):
+    """A kernels.GridField (a multiplier of sigma or l) from an .npz file laid out like a
+    mean grid; ValueError naming the array when it is unusable, including values <= 0
+    (a standard deviation or length scale must stay positive)."""
+    from .gp.kernels import GridField
+    arrays = read_grid_arrays(path)
+    v = arrays["values"]
+    values = check_grid_values(v, v.ndim == 3 and min(v.shape) >= 2,
+                               "3-D (nx, ny, nz) with every dimension >= 2")
+    if not values.min() > 0.0:
+        raise ValueError(f"grid array 'values' must be > 0: it multiplies sigma or the "
+                         f"length scale (min {values.min():.4g} at index "
+                         f"{list(np.unravel_index(np.argmin(values), values.shape))})")
+    return GridField(values, tuple(float(o) for o in arrays["origin"]),
+                     float(arrays["voxel_size"].item()))
+
+
+def field_grid_problem(path) -> str | None:
+    try:
+        load_field_grid(path)
+    except ValueError as exc:
+        return str(exc)
+    return None
+
+
 def save_grid(path, grid: GridMean):
     np.savez(path, values=np.asarray(grid.values), origin=np.asarray(grid.origin, float),
              voxel_size=np.float64(grid.voxel_size))

@@ -132,7 +132,10 @@ inline GpJet gp_kernel_jet(GpKernel p, GP_REAL3 r)
  * b - a, so gp_kernel_value/gp_kernel_jet do not apply to it; gp_cov* dispatch. */
 inline int gp_kernel_nonstationary(GpKernel p) { return p.sigma_field | p.ls_field; }
 
-/* A field multiplier m(x) and its gradient (linear or radial blend). */
+/* A field multiplier m(x) and its gradient (linear or radial blend). A grid field's
+ * samples live in global memory, which a by-value GpKernel cannot reach: its callers
+ * evaluate it (fs_sampling.h fs_fields) and pass GpFieldsAt; here it is NaN, so a
+ * caller that forgot it fails loudly. */
 inline GP_REAL gp_field(int kind, float4 p0, float4 p1, GP_REAL3 x, GP_REAL3* grad)
 {
     GP_REAL3 c = (GP_REAL3)((GP_REAL)p0.x, (GP_REAL)p0.y, (GP_REAL)p0.z);
@@ -150,20 +153,32 @@ inline GP_REAL gp_field(int kind, float4 p0, float4 p1, GP_REAL3 x, GP_REAL3* gr
         return o.x + h * (1 + th);
     }
     *grad = (GP_REAL3)(0);
-    return 1;
+    return kind == GP_FIELD_NONE ? (GP_REAL)1 : (GP_REAL)NAN;
+}
+
+/* Both multipliers at one point: m_s, grad m_s, m_l, grad m_l (1 and 0 where a field is
+ * absent). Only values and gradients at the two points of a covariance enter it, so a
+ * caller with many covariances among few points evaluates them once per point. */
+typedef struct { GP_REAL ms, ml; GP_REAL3 gs, gl; } GpFieldsAt;
+
+inline GpFieldsAt gp_fields_analytic(GpKernel p, GP_REAL3 x)
+{
+    GpFieldsAt f;
+    f.ms = gp_field(p.sigma_field, p.sigma_p0, p.sigma_p1, x, &f.gs);
+    f.ml = gp_field(p.ls_field, p.ls_p0, p.ls_p1, x, &f.gl);
+    return f;
 }
 
 /* Paciorek-Schervish SE/RQ with Sigma(x) = l(x)^2 A^-1: k0 and its derivative
  * covariances cov0(d_u f(a), f(b)), cov0(f(a), d_v f(b)), cov0(d_u f(a), d_v f(b)). */
-inline GP_REAL gp_ps_terms(GpKernel p, GP_REAL3 a, GP_REAL3 u, GP_REAL3 b, GP_REAL3 v,
+inline GP_REAL gp_ps_terms(GpKernel p, GP_REAL3 a, GP_REAL3 u, GpFieldsAt fa,
+                           GP_REAL3 b, GP_REAL3 v, GpFieldsAt fb,
                            GP_REAL* dv, GP_REAL* vd, GP_REAL* dd)
 {
-    GP_REAL3 A = gp_aniso(p), ar = A * (b - a), gla, glb;
+    GP_REAL3 A = gp_aniso(p), ar = A * (b - a);
     GP_REAL s = dot(ar, b - a), l = (GP_REAL)p.length_scale;
-    GP_REAL la = l * gp_field(p.ls_field, p.ls_p0, p.ls_p1, a, &gla);
-    GP_REAL lb = l * gp_field(p.ls_field, p.ls_p0, p.ls_p1, b, &glb);
-    gla *= l;
-    glb *= l;
+    GP_REAL la = l * fa.ml, lb = l * fb.ml;
+    GP_REAL3 gla = l * fa.gl, glb = l * fb.gl;
     GP_REAL S = la * la + lb * lb, beta = 0, psi;
     if (p.kind == GP_KERNEL_RATIONAL_QUADRATIC) {
         GP_REAL al = (GP_REAL)p.alpha;
@@ -191,14 +206,15 @@ inline GP_REAL gp_ps_terms(GpKernel p, GP_REAL3 a, GP_REAL3 u, GP_REAL3 b, GP_RE
     return k0;
 }
 
-/* One joint-covariance entry of a non-stationary kernel: the base (stationary or
- * Paciorek-Schervish) terms, then the product rule for m_s(a) m_s(b). */
-inline GP_REAL gp_cov_ns(GpKernel p, GP_REAL3 a, GP_REAL3 u, int da,
-                         GP_REAL3 b, GP_REAL3 v, int db)
+/* One joint-covariance entry of a non-stationary kernel with the fields at a and b
+ * given: the base (stationary or Paciorek-Schervish) terms, then the product rule for
+ * m_s(a) m_s(b). */
+inline GP_REAL gp_cov_ns_at(GpKernel p, GP_REAL3 a, GP_REAL3 u, int da, GpFieldsAt fa,
+                            GP_REAL3 b, GP_REAL3 v, int db, GpFieldsAt fb)
 {
     GP_REAL k0, dv, vd, dd;
     if (p.ls_field) {
-        k0 = gp_ps_terms(p, a, u, b, v, &dv, &vd, &dd);
+        k0 = gp_ps_terms(p, a, u, fa, b, v, fb, &dv, &vd, &dd);
     } else {
         GpJet j = gp_kernel_jet(p, b - a);
         k0 = j.k;
@@ -206,18 +222,19 @@ inline GP_REAL gp_cov_ns(GpKernel p, GP_REAL3 a, GP_REAL3 u, int da,
         vd = dot(v, j.G);
         dd = -(j.alpha * dot(u, j.g) * dot(v, j.g) + dot(u * j.D, v));
     }
-    GP_REAL ma = 1, mb = 1, ua = 0, vb = 0;
-    if (p.sigma_field) {
-        GP_REAL3 g;
-        ma = gp_field(p.sigma_field, p.sigma_p0, p.sigma_p1, a, &g);
-        ua = da ? dot(u, g) : (GP_REAL)0;
-        mb = gp_field(p.sigma_field, p.sigma_p0, p.sigma_p1, b, &g);
-        vb = db ? dot(v, g) : (GP_REAL)0;
-    }
+    GP_REAL ma = fa.ms, mb = fb.ms;
+    GP_REAL ua = da ? dot(u, fa.gs) : (GP_REAL)0, vb = db ? dot(v, fb.gs) : (GP_REAL)0;
     if (!da && !db) return ma * mb * k0;
     if (!db) return mb * (ua * k0 + ma * dv);
     if (!da) return ma * (vb * k0 + mb * vd);
     return ua * vb * k0 + ua * mb * vd + ma * vb * dv + ma * mb * dd;
+}
+
+inline GP_REAL gp_cov_ns(GpKernel p, GP_REAL3 a, GP_REAL3 u, int da,
+                         GP_REAL3 b, GP_REAL3 v, int db)
+{
+    return gp_cov_ns_at(p, a, u, da, gp_fields_analytic(p, a), b, v, db,
+                        gp_fields_analytic(p, b));
 }
 
 /* cov(f(a), f(b)) */
@@ -259,4 +276,12 @@ inline GP_REAL gp_cov(GpKernel p, GP_REAL3 a, GP_REAL3 u, int da,
     GpJet j = gp_kernel_jet(p, b - a);
     if (da && db) return -(j.alpha * dot(u, j.g) * dot(v, j.g) + dot(u * j.D, v));
     return da ? -dot(u, j.G) : dot(v, j.G);
+}
+
+/* gp_cov with the fields at a and b given (ignored by stationary kernels) */
+inline GP_REAL gp_cov_at(GpKernel p, GP_REAL3 a, GP_REAL3 u, int da, GpFieldsAt fa,
+                         GP_REAL3 b, GP_REAL3 v, int db, GpFieldsAt fb)
+{
+    if (gp_kernel_nonstationary(p)) return gp_cov_ns_at(p, a, u, da, fa, b, v, db, fb);
+    return gp_cov(p, a, u, da, b, v, db);
 }

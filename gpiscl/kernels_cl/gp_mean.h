@@ -54,12 +54,6 @@ inline float gp_grid_sample(GP_MEAN_SPACE const MeanNode* payload, int j)
     return ((GP_MEAN_SPACE const float*)(payload + r))[j - r * GP_MEAN_GRID_PAYLOAD_FLOATS];
 }
 
-/* Trilinear interpolant of the samples at index coordinates u, with the gradient of the
- * same interpolant (cell = floor(u) clamped to the last cell: one-sided at faces, as
- * means.GridMean). Outside the sample box, with g the clamped point's value and d its
- * distance (p0.x = 1 / S converts voxels to the normalised samples' units):
- * sqrt(g^2 + d^2) where g >= 0, g + d where g < 0 (means.GridMean says why); either
- * keeps |gradient| <= 1 in these units (device_layout.py). */
 /* The trilinear cell of index coordinates u in a grid of `dims` samples per axis (x index
  * first): u clamped to the sample box, its cell (floor, the last cell at the far faces),
  * the weights t inside it, the first sample's index and the x and y strides. Shared by
@@ -80,11 +74,17 @@ inline GpGridCell gp_grid_cell(float3 dims, float3 u)
     return r;
 }
 
-inline float gp_mean_grid(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* g)
+/* The trilinear interpolant of the single-channel samples after grid record n at index
+ * coordinates u, clamped to the sample box (the border value held outside), and its
+ * gradient in index units: that of the same interpolant inside, 0 along an axis on
+ * which u was clamped. *out = u - clamped u. Grid means and the kernel's grid fields
+ * (fs_sampling.h) share it. */
+inline float gp_grid_trilinear(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* grad,
+                               float3* out)
 {
     GP_MEAN_SPACE const MeanNode* payload = n + 1;
     GpGridCell q = gp_grid_cell(n->p1.xyz, u);
-    float3 c = q.c, t = q.t;
+    float3 t = q.t;
     int b = q.base, sx = q.sx, nz = q.sy;
     float c000 = gp_grid_sample(payload, b), c001 = gp_grid_sample(payload, b + 1);
     float c010 = gp_grid_sample(payload, b + nz), c011 = gp_grid_sample(payload, b + nz + 1);
@@ -95,10 +95,20 @@ inline float gp_mean_grid(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* g)
     float x1 = mix(mix(c100, c101, t.z), mix(c110, c111, t.z), t.y);
     float gy = mix(mix(c010 - c000, c011 - c001, t.z), mix(c110 - c100, c111 - c101, t.z), t.x);
     float gz = mix(mix(c001 - c000, c011 - c010, t.y), mix(c101 - c100, c111 - c110, t.y), t.x);
-    float3 out = u - c, dir;
-    float3 grad = (float3)(x1 - x0, gy, gz);
-    grad = select(grad, (float3)(0.0f), isnotequal(out, (float3)(0.0f)));
-    float v = mix(x0, x1, t.x);
+    *out = u - q.c;
+    *grad = select((float3)(x1 - x0, gy, gz), (float3)(0.0f), isnotequal(*out, (float3)(0.0f)));
+    return mix(x0, x1, t.x);
+}
+
+/* A grid mean: the trilinear interpolant (one-sided gradient at faces, as
+ * means.GridMean). Outside the sample box, with g the clamped point's value and d its
+ * distance (p0.x = 1 / S converts voxels to the normalised samples' units):
+ * sqrt(g^2 + d^2) where g >= 0, g + d where g < 0 (means.GridMean says why); either
+ * keeps |gradient| <= 1 in these units (device_layout.py). */
+inline float gp_mean_grid(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* g)
+{
+    float3 out, dir, grad;
+    float v = gp_grid_trilinear(n, u, &grad, &out);
     float d = n->p0.x * gp_norm_dir3(out, &dir);
     if (!(d > 0.0f)) {
         *g = grad;

@@ -29,10 +29,14 @@ GP_KERNEL = Struct("GpKernel", (
     ("float", "radius"),            # thin-plate R
     # Spatially varying multipliers sigma(x) = sigma m_s(x), l(x) = l m_l(x) (kernels.py):
     # kind GP_FIELD_*; linear p0 = (gradient, value), p1.xyz = origin; radial
-    # p0 = (center, radius), p1 = (inner, outer, width, 0).
+    # p0 = (center, radius), p1 = (inner, outer, width, 0); grid: a grid record
+    # (pack_grid_field) at sigma_grid / ls_grid records after the object's mean program
+    # (function space only: fs_sampling.h reads it).
     ("int", "sigma_field"),
     ("int", "ls_field"),
     ("float", "ls_step"),           # smallest l(x) where rays sample: the step rule's l
+    ("int", "sigma_grid"),
+    ("int", "ls_grid"),
     ("float4", "sigma_p0"),
     ("float4", "sigma_p1"),
     ("float4", "ls_p0"),
@@ -72,7 +76,7 @@ MEAN_NODE = Struct("MeanNode", (
 
 KERNEL_KINDS = {"squared_exponential": 0, "rational_quadratic": 1, "periodic": 2,
                 "locally_periodic": 3, "thin_plate": 4}
-FIELD_KINDS = {"none": 0, "linear": 1, "radial": 2}
+FIELD_KINDS = {"none": 0, "linear": 1, "radial": 2, "grid": 3}
 MEAN_KINDS = {"constant": 0, "plane": 1, "sphere": 2, "box": 3, "rounded_box": 4,
               "torus": 5, "capsule": 6, "grid": 7, "union": 16, "intersection": 17,
               "difference": 18, "payload": 31}
@@ -104,7 +108,7 @@ def _pack_field(field):
     elif isinstance(field, K.RadialField):
         p0[:3], p0[3] = field.center, field.radius
         p1[:3] = field.inner, field.outer, field.width
-    else:
+    elif not isinstance(field, K.GridField):   # a grid's record offset: the scene compiler
         raise TypeError(f"no device form for field {type(field).__name__}")
     return FIELD_KINDS[field.kind], p0, p1
 
@@ -118,7 +122,7 @@ def pack_kernel(kernel: K.Kernel) -> np.ndarray:
             out["ls_field"], out["ls_p0"], out["ls_p1"] = _pack_field(kernel.length_scale_field)
             step = kernel.step_length_scale
             if step is None:   # without a proxy only a bounded field gives a bound
-                if not isinstance(kernel.length_scale_field, K.RadialField):
+                if isinstance(kernel.length_scale_field, K.LinearField):
                     raise ValueError("a linear length_scale field needs step_length_scale "
                                      "(its minimum over the sampled region)")
                 step = kernel.length_scale * kernel.length_scale_field.minimum()
@@ -191,27 +195,67 @@ def _leaf(node, m, scale):
     return rec
 
 
+def pack_payload(floats) -> np.ndarray:
+    """Payload records holding `floats` (float32, flattened) in row0..p1, as grid leaves,
+    grid colour fields and grid kernel fields store their samples."""
+    flat = np.asarray(floats, np.float32).ravel()
+    n_rec = -(-flat.size // GRID_PAYLOAD_FLOATS)
+    padded = np.zeros(n_rec * GRID_PAYLOAD_FLOATS, np.float32)
+    padded[:flat.size] = flat
+    padded = padded.reshape(n_rec, GRID_PAYLOAD_FLOATS // 4, 4)
+    payload = MEAN_NODE.zeros(n_rec)
+    for f, name in enumerate(("row0", "row1", "row2", "p0", "p1")):
+        payload[name] = padded[:, f]
+    payload["kind"] = MEAN_KINDS["payload"]
+    return payload
+
+
+def _check_grid_size(values):
+    if np.asarray(values).size >= 2**31:
+        raise ValueError(f"grid of {np.shape(values)} samples is too large: the device "
+                         f"indexes samples with 32-bit ints")
+
+
+def pack_grid_field(field: K.GridField) -> np.ndarray:
+    """A kernel grid field's record (row0..row2: world -> index coordinates, p1.xyz: sample
+    counts, flags: payload count; fs_sampling.h fs_grid_field) and its samples."""
+    values = np.asarray(field.values, np.float64)
+    _check_grid_size(values)
+    h = float(field.voxel_size)
+    payload = pack_payload(values)         # C order: (i ny + j) nz + k
+    rec = MEAN_NODE.zeros(1)
+    rec["kind"] = MEAN_KINDS["payload"]    # never run as a mean leaf
+    rec["flags"] = len(payload)
+    rec["row0"], rec["row1"], rec["row2"] = np.concatenate(
+        [np.eye(3) / h, -np.asarray(field.origin, float)[:, None] / h], 1)
+    rec["p1"] = (*values.shape, 0.0)
+    return np.concatenate([rec, payload])
+
+
+def pack_kernel_grids(kernel: K.Kernel, record: np.ndarray, offset: int) -> list:
+    """The records of kernel's grid fields, to be stored from `offset` records after the
+    start of the object's mean program on; sets record's sigma_grid / ls_grid to match."""
+    out = []
+    for attr, slot in (("sigma_field", "sigma_grid"), ("length_scale_field", "ls_grid")):
+        field = getattr(kernel, attr, None) if isinstance(kernel, K.NonStationary) else None
+        if isinstance(field, K.GridField):
+            record[slot] = offset
+            out.append(pack_grid_field(field))
+            offset += len(out[-1])
+    return out
+
+
 def _grid_leaf(node: M.GridMean, m, scale):
     """The grid leaf record followed by its payload records."""
     values = np.asarray(node.values, np.float64)
-    if values.size >= 2**31:
-        raise ValueError(f"grid of {values.shape} samples is too large: the device indexes "
-                         f"samples with 32-bit ints")
+    _check_grid_size(values)
     h = float(node.voxel_size)
     s_index = node.lipschitz * h            # slope bound per voxel
     to_index = np.concatenate([np.eye(3) / h, -np.asarray(node.origin, float)[:, None] / h], 1)
-    flat = (values / s_index).astype(np.float32).ravel()     # C order: (i ny + j) nz + k
-    n_rec = -(-flat.size // GRID_PAYLOAD_FLOATS)
-    payload = MEAN_NODE.zeros(n_rec)
-    floats = np.zeros(n_rec * GRID_PAYLOAD_FLOATS, np.float32)
-    floats[:flat.size] = flat
-    floats = floats.reshape(n_rec, GRID_PAYLOAD_FLOATS // 4, 4)
-    for f, name in enumerate(("row0", "row1", "row2", "p0", "p1")):
-        payload[name] = floats[:, f]
-    payload["kind"] = MEAN_KINDS["payload"]
+    payload = pack_payload(values / s_index)     # C order: (i ny + j) nz + k
     rec = MEAN_NODE.zeros(1)
     rec["kind"] = MEAN_KINDS["grid"]
-    rec["flags"] = n_rec
+    rec["flags"] = len(payload)
     rec["row0"], rec["row1"], rec["row2"] = _compose(m, to_index)
     rec["p0"] = (h / s_index, 0.0, 0.0, 0.0)
     rec["p1"] = (*values.shape, 0.0)

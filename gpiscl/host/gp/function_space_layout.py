@@ -66,8 +66,9 @@ def max_rows(samples: int, memory_cap: int, refine: int = DEFAULT_REFINE) -> int
 
 def scratch_doubles(rows: int) -> int:
     """Doubles per work item for `rows` rows: FsObs rows (8 doubles each), the packed
-    lower triangle, the whitened vector e and the prior means."""
-    return 8 * rows + rows * (rows + 1) // 2 + 2 * rows
+    lower triangle, the whitened vector e, the prior means and the rows' kernel-field
+    multipliers (8 doubles each; FsScratch in fs_sampling.h)."""
+    return 8 * rows + rows * (rows + 1) // 2 + 2 * rows + 8 * rows
 
 
 def defines(samples_max: int, memory_cap: int, refine: int = DEFAULT_REFINE) -> dict:

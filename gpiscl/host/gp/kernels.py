@@ -369,7 +369,56 @@ class RadialField:
         return self.minimum()
 
 
-FIELDS = {cls.kind: cls for cls in (LinearField, RadialField)}
+@dataclass(frozen=True, eq=False)
+class GridField:
+    """Trilinear in samples values[i, j, k] > 0 at origin + voxel_size (i, j, k) (every
+    n >= 2), the border value held outside the sample box, as fs_sampling.h
+    fs_grid_field: inside, the gradient of the same interpolant (one-sided at cell
+    faces: the cell is floor(u), the last one at the far faces); outside, 0 along each
+    clamped axis. m is continuous and its gradient jumps across cell faces, which keeps
+    every covariance built from (m, grad m) valid: k(a, b) = m(a) m(b) k0(a, b) and the
+    Paciorek-Schervish form are covariances for any positive m; the derivative rows are
+    those of the interpolant wherever it is differentiable."""
+    values: np.ndarray
+    origin: tuple
+    voxel_size: float
+    kind = "grid"
+
+    def eval(self, x):
+        x = _vec(x)
+        values = np.asarray(self.values, np.float64)
+        hi = np.asarray(values.shape, float) - 1.0
+        u = (x - _vec(self.origin)) / self.voxel_size
+        c = np.clip(u, 0.0, hi)
+        cell = np.minimum(np.floor(c), hi - 1.0)
+        t = c - cell
+        i, j, k = (cell[..., a].astype(np.intp) for a in range(3))
+        m, g = 0.0, np.zeros(x.shape)
+        for a in (0, 1):
+            for b in (0, 1):
+                for e in (0, 1):
+                    w = [t[..., 0] if a else 1 - t[..., 0], t[..., 1] if b else 1 - t[..., 1],
+                         t[..., 2] if e else 1 - t[..., 2]]
+                    v = values[i + a, j + b, k + e]
+                    m = m + w[0] * w[1] * w[2] * v
+                    for ax, sign in enumerate((a, b, e)):
+                        others = [w[q] for q in range(3) if q != ax]
+                        g[..., ax] += (1.0 if sign else -1.0) * others[0] * others[1] * v
+        g = np.where(u != c, 0.0, g) / self.voxel_size
+        return m, g
+
+    def minimum(self, lo=None, hi=None):
+        """A lower bound anywhere: trilinear values are convex combinations of samples."""
+        return float(np.min(self.values))
+
+    def maximum(self):
+        return float(np.max(self.values))
+
+    def minimum_ball(self, center=None, radius=None):
+        return self.minimum()
+
+
+FIELDS = {cls.kind: cls for cls in (LinearField, RadialField, GridField)}
 
 
 @dataclass(frozen=True)
