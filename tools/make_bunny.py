@@ -9,16 +9,26 @@ meshed by surface nets, the mesh's signed distance is baked with gpiscl's own me
 samples, float32). The colour grid (16^3) paints a brown coat, a white belly and tail and
 pink inner ears.
 
+The sigma grid is a reconstruction's uncertainty, like the authors' variance grid: a
+simulated scan sees the rabbit from one side (surface points whose normal faces the
+scanner, SCAN_DIRECTION), and a GP with the scene's kernel conditioned on f = 0 at those
+points (gpiscl.host.gp.posterior) has a posterior standard deviation that is small near
+the scanned surface and returns to the prior's far from it. That standard deviation,
+divided by the prior's and floored at SIGMA_FLOOR, is the sigma(x) multiplier: the
+rendered surface is smooth where it was seen and rough where it was guessed.
+
     python tools/make_bunny.py [--resolution 44] [--mesh bunny.obj]
 
-Outputs scenes/assets/bunny_mean.npz and scenes/assets/bunny_color.npz (compressed,
-< 200 kB together); --mesh also writes the intermediate mesh.
+Outputs scenes/assets/bunny_mean.npz, bunny_color.npz and bunny_sigma.npz (compressed,
+< 400 kB together); --mesh also writes the intermediate mesh.
 """
 import argparse
 from pathlib import Path
 
 import numpy as np
 
+from gpiscl.host.gp import SquaredExponential
+from gpiscl.host.gp.posterior import Observations, Posterior
 from gpiscl.host.gpis_fields import save_rgb_grid
 from gpiscl.host.sdf_bake import bake_mesh
 
@@ -33,6 +43,14 @@ CAPSULES += [((s * 0.20, 0.08, -0.05), (s * 0.22, 0.08, 0.32), 0.08) for s in (-
 CAPSULES += [((s * 0.14, 0.40, 0.28), (s * 0.15, 0.08, 0.42), 0.065) for s in (-1, 1)]  # paws
 BLEND = 0.06
 BOUNDS = (np.array([-0.6, -0.15, -0.85]), np.array([0.6, 1.8, 0.7]))
+# the simulated scan: surface points facing this direction (from the left, slightly above
+# and in front): the camera of bunny_grid.json sees the seen and unseen halves
+SCAN_DIRECTION = np.array([-1.0, 0.25, 0.15]) / np.linalg.norm([-1.0, 0.25, 0.15])
+SCAN_POINTS = 1500          # drawn on the whole surface; about half face the scanner
+SCAN_NOISE = 1e-4           # variance of each f = 0 observation (relative to sigma^2 = 1)
+SCAN_LENGTH_SCALE = 0.15    # the scene's kernel length scale (bunny_grid.json)
+SIGMA_FLOOR = 0.05
+SIGMA_VOXEL = 0.05
 
 
 def _smin(a, b, k):
@@ -125,6 +143,24 @@ def colour(x):
     return c * (1 - e) + pink * e
 
 
+def scan_sigma(verts, faces, seed=0):
+    """(values, origin, voxel size) of the sigma(x) multiplier grid (module docstring)."""
+    import trimesh
+    mesh = trimesh.Trimesh(verts, faces, process=False)
+    points, tri = trimesh.sample.sample_surface(mesh, SCAN_POINTS, seed=seed)
+    seen = mesh.face_normals[tri] @ SCAN_DIRECTION > 0.0
+    post = Posterior(SquaredExponential(1.0, SCAN_LENGTH_SCALE), None,
+                     Observations.values(points[seen], 0.0, SCAN_NOISE))
+    lo, hi = BOUNDS[0] - 0.2, BOUNDS[1] + 0.2
+    counts = np.ceil((hi - lo) / SIGMA_VOXEL).astype(int) + 1
+    axes = [lo[a] + SIGMA_VOXEL * np.arange(counts[a]) for a in range(3)]
+    x = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    sd = np.concatenate([np.sqrt(np.maximum(post.variance(c), 0.0))
+                         for c in np.array_split(x, max(1, len(x) // 8192))])
+    values = np.maximum(sd, SIGMA_FLOOR).reshape(*counts)
+    return values, lo, SIGMA_VOXEL, int(seen.sum())
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--resolution", type=int, default=44, help="mean grid samples (longest axis)")
@@ -146,9 +182,13 @@ def main():
     axes = [lo[a] + h * np.arange(counts[a]) for a in range(3)]
     x = np.stack(np.meshgrid(*axes, indexing="ij"), -1)
     save_rgb_grid(ASSETS / "bunny_color.npz", colour(x), lo, h)
+    sigma, s_origin, s_h, n_seen = scan_sigma(verts, faces)
+    np.savez_compressed(ASSETS / "bunny_sigma.npz", values=sigma.astype(np.float32),
+                        origin=np.asarray(s_origin, np.float64), voxel_size=np.float64(s_h))
     print(f"mesh: {len(verts)} vertices, {len(faces)} triangles; mean grid "
           f"{grid.shape} voxel {grid.voxel_size:.4g} origin {np.round(grid.origin, 4)}; "
-          f"colour grid {tuple(counts)}")
+          f"colour grid {tuple(counts)}; sigma grid {sigma.shape} from {n_seen} scanned "
+          f"points (multiplier {sigma.min():.3g}..{sigma.max():.3g})")
 
 
 if __name__ == "__main__":
