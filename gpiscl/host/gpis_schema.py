@@ -32,6 +32,10 @@ PROXIES = Tagged("proxy", {
     # a closed convex mesh (mesh_proxy.py), e.g. the authors' wedge prism
     "mesh": Record({"file": Field(File((".obj", ".ply", ".stl", ".off"), _mesh_problem)),
                     "transform": Field(TRANSFORM, {})}),
+    # unbounded: the scene's box (scene_compile.scene_box: every other shape and proxy,
+    # positioned lights, the camera), e.g. a volume-type GPIS filling the scene, which
+    # rays sample in progressive segments until they leave the scene
+    "scene": Record({}),
 })
 
 # Means are signed distances, positive outside (gpiscl/host/gp/means.py).
@@ -130,6 +134,8 @@ def field_minimum(field: dict, proxy: dict) -> float:
         return min(field["inner"], field["outer"])
     if field["type"] == "grid":
         return load_field_grid(field["file"]).minimum()
+    if proxy["type"] == "scene":   # checked: a linear field there has no gradient
+        return field["value"]
     proxy = bounding_proxy(proxy)
     g, o, v = field["gradient"], field["origin"], field["value"]
     if proxy["type"] == "box":
@@ -185,9 +191,13 @@ def _thin_plate_span(g):
     """Thin-plate covariances are positive definite only among points within `radius`
     (anisotropic distance); function space samples anywhere in the proxy, so the proxy's
     diameter must fit (a conservative bound through the largest aniso weight)."""
-    k, proxy = g["kernel"], bounding_proxy(g["proxy"])
+    k = g["kernel"]
     if k["type"] != "thin_plate" or g["sampler"]["type"] != "function_space":
         return None
+    if g["proxy"]["type"] == "scene":
+        return "proxy.type", ("thin_plate is a covariance only within its radius, so it "
+                              "needs a bounded proxy (box, sphere or mesh)")
+    proxy = bounding_proxy(g["proxy"])
     if proxy["type"] == "box":
         diameter = sum((b - a) ** 2 for a, b in zip(proxy["min"], proxy["max"])) ** 0.5
     else:
@@ -204,6 +214,10 @@ def _fields_positive(g):
     """A linear field may cross zero somewhere; where rays sample it must not."""
     for key in FIELD_KEYS:
         f = g["kernel"].get(key)
+        if (f is not None and f["type"] == "linear" and g["proxy"]["type"] == "scene"
+                and any(f["gradient"])):
+            return f"kernel.{key}", ("a linear field with a gradient turns negative somewhere "
+                                     "in an unbounded ('scene') proxy; bound the proxy")
         if f is not None and f["type"] == "linear":
             m = field_minimum(f, g["proxy"])
             if not m > 0.0:

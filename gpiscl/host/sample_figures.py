@@ -72,6 +72,10 @@ def resolve_target(spec: str, obj: int = 0) -> Target:
                          f"must be in [0, {len(gpis)}) for this scene (got {obj})")
     g = gpis[obj]
     proxy = bounding_proxy(g["proxy"])
+    if proxy["type"] == "scene":
+        from .scene_compile import scene_box
+        lo, hi = scene_box(scene.data)
+        proxy = {"type": "box", "min": lo, "max": hi}
     if proxy["type"] == "box":
         lo, hi = np.asarray(proxy["min"], float), np.asarray(proxy["max"], float)
         center, half = (lo + hi) / 2, float(np.max(hi - lo)) / 2

@@ -11,6 +11,7 @@ from .bvh import build_bvh
 from .camera import compile_camera
 from .envmap import build_envmap_tables
 from .gpis_compile import CompiledGpis, compile_gpis
+from .mesh_proxy import bounding_proxy
 from .imageio import read_exr_rgb
 
 PRIM = layouts.PRIM_KINDS
@@ -184,6 +185,48 @@ def _bounds(prims: np.ndarray):
     return lo - pad, hi + pad
 
 
+def scene_box(data: dict, prims: np.ndarray | None = None):
+    """(lo, hi) of everything bounded in the scene: primitives (area lights included),
+    bounded GPIS proxies, point lights and the camera, grown by 1% of the diagonal. A
+    path that leaves it meets nothing but infinitely far lights. prims: the compiled
+    primitives, or None to build them."""
+    if prims is None:
+        b = _Builder()
+        for s in data.get("shapes", []):
+            if s["type"] != "gpis":
+                _add_shape(b, s)
+        for lt in data["lights"]:
+            if lt["type"] in ("sphere", "rectangle"):
+                _add_light(b, lt, {})
+        prims = np.array(b.prims, dtype=layouts.PRIMITIVE.dtype)
+    pts = [np.asarray(data["camera"]["position"], float)[None]]
+    if len(prims):
+        pts += list(_bounds(prims))
+    for s in data.get("shapes", []):
+        if s["type"] == "gpis" and s["proxy"]["type"] != "scene":
+            box = bounding_proxy(s["proxy"])
+            if box["type"] == "box":
+                pts.append(np.asarray([box["min"], box["max"]], float))
+            else:
+                pts.append(np.asarray(box["center"], float) + box["radius"] * np.array([[-1.0], [1.0]]))
+    pts += [np.asarray(lt["position"], float)[None] for lt in data["lights"]
+            if lt["type"] == "point"]
+    pts = np.concatenate(pts)
+    lo, hi = pts.min(0), pts.max(0)
+    grow = 0.01 * float(np.linalg.norm(hi - lo)) + 1e-3
+    return lo - grow, hi + grow
+
+
+def bound_scene_proxies(data: dict, prims: np.ndarray | None = None) -> list:
+    """The gpis shapes with every "scene" proxy replaced by the scene's box (scene_box)."""
+    shapes = [s for s in data.get("shapes", []) if s["type"] == "gpis"]
+    if not any(s["proxy"]["type"] == "scene" for s in shapes):
+        return shapes
+    lo, hi = scene_box(data, prims)
+    box = {"type": "box", "min": lo.tolist(), "max": hi.tolist()}
+    return [dict(s, proxy=box) if s["proxy"]["type"] == "scene" else s for s in shapes]
+
+
 def compile_scene(data: dict, source: str = "<scene>") -> CompiledScene:
     """source: the scene's file, for errors found only while compiling (e.g. a mesh bake)."""
     b = _Builder()
@@ -191,12 +234,12 @@ def compile_scene(data: dict, source: str = "<scene>") -> CompiledScene:
     for s in data.get("shapes", []):
         if s["type"] != "gpis":
             _add_shape(b, s)
-    gpis_at = [i for i, s in enumerate(data.get("shapes", [])) if s["type"] == "gpis"]
-    gpis = compile_gpis([data["shapes"][i] for i in gpis_at], b.material, source,
-                        [f"shapes[{i}]" for i in gpis_at])
     for lt in data["lights"]:
         _add_light(b, lt, env)
     prims = np.array(b.prims, dtype=layouts.PRIMITIVE.dtype)
+    gpis_at = [i for i, s in enumerate(data.get("shapes", [])) if s["type"] == "gpis"]
+    gpis = compile_gpis(bound_scene_proxies(data, prims), b.material, source,
+                        [f"shapes[{i}]" for i in gpis_at])
     if len(prims):
         nodes, order = build_bvh(*_bounds(prims))
         prims = prims[order]
