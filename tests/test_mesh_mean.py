@@ -1,6 +1,7 @@
 """Mesh and grid means: SDF bakes against analytic distances, the device grid leaf against
 its numpy twin, the Lipschitz bound weight space relies on, the bake cache, bad grid files,
 and a weight-space render with a sphere-mesh mean against the analytic sphere mean."""
+import dataclasses
 import json
 import math
 import os
@@ -192,8 +193,8 @@ def test05_band_clamps_the_distance(tmp_path):
 
 # ---- the device grid leaf against its numpy twin ------------------------------------------
 
-def random_grid(rng, shape=(5, 6, 7), origin=(-1.0, -1.2, -0.9), h=0.4):
-    return GridMean(rng.normal(size=shape), origin, h)
+def random_grid(rng, shape=(5, 6, 7), origin=(-1.0, -1.2, -0.9), h=0.4, interp="linear"):
+    return GridMean(rng.normal(size=shape), origin, h, interp)
 
 
 def _grid_index(mean_to_grid, grid, x):
@@ -205,9 +206,10 @@ RIGID = np.concatenate([ROT, [[0.25], [0.0], [-0.5]]], 1)
 AFFINE = np.concatenate([ROT @ np.diag([1.5, 0.75, 1.0]), [[0.1], [0.2], [0.0]]], 1)
 
 
-def cases():
+def cases(interp="linear"):
     rng = np.random.default_rng(4)
-    g1, g2 = random_grid(rng), random_grid(rng, (3, 2, 4), (0.0, 0.1, -0.5), 0.3)
+    g1 = random_grid(rng, interp=interp)
+    g2 = random_grid(rng, (3, 2, 4), (0.0, 0.1, -0.5), 0.3, interp)
     inv = {}
     for name, m in (("rigid", RIGID), ("affine", AFFINE)):
         w2o = Transform(g1, m).world_to_object
@@ -223,9 +225,10 @@ def cases():
     }
 
 
+@pytest.mark.parametrize("interp", ["linear", "cubic"])
 @pytest.mark.parametrize("name", ["grid", "rigid", "affine", "csg"])
-def test06_device_grid_matches_the_numpy_twin(device, prg, name):
-    mean, leaves = cases()[name]
+def test06_device_grid_matches_the_numpy_twin(device, prg, name, interp):
+    mean, leaves = cases(interp)[name]
     # half near the grids (inside their boxes: trilinear), half around them (continuation)
     rng = np.random.default_rng(5)
     x = np.concatenate([rng.uniform(-1.2, 1.2, (2000, 3)), rng.uniform(-3, 3, (2000, 3))])
@@ -246,6 +249,45 @@ def test06_device_grid_matches_the_numpy_twin(device, prg, name):
     np.testing.assert_allclose(grad[~near], g_ref[~near], atol=1e-4)
 
 
+def test06b_cubic_grids_interpolate_smoothly_to_fourth_order(device, prg):
+    """The cubic leaf passes through its samples (host to rounding, device to float32),
+    its gradient is continuous across cell faces (where trilinear's jumps), and on a
+    smooth function its error falls >= 16x per halving of h (O(h^4); trilinear ~4x)."""
+    rng = np.random.default_rng(61)
+    g = random_grid(rng, interp="cubic")
+    idx = np.argwhere(np.ones(g.shape, bool))
+    x = np.asarray(g.origin) + g.voxel_size * idx
+    np.testing.assert_allclose(g.value(x), g.values.ravel(), atol=1e-12)
+    value, _ = device_eval(device, prg, g, x.astype(np.float32))
+    np.testing.assert_allclose(value, g.values.ravel(), atol=2e-5 * np.abs(g.values).max())
+    # one-sided gradients 1e-9 voxel either side of interior faces normal to x
+    face = np.asarray(g.origin) + g.voxel_size * (np.array([2.0, 2.3, 3.6]) + rng.uniform(
+        0, 0.3, (50, 3)) * [0, 1, 1])
+    e = np.array([1e-9 * g.voxel_size, 0, 0])
+    for interp, continuous in (("cubic", True), ("linear", False)):
+        gg = GridMean(g.values, g.origin, g.voxel_size, interp)
+        jump = np.abs(gg.gradient(face + e) - gg.gradient(face - e)).max()
+        assert (jump < 1e-6) == continuous, (interp, jump)
+
+    def f(p):
+        return np.sin(p[..., 0]) * np.cos(0.7 * p[..., 1]) + 0.3 * p[..., 2] ** 2
+
+    pts = rng.uniform(0.3, 1.7, (2000, 3))
+    # cubic: >= 16 far from the faces; the natural end conditions' O(h^2) error decays
+    # by ~0.27 per cell inwards, so points a fixed distance in gain more than 16x
+    for interp, lo, hi in (("cubic", 12.0, np.inf), ("linear", 3.0, 5.0)):
+        errs = []
+        for n in (11, 21, 41):
+            h = 2.0 / (n - 1)
+            ax = h * np.arange(n)
+            grid = GridMean(f(np.stack(np.meshgrid(ax, ax, ax, indexing="ij"), -1)),
+                            (0, 0, 0), h, interp)
+            errs.append(np.abs(grid.value(pts) - f(pts)).max())
+        ratios = np.array(errs[:-1]) / np.array(errs[1:])
+        print(interp, errs, ratios)
+        assert np.all((lo < ratios) & (ratios < hi)), (interp, ratios)
+
+
 def test07_packing_puts_the_samples_inline():
     rng = np.random.default_rng(6)
     g = random_grid(rng)
@@ -261,12 +303,13 @@ def test07_packing_puts_the_samples_inline():
     np.testing.assert_allclose(floats[:g.values.size] * s_h, g.values.ravel(), rtol=1e-6)
 
 
-def test08_lipschitz_bound_holds(device, prg):
+@pytest.mark.parametrize("interp", ["linear", "cubic"])
+def test08_lipschitz_bound_holds(device, prg, interp):
     """ws_mean_lipschitz (unchanged) yields the grid's slope bound through the leaf's
     scale, and no gradient exceeds it, inside the box, outside it, or transformed."""
     rng = np.random.default_rng(7)
-    g = random_grid(rng)
-    cs = cases()
+    g = random_grid(rng, interp=interp)
+    cs = cases(interp)
     x = rng.uniform(-4, 4, (20000, 3))
     for mean, expected in [(g, g.lipschitz), (Transform(g, RIGID), g.lipschitz),
                            (Transform(g, np.diag([2.0, 2.0, 2.0, 1.0])), g.lipschitz),
@@ -278,6 +321,8 @@ def test08_lipschitz_bound_holds(device, prg):
         host = np.linalg.norm(mean.gradient(x), axis=1)
         dev = np.linalg.norm(device_eval(device, prg, mean, x)[1], axis=1)
         assert max(host.max(), dev.max()) <= lip * (1 + 1e-5)
+    if interp == "cubic":
+        return
     # the bound is attained: a linear field of slope a along x reaches sqrt(a^2 + 1)
     # beyond the y and z faces where it is negative (g + d), and 1 where every sample is
     # >= 0 (sqrt(g^2 + d^2), whose slope exceeds 1 nowhere)
@@ -372,12 +417,20 @@ def test10_grid_file_round_trips_into_the_program(tmp_path):
     g = random_grid(np.random.default_rng(8))
     sdf_bake.save_grid(tmp_path / "g.npz", g)
     scene = _load(tmp_path, _gpis_scene({"type": "transform", "translate": [0.5, 0, 0],
-                                         "child": {"type": "grid", "file": "g.npz"}}))
+                                         "child": {"type": "grid", "file": "g.npz",
+                                                   "interpolation": "linear"}}))
     from gpiscl.host.gpis_compile import build_mean
     mean = build_mean(scene.data["shapes"][0]["mean"])
     x = np.random.default_rng(9).uniform(-2, 2, (100, 3))
     np.testing.assert_allclose(mean.value(x), Transform(g, np.concatenate(
         [np.eye(3), [[0.5], [0], [0]]], 1)).value(x), atol=1e-12)
+    # the default is the cubic spline through the same samples
+    scene = _load(tmp_path, _gpis_scene({"type": "grid", "file": "g.npz"}))
+    cubic = build_mean(scene.data["shapes"][0]["mean"])
+    assert cubic.interpolation == "cubic"
+    idx = np.argwhere(np.ones(g.shape, bool))
+    np.testing.assert_allclose(cubic.value(np.asarray(g.origin) + g.voxel_size * idx),
+                               g.values.ravel(), atol=1e-12)
 
 
 # ---- a render: sphere-mesh mean vs the analytic sphere mean -----------------------------------
@@ -412,13 +465,14 @@ def ws_prg(device):
     return build(device, EXTRA)
 
 
-def _sphere_grid(tmp_path):
+def _sphere_grid(tmp_path, interp="linear"):
     mesh = trimesh.creation.icosphere(subdivisions=3)
     grid, _ = sdf_bake.mesh_mean(write_mesh(tmp_path, mesh), resolution=20)
-    return Transform(grid, RIGID)
+    return Transform(dataclasses.replace(grid, interpolation=interp), RIGID)
 
 
-def test12_bounds_and_first_roots_hold_with_a_grid_mean(device, ws_prg, tmp_path):
+@pytest.mark.parametrize("interp", ["linear", "cubic"])
+def test12_bounds_and_first_roots_hold_with_a_grid_mean(device, ws_prg, tmp_path, interp):
     """ws_intersect.h, unchanged, on a baked mean: its piecewise-linear bounds contain every
     evaluation of f over random intervals (the grid's Lipschitz bound is what makes the
     mean's cones valid), and its first roots miss no crossing a dense float64 scan finds."""
@@ -427,7 +481,7 @@ def test12_bounds_and_first_roots_hold_with_a_grid_mean(device, ws_prg, tmp_path
     from test_ws_features import buf, dump, gp_args, keys_for, run
     from test_ws_intersect import assert_tents_contain, host_values, random_rays
     kernel = SquaredExponential(sigma=0.1, length_scale=0.25)
-    mean = _sphere_grid(tmp_path)
+    mean = _sphere_grid(tmp_path, interp)
     rng = np.random.default_rng(12)
     m, n, npts = 32, 96, 33
     # bounds over intervals 1e-4 l .. 4 l, some starting outside the grid's box

@@ -1,6 +1,7 @@
 """Resolved GPIS scene objects -> host GP model objects -> device arrays."""
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from statistics import NormalDist
@@ -83,14 +84,16 @@ def build_mean(m: dict) -> M.Mean:
         return M.Transform(build_mean(m["child"]), _transform_matrix(m))
     if kind == "mesh":
         from .sdf_bake import mesh_mean
-        return mesh_mean(m["file"], m["resolution"], m["margin"], m["band"],
+        grid = mesh_mean(m["file"], m["resolution"], m["margin"], m["band"],
                          _transform_matrix(m["transform"]))[0]
-    if kind == "grid":
+    elif kind == "grid":
         from .sdf_bake import load_grid
-        return load_grid(m["file"])
-    if kind == "procedural":
-        return knob_grid(m["function"], m["resolution"])
-    raise AssertionError(kind)
+        grid = load_grid(m["file"])
+    elif kind == "procedural":
+        grid = knob_grid(m["function"], m["resolution"])
+    else:
+        raise AssertionError(kind)
+    return dataclasses.replace(grid, interpolation=m["interpolation"])
 
 
 def kernel_length_scale(k: dict) -> float:

@@ -60,6 +60,11 @@ for _op in ("union", "intersection", "difference"):  # k > 0: smooth blend of wi
     MEANS.register(_op, Record({"left": Field(MEANS), "right": Field(MEANS),
                                 "k": Field(Number(ge=0), 0.0)}))
 MEANS.register("transform", Record({"child": Field(MEANS), **TRANSFORM.fields}))
+# Sampled means (mesh bakes, grids, procedural shapes) are interpolated "cubic" (the
+# interpolating tricubic B-spline: C2, no cell facets in a mirror, O(h^4) on smooth data,
+# may overshoot between samples) or "linear" (trilinear: never leaves the samples' range,
+# gradient jumps at cell faces).
+_INTERPOLATION = Field(Enum("cubic", "linear"), "cubic")
 # Baked signed distance of a triangle mesh (gpiscl/host/sdf_bake.py): `resolution`
 # samples along the longest axis of the mesh bounds grown by `margin` per side (null:
 # 10% of the largest extent); `band` clamps distances to [-band, band] (null: none);
@@ -69,13 +74,16 @@ MEANS.register("mesh", Record({"file": Field(File((".obj", ".ply", ".stl", ".off
                                "resolution": Field(Int(ge=4, le=256), 128),
                                "margin": Field(Nullable(Number(gt=0)), None),
                                "band": Field(Nullable(Number(gt=0)), None),
-                               "transform": Field(TRANSFORM, {})}))
+                               "transform": Field(TRANSFORM, {}),
+                               "interpolation": _INTERPOLATION}))
 # A voxel grid of mean values (.npz with values (nx, ny, nz), origin, voxel_size).
-MEANS.register("grid", Record({"file": Field(File((".npz",), grid_problem))}))
+MEANS.register("grid", Record({"file": Field(File((".npz",), grid_problem)),
+                               "interpolation": _INTERPOLATION}))
 # the authors' procedural shapes (gp/knob.py), sampled on a grid like a baked mesh
 MEANS.register("procedural", Record({
     "function": Field(Enum("knob", "knob_inner", "knob_outer")),
     "resolution": Field(Int(ge=16, le=512), 128),
+    "interpolation": _INTERPOLATION,
 }))
 
 # Spatially varying multipliers (function space only): sigma(x) = sigma m(x) on every

@@ -105,10 +105,67 @@ inline float gp_grid_trilinear(GP_MEAN_SPACE const MeanNode* n, float3 u, float3
  * distance (p0.x = 1 / S converts voxels to the normalised samples' units):
  * sqrt(g^2 + d^2) where g >= 0, g + d where g < 0 (means.GridMean says why); either
  * keeps |gradient| <= 1 in these units (device_layout.py). */
+/* Cubic B-spline weights of the four taps around fraction t of a cell, and their
+ * derivatives (means._bspline_weights). */
+inline void gp_bspline(float t, float* w, float* dw)
+{
+    float s = 1.0f - t, t2 = t * t, t3 = t2 * t;
+    w[0] = s * s * s / 6.0f;
+    w[1] = (3.0f * t3 - 6.0f * t2 + 4.0f) / 6.0f;
+    w[2] = (-3.0f * t3 + 3.0f * t2 + 3.0f * t + 1.0f) / 6.0f;
+    w[3] = t3 / 6.0f;
+    dw[0] = -0.5f * s * s;
+    dw[1] = 0.5f * (3.0f * t2 - 4.0f * t);
+    dw[2] = 0.5f * (-3.0f * t2 + 2.0f * t + 1.0f);
+    dw[3] = 0.5f * t2;
+}
+
+/* The interpolating tricubic B-spline (a cubic grid leaf: its payload holds the
+ * (n + 2)^3 coefficients, sample i at coefficient i + 1) at index coordinates u clamped
+ * to the sample box, with its gradient in index units (0 along clamped axes) and
+ * *out = u - clamped u, as gp_grid_trilinear; means.cubic_eval is the reference. */
+inline float gp_grid_cubic(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* grad,
+                           float3* out)
+{
+    GP_MEAN_SPACE const MeanNode* payload = n + 1;
+    float3 hi = n->p1.xyz - 1.0f;
+    float3 c = fmin(fmax(u, (float3)(0.0f)), hi);
+    float3 cell = fmin(floor(c), hi - 1.0f), t = c - cell;
+    float wx[4], wy[4], wz[4], dx[4], dy[4], dz[4];
+    gp_bspline(t.x, wx, dx);
+    gp_bspline(t.y, wy, dy);
+    gp_bspline(t.z, wz, dz);
+    int sy = (int)n->p1.z + 2, sx = ((int)n->p1.y + 2) * sy;
+    int base = (int)cell.x * sx + (int)cell.y * sy + (int)cell.z;
+    float v = 0.0f;
+    float3 g = (float3)(0.0f);
+    for (int a = 0; a < 4; ++a) {
+        float3 ga = (float3)(0.0f);
+        float va = 0.0f;
+        for (int b = 0; b < 4; ++b) {
+            float vb = 0.0f, db = 0.0f;
+            int row = base + a * sx + b * sy;
+            for (int e = 0; e < 4; ++e) {
+                float q = gp_grid_sample(payload, row + e);
+                vb += wz[e] * q;
+                db += dz[e] * q;
+            }
+            va += wy[b] * vb;
+            ga += (float3)(0.0f, dy[b] * vb, wy[b] * db);
+        }
+        v += wx[a] * va;
+        g += (float3)(dx[a] * va, wx[a] * ga.y, wx[a] * ga.z);
+    }
+    *out = u - c;
+    *grad = select(g, (float3)(0.0f), isnotequal(*out, (float3)(0.0f)));
+    return v;
+}
+
 inline float gp_mean_grid(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* g)
 {
     float3 out, dir, grad;
-    float v = gp_grid_trilinear(n, u, &grad, &out);
+    float v = n->p0.y > 0.5f ? gp_grid_cubic(n, u, &grad, &out)
+                             : gp_grid_trilinear(n, u, &grad, &out);
     float d = n->p0.x * gp_norm_dir3(out, &dir);
     if (!(d > 0.0f)) {
         *g = grad;

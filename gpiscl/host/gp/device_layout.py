@@ -52,7 +52,9 @@ GP_KERNEL = Struct("GpKernel", (
 #   torus     p0.x = major, p0.y = minor
 #   capsule   p0.xyz = a, p0.w = radius, p1.xyz = b
 #   grid      the map goes to index coordinates u (voxel units, sample (i,j,k) at u = i,j,k);
-#             p1.xyz = sample counts (nx, ny, nz); p0.x = 1 / S, S = GridMean.lipschitz
+#             p1.xyz = sample counts (nx, ny, nz); p0.y = 1: cubic, the payload holds the
+#             (nx + 2, ny + 2, nz + 2) B-spline coefficients (means.cubic_coefficients)
+#             instead of the samples; p0.x = 1 / S, S = GridMean.lipschitz
 #             (world units), the weight of the outside distance (in voxels); flags =
 #             number of payload records that follow the leaf.
 #             Samples are stored divided by S h, with scale multiplied by S h: the leaf's
@@ -252,12 +254,15 @@ def _grid_leaf(node: M.GridMean, m, scale):
     h = float(node.voxel_size)
     s_index = node.lipschitz * h            # slope bound per voxel
     to_index = np.concatenate([np.eye(3) / h, -np.asarray(node.origin, float)[:, None] / h], 1)
-    payload = pack_payload(values / s_index)     # C order: (i ny + j) nz + k
+    cubic = node.interpolation == "cubic"
+    samples = node.coefficients if cubic else values
+    _check_grid_size(samples)
+    payload = pack_payload(samples / s_index)     # C order: (i ny + j) nz + k
     rec = MEAN_NODE.zeros(1)
     rec["kind"] = MEAN_KINDS["grid"]
     rec["flags"] = len(payload)
     rec["row0"], rec["row1"], rec["row2"] = _compose(m, to_index)
-    rec["p0"] = (h / s_index, 0.0, 0.0, 0.0)
+    rec["p0"] = (h / s_index, 1.0 if cubic else 0.0, 0.0, 0.0)
     rec["p1"] = (*values.shape, 0.0)
     rec["scale"] = scale * s_index
     return np.concatenate([rec, payload])

@@ -253,7 +253,10 @@ class Transform(Mean):
 
 @dataclass(frozen=True, eq=False)
 class GridMean(Mean):
-    """Trilinear interpolant of samples values[i, j, k] at origin + voxel_size (i, j, k).
+    """Interpolant of samples values[i, j, k] at origin + voxel_size (i, j, k):
+    interpolation "linear" (trilinear) or "cubic" (the interpolating tricubic B-spline
+    with natural end conditions, cubic_coefficients: C2, so a mirror shows no cell facets,
+    and O(h^4) accurate on smooth data; it may overshoot the samples between them).
 
     values has shape (nx, ny, nz), x index first, each >= 2. The gradient is that of the
     same interpolant (one-sided at cell faces: the cell is floor(u) clamped to the last
@@ -273,8 +276,12 @@ class GridMean(Mean):
     values: np.ndarray
     origin: tuple = (0.0, 0.0, 0.0)
     voxel_size: float = 1.0
+    interpolation: str = "linear"
 
     def __post_init__(self):
+        if self.interpolation not in ("linear", "cubic"):
+            raise ValueError(f"grid interpolation must be 'linear' or 'cubic' (got "
+                             f"{self.interpolation!r})")
         v = np.asarray(self.values)
         if v.ndim != 3 or min(v.shape) < 2:
             raise ValueError(f"grid values must be a 3-D array (nx, ny, nz) with every "
@@ -291,7 +298,14 @@ class GridMean(Mean):
     @cached_property
     def lipschitz(self) -> float:
         """A bound on |gradient| (world units) over all space; >= 1 (the outside term)."""
+        if self.interpolation == "cubic":
+            return cubic_slope_bound(self.coefficients, float(self.voxel_size))
         return grid_slope_bound(np.asarray(self.values, np.float64), float(self.voxel_size))
+
+    @cached_property
+    def coefficients(self) -> np.ndarray:
+        """The cubic B-spline coefficients, (nx + 2, ny + 2, nz + 2) (cubic only)."""
+        return cubic_coefficients(np.asarray(self.values, np.float64))
 
     def value_and_gradient(self, x):
         x = _vec(x)
@@ -300,6 +314,9 @@ class GridMean(Mean):
         hi = np.asarray(vals.shape, np.float64) - 1.0
         u = (x - _vec(self.origin)) / h
         c = np.clip(u, 0.0, hi)
+        if self.interpolation == "cubic":
+            value, grad = cubic_eval(self.coefficients, c)
+            return _continue_outside(value, grad / h, u - c, h)
         cell = np.minimum(np.floor(c), hi - 1.0)
         t = c - cell
         i, j, k = (cell[..., a].astype(np.intp) for a in range(3))
@@ -325,19 +342,96 @@ class GridMean(Mean):
                   lerp(corner[1, 0, 1] - corner[1, 0, 0], corner[1, 1, 1] - corner[1, 1, 0], ty),
                   tx)
         grad = np.stack([gx, gy, gz], axis=-1) / h
-        out = u - c
-        grad = np.where(out != 0.0, 0.0, grad)      # clamped axes: g(c(x)) is flat there
-        d, direction = _norm_and_dir(out)
-        d = h * d
-        outside = d > 0.0
-        negative = value < 0.0
-        r = np.sqrt(value**2 + d**2)
-        safe = np.where(outside, r, 1.0)[..., None]
-        g_pos = (value[..., None] * grad + d[..., None] * direction) / safe
-        v_out = np.where(negative, value + d, r)
-        g_out = np.where(negative[..., None], grad + direction, g_pos)
-        return (np.where(outside, v_out, value),
-                np.where(outside[..., None], g_out, grad))
+        return _continue_outside(value, grad, u - c, h)
+
+
+def _continue_outside(value, grad, out, h):
+    """The grid's value and gradient at x from those at the clamped point c (GridMean's
+    docstring): out = (x - c) / h."""
+    grad = np.where(out != 0.0, 0.0, grad)      # clamped axes: g(c(x)) is flat there
+    d, direction = _norm_and_dir(out)
+    d = h * d
+    outside = d > 0.0
+    negative = value < 0.0
+    r = np.sqrt(value**2 + d**2)
+    safe = np.where(outside, r, 1.0)[..., None]
+    g_pos = (value[..., None] * grad + d[..., None] * direction) / safe
+    v_out = np.where(negative, value + d, r)
+    g_out = np.where(negative[..., None], grad + direction, g_pos)
+    return (np.where(outside, v_out, value),
+            np.where(outside[..., None], g_out, grad))
+
+
+def _spline_system(n: int) -> np.ndarray:
+    """The (n + 2)^2 matrix taking B-spline coefficients to the n samples (interpolation
+    rows) and the two natural end conditions (zero second derivative at both ends)."""
+    A = np.zeros((n + 2, n + 2))
+    for i in range(n):
+        A[i, i:i + 3] = (1.0 / 6.0, 4.0 / 6.0, 1.0 / 6.0)
+    A[n, 0:3] = (1.0, -2.0, 1.0)
+    A[n + 1, n - 1:n + 2] = (1.0, -2.0, 1.0)
+    return A
+
+
+def cubic_coefficients(values: np.ndarray) -> np.ndarray:
+    """Coefficients c of the interpolating tricubic B-spline: sample (i, j, k) sits at
+    coefficient index (i + 1, j + 1, k + 1), f(u) = sum c[a, b, e] B(u_x + 1 - a) ... with
+    the uniform cubic B-spline B. Separable: one (n + 2)-square solve per axis."""
+    c = np.asarray(values, np.float64)
+    for axis in range(3):
+        n = c.shape[axis]
+        pad = [(0, 0)] * 3
+        pad[axis] = (0, 2)                       # the end-condition rows' zero right sides
+        rhs = np.moveaxis(np.pad(c, pad), axis, 0)
+        sol = np.linalg.solve(_spline_system(n), rhs.reshape(n + 2, -1))
+        c = np.moveaxis(sol.reshape(rhs.shape), 0, axis)
+    return c
+
+
+def _bspline_weights(t):
+    """Weights of the four coefficients around a point at fraction t of its cell, and of
+    their derivative (per unit of t)."""
+    s = 1.0 - t
+    w = np.stack([s**3, 3 * t**3 - 6 * t**2 + 4, -3 * t**3 + 3 * t**2 + 3 * t + 1, t**3]) / 6
+    dw = np.stack([-s**2, 3 * t**2 - 4 * t, -3 * t**2 + 2 * t + 1, t**2]) / 2
+    return w, dw
+
+
+def cubic_eval(coef: np.ndarray, c: np.ndarray):
+    """Value and gradient (index units) of the spline at clamped index coordinates c
+    (..., 3), as gp_mean.h gp_grid_cubic: cell floor(c) clamped to the last one."""
+    hi = np.asarray(coef.shape, np.float64) - 3.0        # the last sample's index
+    cell = np.minimum(np.floor(c), hi - 1.0)
+    t = c - cell
+    base = cell.astype(np.intp)                         # coefficient index of tap 0
+    wx, dx = _bspline_weights(t[..., 0])
+    wy, dy = _bspline_weights(t[..., 1])
+    wz, dz = _bspline_weights(t[..., 2])
+    value = np.zeros(c.shape[:-1])
+    grad = np.zeros(c.shape)
+    for a in range(4):
+        for b in range(4):
+            for e in range(4):
+                q = coef[base[..., 0] + a, base[..., 1] + b, base[..., 2] + e]
+                value += wx[a] * wy[b] * wz[e] * q
+                grad[..., 0] += dx[a] * wy[b] * wz[e] * q
+                grad[..., 1] += wx[a] * dy[b] * wz[e] * q
+                grad[..., 2] += wx[a] * wy[b] * dz[e] * q
+    return value, grad
+
+
+def cubic_slope_bound(coef: np.ndarray, h: float) -> float:
+    """A bound on |grad| of the cubic GridMean (world units). Along each axis the
+    derivative is a quadratic B-spline (weights >= 0, sum 1) of coefficient differences
+    in that axis, times cubic B-spline weights in the others, so |d_a f| <= max |diff_a c|
+    / h and |grad| <= the norm of the three. Outside: as grid_slope_bound, max(a, 1) where
+    the face values are >= 0 (convex combinations of the three coefficient layers at the
+    face, all >= 0), sqrt(a^2 + 1) otherwise."""
+    per_axis = [float(np.max(np.abs(np.diff(coef, axis=a)))) / h for a in range(3)]
+    a2 = sum(d * d for d in per_axis)
+    faces_positive = all(float(np.min(np.take(coef, idx, axis=a))) >= 0.0
+                         for a in range(3) for idx in (np.arange(3), np.arange(-3, 0)))
+    return float(np.sqrt(max(a2, 1.0) if faces_positive else a2 + 1.0))
 
 
 def _corner_gradients2(values: np.ndarray) -> np.ndarray:
