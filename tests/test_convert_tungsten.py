@@ -181,3 +181,90 @@ def test_mesh_proxy_maps_to_a_convex_mesh_proxy(tmp_path):
     assert proxies[0]["file"] == str(tmp_path / "meshes" / "wedge.obj")
     assert proxies[0]["transform"]["translate"] == pytest.approx([0, 1, -0.49])
     assert proxies[0]["transform"]["scale"] == pytest.approx([0.5] * 3)
+
+
+# ---- VDB-backed means and sigma grids (the authors' baked CSG and bunny scenes) ----------
+
+def _baked_doc(scale=2.0, offset=0.0):
+    """The CSG test with its GP replaced by the baked one of gp-csg-test/baked-32.json,
+    with the bunny's grid transform and interpolation keys."""
+    doc = authors_scene()
+    grid = {"type": "vdb", "file": "baked.vdb", "normalize_size": False,
+            "transform": {"position": [0, 0.8, 0]}}
+    doc["media"][0]["gaussian_process"] = {
+        "id": 0, "type": "standard",
+        "mean": {"type": "tabulated",
+                 "grid": {**grid, "density_name": "mean", "interpolate": "quadratic"}},
+        "covariance": {"type": "nonstationary", "offset": offset, "scale": scale,
+                       "cov": {"type": "squared_exponential", "lengthScale": 0.5, "sigma": 1},
+                       "grid": {**grid, "density_name": "variance", "interpolate": "linear"}}}
+    return doc
+
+
+def _assets():
+    from gpiscl.host.sdf_bake import load_grid
+    assets = ROOT / "scenes" / "assets"
+    return load_grid(assets / "csg_baked_mean.npz"), load_grid(assets / "csg_baked_sigma.npz")
+
+
+def test_vdb_grids_map_to_grid_means_and_sigma_fields(tmp_path, monkeypatch, device):
+    """Without a binding, grids converted elsewhere (STEM.NAME.npz beside the .vdb) are
+    used; offset/scale reach the sigma values, the grid transform becomes a transform
+    mean and moves the sigma grid's origin, and the scene renders."""
+    from gpiscl.host import vdb
+    from gpiscl.host.sdf_bake import load_field_grid, save_grid
+    monkeypatch.setattr(vdb, "import_openvdb", lambda: None)
+    mean, sd = _assets()
+    save_grid(tmp_path / "baked.mean.npz", mean)
+    save_grid(tmp_path / "baked.variance.npz", sd)
+    (tmp_path / "baked.vdb").write_bytes(b"")
+    scene, notes = convert_tungsten(_baked_doc(), str(tmp_path / "scene.json"), SKY)
+    g = [s for s in load_scene(scene).data["shapes"] if s["type"] == "gpis"][0]
+    assert g["mean"]["type"] == "transform" and g["mean"]["translate"] == [0, 0.8, 0]
+    assert g["mean"]["child"]["interpolation"] == "cubic"
+    assert any("quadratic" in n for n in notes)
+    field = load_field_grid(g["kernel"]["sigma_field"]["file"])
+    np.testing.assert_allclose(field.values, 2.0 * sd.values, rtol=1e-6)
+    np.testing.assert_allclose(field.origin, np.asarray(sd.origin) + [0, 0.8, 0])
+    assert g["sampler"]["type"] == "function_space"
+    res = render_result(scene, spp=1, resolution=(8, 8), device=device)
+    assert res.stats.gpis_failed == 0 and res.stats.nan_paths == 0, res.stats.summary()
+
+
+def test_vdb_grids_without_a_binding_or_a_converted_copy_say_how(tmp_path, monkeypatch):
+    from gpiscl.host import vdb
+    monkeypatch.setattr(vdb, "import_openvdb", lambda: None)
+    (tmp_path / "baked.vdb").write_bytes(b"")
+    with pytest.raises(SceneError) as info:
+        convert_tungsten(_baked_doc(), str(tmp_path / "scene.json"), SKY)
+    assert info.value.key == "media[0].gaussian_process.mean.grid.file"
+    assert "convert-vdb baked.vdb baked.mean.npz --grid mean" in info.value.reason
+
+
+def test_vdb_grids_convert_with_a_binding_and_refuse_a_negative_sigma(tmp_path, monkeypatch):
+    """With a (stand-in) OpenVDB binding the grids are converted into grid_dir; a sigma
+    grid that offset and scale make negative is an error at the covariance's key."""
+    import types
+    from gpiscl.host import vdb
+    from test_convert_vdb import FakeGrid
+    mean, sd = _assets()
+
+    def fake(name, grid):
+        voxels = {tuple(int(i) for i in ijk): float(grid.values[tuple(ijk)])
+                  for ijk in np.argwhere(np.ones(grid.shape, bool))}
+        return FakeGrid(name, voxels, 0.0, grid.voxel_size, grid.origin)
+
+    grids = [fake("mean", mean), fake("variance", sd)]
+    monkeypatch.setattr(vdb, "import_openvdb",
+                        lambda: types.SimpleNamespace(readAll=lambda path: (grids, {})))
+    (tmp_path / "baked.vdb").write_bytes(b"")
+    out = tmp_path / "grids"
+    out.mkdir()
+    scene, _ = convert_tungsten(_baked_doc(), str(tmp_path / "scene.json"), SKY, grid_dir=out)
+    load_scene(scene)
+    assert (out / "baked.mean.npz").is_file() and (out / "baked.variance.sigma.npz").is_file()
+    with pytest.raises(SceneError) as info:
+        convert_tungsten(_baked_doc(offset=-0.05), str(tmp_path / "scene.json"), SKY,
+                         grid_dir=out)
+    assert info.value.key == "media[0].gaussian_process.covariance.grid"
+    assert "must be > 0" in info.value.reason

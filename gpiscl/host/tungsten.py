@@ -33,13 +33,23 @@ Mapping (../shared/design/REFERENCE-ALGORITHMS.md section 8 describes their form
             it at load time; its rotY rotX rotZ rotation becomes our x-then-y-then-z Euler
             angles of the same matrix; `signed` is ignored, as by the reference; the exact
             distance becomes a 128^3 baked grid, listed in the notes)
+          tabulated {grid, offset, scale, volume} -> grid (values (g + offset) scale, with
+            g <- -log(max(1e-4, g)) first when volume; interpolate "quadratic" -> cubic, as
+            gpiscl has no quadratic spline; the grid's transform -> a transform mean)
   kernels squared_exponential, rational_quadratic (a -> alpha), thin_plate (R -> radius),
-          with sigma, lengthScale and aniso; the reference's kernels and ours agree there
+          with sigma, lengthScale and aniso; the reference's kernels and ours agree there;
+          nonstationary {cov, grid | variance, offset, scale} -> cov with a sigma_field grid
+            of (g + offset) scale (their grid holds a deviation multiplier, the name
+            notwithstanding; a translation in the grid's transform moves the grid's origin)
+  grids   {type: vdb, file, density_name} (a VDB grid): read with an OpenVDB binding when
+          one imports (vdb.py), else from FILE_STEM.DENSITY_NAME.npz next to the .vdb if
+          present (made elsewhere with `python -m gpiscl convert-vdb`); written .npz files
+          go to `grid_dir` (default: next to the .vdb)
 
-Everything else (procedural and tabulated means, a mesh mean's `min` clamp, their radial periodic kernel, rough
-conductors, mesh proxies, .hdr environment maps, rotated cubes) is an error naming the key
-path and the reason, never silently dropped. Pass `environment` to substitute a missing
-environment map.
+Everything else (procedural means, a mesh mean's `min` clamp, their radial periodic kernel,
+rough conductors, mesh proxies, .hdr environment maps, rotated cubes) is an error naming
+the key path and the reason, never silently dropped. Pass `environment` to substitute a
+missing environment map.
 """
 from __future__ import annotations
 
@@ -79,9 +89,10 @@ def euler_xyz(rot) -> list:
 
 
 class _Converter:
-    def __init__(self, doc: dict, source: str, environment=None):
+    def __init__(self, doc: dict, source: str, environment=None, grid_dir=None):
         self.doc, self.source, self.environment = doc, source, environment
         self.base = Path(source).resolve().parent if source != "<dict>" else Path.cwd()
+        self.grid_dir = Path(grid_dir) if grid_dir is not None else None
         self.notes: list[str] = []
 
     def fail(self, key: str, reason: str):
@@ -176,8 +187,92 @@ class _Converter:
                     "normal": m.get("direction", [1, 0, 0]), "scale": m.get("scale", 1.0)}
         if kind == "mesh":
             return self.mesh_mean(m, key)
+        if kind == "tabulated":
+            return self.tabulated_mean(m, key)
         self.fail(f"{key}.type", f'mean "{kind}" is not supported (homogeneous, spherical, '
-                  'linear, mesh)')
+                  'linear, mesh, tabulated)')
+
+    def vdb_grid(self, spec, key: str, offset=0.0, scale=1.0, volume=False,
+                 kind="mean") -> tuple[str, dict]:
+        """(.npz path, the grid's transform) of a VDB grid reference, its values mapped
+        to (g + offset) scale (after g <- -log(max(1e-4, g)) when volume)."""
+        from . import vdb
+        from .sdf_bake import load_grid, save_grid
+        if not isinstance(spec, dict) or spec.get("type") != "vdb":
+            self.fail(f"{key}.type", "only VDB grids ({type: vdb, file, density_name}) are "
+                      "supported")
+        if not isinstance(spec.get("file"), str):
+            self.fail(f"{key}.file", "expected the .vdb file name")
+        src = (self.base / spec["file"]).resolve()
+        name = spec.get("density_name", "density")
+        out_dir = self.grid_dir or src.parent
+        converted = src.parent / f"{src.stem}.{name}.npz"
+        if not converted.is_file():
+            if not src.is_file():
+                self.fail(f"{key}.file", f"file not found: {src}")
+            if vdb.import_openvdb() is None:
+                self.fail(f"{key}.file", f"{vdb.HOW_TO_GET}; or convert it where one is "
+                          f"available (python -m gpiscl convert-vdb {src.name} "
+                          f"{converted.name} --grid {name}) and keep the .npz next to the .vdb")
+            converted = out_dir / f"{src.stem}.{name}.npz"
+            try:
+                vdb.convert_vdb(str(src), str(converted), name)
+            except SceneError as exc:
+                self.fail(f"{key}.density_name", exc.reason)
+        if offset == 0.0 and scale == 1.0 and not volume:
+            return str(converted), spec.get("transform", {})
+        try:
+            g = load_grid(converted)
+        except ValueError as exc:
+            self.fail(f"{key}.file", f"{converted}: {exc}")
+        values = np.asarray(g.values, np.float64)
+        if volume:
+            values = -np.log(np.maximum(values, 1e-4))
+        out = out_dir / f"{src.stem}.{name}.{kind}.npz"
+        save_grid(out, type(g)((values + offset) * scale, g.origin, g.voxel_size))
+        return str(out), spec.get("transform", {})
+
+    def tabulated_mean(self, m: dict, key: str) -> dict:
+        path, t = self.vdb_grid(m.get("grid"), f"{key}.grid", float(m.get("offset", 0.0)),
+                                float(m.get("scale", 1.0)), bool(m.get("volume", False)))
+        interp = m["grid"].get("interpolate", "linear")
+        if interp not in ("linear", "quadratic"):
+            self.fail(f"{key}.grid.interpolate", f'"{interp}" is not supported (linear, '
+                      'quadratic)')
+        if interp == "quadratic":
+            self.notes.append(f"{key}.grid.interpolate: quadratic becomes gpiscl's cubic "
+                              "spline (also smooth, through the same samples)")
+        grid = {"type": "grid", "file": path,
+                "interpolation": "cubic" if interp == "quadratic" else "linear"}
+        if not t:
+            return grid
+        pos, scale, rot = self.transform(t, f"{key}.grid.transform")
+        return {"type": "transform", "child": grid, "scale": scale.tolist(),
+                "rotate": euler_xyz(rot), "translate": pos.tolist()}
+
+    def nonstationary_kernel(self, k: dict, key: str) -> dict:
+        from .sdf_bake import load_grid, save_grid
+        base = self.kernel(k.get("cov", {"type": "squared_exponential"}), f"{key}.cov")
+        if base["type"] not in KERNEL_KEYS:
+            self.fail(f"{key}.cov.type", "expected a stationary kernel")
+        gkey = "grid" if "grid" in k else "variance"
+        if gkey not in k:
+            self.fail(key, "a nonstationary kernel needs a grid (or variance) VDB grid")
+        path, t = self.vdb_grid(k[gkey], f"{key}.{gkey}", float(k.get("offset", 0.0)),
+                                float(k.get("scale", 1.0)), kind="sigma")
+        if t:
+            pos, scale, rot = self.transform(t, f"{key}.{gkey}.transform")
+            if np.any(scale != 1.0) or np.any(rot != np.eye(3)):
+                self.fail(f"{key}.{gkey}.transform", "only a translation of a sigma grid is "
+                          "supported")
+            g = load_grid(path)
+            path = str(Path(path).with_suffix("")) + ".moved.npz"
+            save_grid(path, type(g)(g.values, tuple(np.asarray(g.origin) + pos), g.voxel_size))
+        from .sdf_bake import field_grid_problem
+        problem = field_grid_problem(path)
+        if problem:
+            self.fail(f"{key}.{gkey}", f"{path}: {problem}")
+        return {**base, "sigma_field": {"type": "grid", "file": path}}
 
     def mesh_mean(self, m: dict, key: str) -> dict:
         for name in m:
@@ -211,6 +306,8 @@ class _Converter:
 
     def kernel(self, k: dict, key: str) -> dict:
         kind = k.get("type")
+        if kind == "nonstationary":
+            return self.nonstationary_kernel(k, key)
         if kind not in KERNEL_KEYS:
             why = (" (the reference's periodic kernel is radial; gpiscl's is a product over "
                    "axes)" if kind == "periodic" else "")
@@ -345,7 +442,10 @@ class _Converter:
                 "camera": self.camera(), "render": render, "shapes": shapes, "lights": lights}
 
 
-def convert_tungsten(doc: dict, source: str = "<dict>", environment: dict | None = None):
-    """gpiscl scene dict and a list of notes on lossy mappings; SceneError if unsupported."""
-    c = _Converter(doc, source, environment)
+def convert_tungsten(doc: dict, source: str = "<dict>", environment: dict | None = None,
+                     grid_dir=None):
+    """gpiscl scene dict and a list of notes on lossy mappings; SceneError if unsupported.
+    grid_dir: where .npz grids converted from VDB grids are written (default: beside
+    their .vdb)."""
+    c = _Converter(doc, source, environment, grid_dir)
     return c.convert(), c.notes
