@@ -417,15 +417,15 @@ def test10_grid_file_round_trips_into_the_program(tmp_path):
     g = random_grid(np.random.default_rng(8))
     sdf_bake.save_grid(tmp_path / "g.npz", g)
     scene = _load(tmp_path, _gpis_scene({"type": "transform", "translate": [0.5, 0, 0],
-                                         "child": {"type": "grid", "file": "g.npz",
-                                                   "interpolation": "linear"}}))
+                                         "child": {"type": "grid", "file": "g.npz"}}))
     from gpiscl.host.gpis_compile import build_mean
     mean = build_mean(scene.data["shapes"][0]["mean"])
     x = np.random.default_rng(9).uniform(-2, 2, (100, 3))
     np.testing.assert_allclose(mean.value(x), Transform(g, np.concatenate(
         [np.eye(3), [[0.5], [0], [0]]], 1)).value(x), atol=1e-12)
-    # the default is the cubic spline through the same samples
-    scene = _load(tmp_path, _gpis_scene({"type": "grid", "file": "g.npz"}))
+    # "cubic": the spline through the same samples
+    scene = _load(tmp_path, _gpis_scene({"type": "grid", "file": "g.npz",
+                                         "interpolation": "cubic"}))
     cubic = build_mean(scene.data["shapes"][0]["mean"])
     assert cubic.interpolation == "cubic"
     idx = np.argwhere(np.ones(g.shape, bool))

@@ -54,23 +54,31 @@ def main():
     print(f"{'scene':28s} {'off s':>8s} {'on s':>8s} {'off/on':>7s} {'rays off':>10s} "
           f"{'rays on':>10s}")
     for path in args.scenes:
-        compiled, times, rays = {}, {"off": [], "on": []}, {}
-        for name, eps in (("off", None), ("on", args.eps)):
-            data = variant(path, eps, args.resolution)
-            compiled[name] = (compile_scene(data), dict(data["render"], spp=args.spp))
-            WavefrontIntegrator(dev, *compiled[name], None).render(1)   # warm-up: builds
-        for _ in range(args.repeats):
-            for name in ("off", "on"):
-                # a fresh integrator per render: its statistics accumulate over renders
-                integ = WavefrontIntegrator(dev, *compiled[name], None)
-                t = time.perf_counter()
-                res = integ.render(args.spp)
-                times[name].append(time.perf_counter() - t)
-                rays[name] = res.stats.rays
-        off, on = (statistics.median(times[n]) for n in ("off", "on"))
+        data = {name: variant(path, eps, args.resolution)
+                for name, eps in (("off", None), ("on", args.eps))}
+        times, rays = time_variants(dev, data, args.spp, args.repeats)
+        off, on = times["off"], times["on"]
         print(f"{Path(path).stem:28s} {off:8.2f} {on:8.2f} {off / on:7.2f} "
               f"{rays['off']:10d} {rays['on']:10d}", flush=True)
 
+
+def time_variants(dev, variants: dict, spp: int, repeats: int):
+    """Median render seconds and rays of each resolved scene variant (name -> data): the
+    variants alternate so that load from other users of the machine hits all alike; only
+    the integrator's render is timed (compiled and built before)."""
+    compiled, times, rays = {}, {name: [] for name in variants}, {}
+    for name, data in variants.items():
+        compiled[name] = (compile_scene(data), dict(data["render"], spp=spp))
+        WavefrontIntegrator(dev, *compiled[name], None).render(1)   # warm-up: builds
+    for _ in range(repeats):
+        for name in variants:
+            # a fresh integrator per render: its statistics accumulate over renders
+            integ = WavefrontIntegrator(dev, *compiled[name], None)
+            t = time.perf_counter()
+            res = integ.render(spp)
+            times[name].append(time.perf_counter() - t)
+            rays[name] = res.stats.rays
+    return {name: statistics.median(t) for name, t in times.items()}, rays
 
 if __name__ == "__main__":
     main()

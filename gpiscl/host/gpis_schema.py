@@ -60,11 +60,15 @@ for _op in ("union", "intersection", "difference"):  # k > 0: smooth blend of wi
     MEANS.register(_op, Record({"left": Field(MEANS), "right": Field(MEANS),
                                 "k": Field(Number(ge=0), 0.0)}))
 MEANS.register("transform", Record({"child": Field(MEANS), **TRANSFORM.fields}))
-# Sampled means (mesh bakes, grids, procedural shapes) are interpolated "cubic" (the
-# interpolating tricubic B-spline: C2, no cell facets in a mirror, O(h^4) on smooth data,
-# may overshoot between samples) or "linear" (trilinear: never leaves the samples' range,
-# gradient jumps at cell faces).
-_INTERPOLATION = Field(Enum("cubic", "linear"), "cubic")
+# Sampled means (mesh bakes, grids, procedural shapes) are interpolated "linear"
+# (trilinear: stays within the samples' range, slope bound ~1.4 for a distance, gradient
+# jumps at cell faces, which a mirror micro-BSDF shows as facets) or "cubic" (the
+# interpolating tricubic B-spline: C2, no facets, O(h^4) on smooth data; its certified
+# slope bound comes from coefficient differences, which spike at a distance's point
+# kinks deep inside (~6 for the bunny and the knob, true maximum ~1.45), so weight-space
+# searches and occupancy marches take smaller steps: renders 1.5-2.3x slower,
+# tools/bench_grid_interpolation.py).
+_INTERPOLATION = Field(Enum("linear", "cubic"), "linear")
 # Baked signed distance of a triangle mesh (gpiscl/host/sdf_bake.py): `resolution`
 # samples along the longest axis of the mesh bounds grown by `margin` per side (null:
 # 10% of the largest extent); `band` clamps distances to [-band, band] (null: none);
