@@ -10,7 +10,8 @@
    nearly every segment is a full one; renewal_plus and global (cap 64) memory. The numpy
    column is the batched segment pipeline's rate times N (no numpy free flight is faster).
 3. Paths/s of a small full render (tests/test_fs_render.py's rough ball, 32x32, 16 spp)
-   per memory model, and weight space for scale.
+   per memory model, and weight space for scale; then renewal_plus with sigma(x), l(x)
+   fields, analytic and sampled on grids (the cost of the fields and of the grid reads).
 Numbers are medians over --repeats runs after a warm-up (PoCL compiles per work-group
 size on first use); the machines are shared, so compare ratios.
 """
@@ -71,6 +72,30 @@ __kernel void flight(__global const GpKernel* kp, __global const MeanNode* mean,
 """
 KERNEL = SquaredExponential(sigma=1.0, length_scale=1.0)
 MEAN = Sphere(center=(0.0, 0.0, 0.0), radius=0.5)
+
+
+def field_variants() -> dict:
+    """sigma(x) = sigma (1 + 0.3 x) and l(x) = l (0.75 + 0.25 y) over the ball's proxy
+    [-1.1, 1.1]^3, analytic and as 12^3 grids of their samples (written to a temporary
+    folder that lives as long as the process)."""
+    import atexit
+    import shutil
+    import tempfile
+    from gpiscl.host.gp.kernels import LinearField
+    sig = {"type": "linear", "value": 1.0, "gradient": [0.3, 0.0, 0.0]}
+    ls = {"type": "linear", "value": 0.75, "gradient": [0.0, 0.25, 0.0]}
+    folder = Path(tempfile.mkdtemp())
+    atexit.register(shutil.rmtree, folder, True)
+    h, n = 0.2, 12
+    idx = np.stack(np.meshgrid(*[np.arange(n)] * 3, indexing="ij"), -1)
+    x = -1.1 + h * idx
+    grids = {}
+    for key, f in (("sigma_field", sig), ("length_scale_field", ls)):
+        values = LinearField(f["value"], tuple(f["gradient"])).eval(x)[0]
+        path = folder / f"{key}.npz"
+        np.savez(path, values=values, origin=np.full(3, -1.1), voxel_size=np.float64(h))
+        grids[key] = {"type": "grid", "file": str(path)}
+    return {"analytic": {"sigma_field": sig, "length_scale_field": ls}, "grid": grids}
 
 
 def median_time(fn, repeats):
@@ -201,13 +226,18 @@ def main():
     from gpiscl import render_result
     print("\nfull render, 32x32 x 16 spp, rough GPIS ball (diffuse 0.9, sun + sky)")
     print(f"{'sampler':>24}{'paths/s':>12}{'rays/path':>11}")
-    samplers = [("weight_space M=256", {"type": "weight_space", "features": 256})]
-    samplers += [(f"function_space {m}", fs(m, memory_cap=64))
+    samplers = [("weight_space M=256", {"type": "weight_space", "features": 256}, None)]
+    samplers += [(f"function_space {m}", fs(m, memory_cap=64), None)
                  for m in ("none", "renewal", "renewal_plus", "global")]
-    for name, sampler in samplers:
+    # renewal_plus with sigma(x) and l(x): analytic fields, and the same sampled on grids
+    samplers += [(f"rp {kind} fields", fs("renewal_plus"), fields)
+                 for kind, fields in field_variants().items()]
+    for name, sampler, fields in samplers:
         scene = gpis_scene(sampler, "diffuse", 0.9, LIGHTS, 16, seed=7, max_depth=64,
                            rr_start=8)
         scene["camera"]["resolution"] = [32, 32]
+        if fields:
+            scene["shapes"][0]["kernel"].update(fields)
         stats = []
         render_result(scene, device=dev)   # warm-up
         for _ in range(max(1, args.repeats // 2)):
