@@ -79,8 +79,11 @@ BAD = [
      "media[0].gaussian_process.left.covariance.type", "radial"),
     (_with(["media", 0, "correlation_context"], "parrot"),
      "media[0].correlation_context", "unknown memory model"),
-    (_with(["media", 0, "phase_function", "bsdf", "type"], "rough_conductor"),
+    (_with(["media", 0, "phase_function", "bsdf", "type"], "plastic"),
      "media[0].phase_function.bsdf.type", "micro-BSDF"),
+    (_with(["media", 0, "phase_function", "bsdf"], {"type": "rough_conductor",
+                                                    "distribution": "ggx"}),
+     "media[0].phase_function.bsdf.distribution", "beckmann only"),
     (_with(["primitives", 1, "transform", "rotation"], [0, 45, 0]),
      "primitives[1].transform.rotation", "axis-aligned"),
     (_with(["primitives", 1, "int_medium"], "fog"),
@@ -268,3 +271,14 @@ def test_vdb_grids_convert_with_a_binding_and_refuse_a_negative_sigma(tmp_path, 
                          grid_dir=out)
     assert info.value.key == "media[0].gaussian_process.covariance.grid"
     assert "must be > 0" in info.value.reason
+
+
+def test_rough_copper_maps_to_the_rough_conductor():
+    """The wedge scenes' phase function: rough_conductor Cu, Beckmann 0.1."""
+    doc = _with(["media", 0, "phase_function", "bsdf"],
+                {"type": "rough_conductor", "material": "Cu", "distribution": "beckmann",
+                 "roughness": 0.1})
+    scene, _ = convert_tungsten(doc, str(CSG), SKY)
+    gpis = [s for s in load_scene(scene).data["shapes"] if s["type"] == "gpis"]
+    assert gpis[0]["bsdf"] == {"type": "rough_conductor", "material": "Cu", "roughness": 0.1,
+                               "albedo": [1.0, 1.0, 1.0], "eta": None, "k": None}

@@ -14,7 +14,8 @@ Importing this module registers the "gpis" shape with the scene loader.
 """
 from __future__ import annotations
 
-from .scene import ALBEDO, SHAPES, TRANSFORM, VEC3, _box_extent, _mesh_problem
+from .scene import (ALBEDO, ROUGH_CONDUCTOR, SHAPES, TRANSFORM, VEC3, _box_extent,
+                    _mesh_problem)
 from .gp import function_space_layout as FSL
 from .scene_schema import (Bool, Enum, Field, File, Int, Nullable, Number, Record, Tagged,
                            Vector)
@@ -179,6 +180,7 @@ SAMPLERS = Tagged("sampler", {
 MICRO_BSDFS = Tagged("micro-BSDF", {
     "diffuse": Record({"albedo": Field(ALBEDO, 0.8)}),
     "mirror": Record({"albedo": Field(ALBEDO, 1.0)}),
+    "rough_conductor": ROUGH_CONDUCTOR,   # scene.py: Beckmann microfacets on the realization
 })
 
 

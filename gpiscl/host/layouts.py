@@ -100,7 +100,10 @@ PRIMITIVE = Struct("Primitive", (
 
 MATERIAL = Struct("Material", (
     ("float4", "albedo"),
+    ("float4", "eta"),       # rough_conductor: complex index eta + i k (RGB)
+    ("float4", "k"),
     ("int", "kind"),
+    ("float", "roughness"),  # rough_conductor: Beckmann alpha
 ))
 
 # Lights: the meaning of the vectors depends on kind (see lights.h).
@@ -205,7 +208,7 @@ SHADOW_QUEUE = Queue("shadow", (
 # --- enumerations shared with the device (emitted as #defines) ----------------------
 
 PRIM_KINDS = {"sphere": 0, "rectangle": 1, "disk": 2, "triangle": 3}
-MATERIAL_KINDS = {"diffuse": 0, "mirror": 1, "null": 2}
+MATERIAL_KINDS = {"diffuse": 0, "mirror": 1, "null": 2, "rough_conductor": 3}
 LIGHT_KINDS = {"environment": 0, "environment_map": 1, "point": 2, "sphere": 3,
                "rectangle": 4, "directional": 5}
 # Device-side counters; the host reads only rays_out between bounces.

@@ -14,7 +14,8 @@ import math
 import os
 from dataclasses import dataclass, field
 
-from .scene_schema import (Bool, Context, Field, File, Int, ListOf, Nullable, String,
+from .conductors import CONDUCTORS
+from .scene_schema import (Bool, Context, Enum, Field, File, Int, ListOf, Nullable, String,
                            Number, Record, SceneError, Tagged, Vector, kind_of, show)
 
 __all__ = ["SceneError", "Scene", "load_scene", "write_resolved",
@@ -126,9 +127,27 @@ RENDER = Record({
     }), {}),
 })
 
+def _eta_k_together(b):
+    if (b["eta"] is None) != (b["k"] is None):
+        return ("k" if b["k"] is None else "eta"), "give both eta and k, or neither"
+    return None
+
+
+# A metal with a rough surface: Beckmann microfacets, D ~ exp(-tan^2(theta_m) / alpha^2)
+# with alpha = `roughness` (the rms slope is alpha / sqrt(2) per axis), the exact unpolarised Fresnel term of the complex index eta + i k (a `material`
+# preset, conductors.py, or explicit RGB eta and k), height-correlated Smith masking;
+# `albedo` multiplies it. Single scattering: energy that would bounce between
+# microfacets is lost (a few percent at roughness 0.5, ~0.1% at 0.1).
+ROUGH_CONDUCTOR = Record({"material": Field(Enum(*CONDUCTORS), "Cu"),
+                          "eta": Field(Nullable(RGB), None),
+                          "k": Field(Nullable(RGB), None),
+                          "roughness": Field(Number(ge=1e-3, le=1.0), 0.1),
+                          "albedo": Field(ALBEDO, 1.0)}, [_eta_k_together])
+
 BSDFS = Tagged("bsdf", {
     "diffuse": Record({"albedo": Field(ALBEDO, 0.8)}),
     "mirror": Record({"albedo": Field(ALBEDO, 1.0)}),
+    "rough_conductor": ROUGH_CONDUCTOR,
     "null": Record({}),  # pass-through, for bounding proxies
 })
 DEFAULT_BSDF = {"type": "diffuse", "albedo": [0.8, 0.8, 0.8]}

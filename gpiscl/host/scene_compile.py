@@ -9,6 +9,7 @@ import numpy as np
 from . import layouts
 from .bvh import build_bvh
 from .camera import compile_camera
+from .conductors import eta_k
 from .envmap import build_envmap_tables
 from .gpis_compile import CompiledGpis, compile_gpis
 from .mesh_proxy import bounding_proxy
@@ -45,6 +46,9 @@ class _Builder:
         m = layouts.MATERIAL.zeros(1)[0]
         m["kind"] = layouts.MATERIAL_KINDS[bsdf["type"]]
         m["albedo"][:3] = bsdf.get("albedo", [0.0, 0.0, 0.0])
+        if bsdf["type"] == "rough_conductor":
+            m["eta"][:3], m["k"][:3] = eta_k(bsdf)
+            m["roughness"] = bsdf["roughness"]
         self.materials.append(m)
         return len(self.materials) - 1
 

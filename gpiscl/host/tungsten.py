@@ -6,7 +6,8 @@ Mapping (../shared/design/REFERENCE-ALGORITHMS.md section 8 describes their form
           -> camera (fov made vertical for the image's aspect)
   renderer.spp -> render.spp;  integrator.max_bounces -> render.max_depth;
   integrator.enable_light_sampling -> render.nee
-  bsdfs   lambert -> diffuse, mirror -> mirror, forward/null -> null; a checker texture
+  bsdfs   lambert -> diffuse, mirror -> mirror, rough_conductor {material, roughness,
+          distribution beckmann} -> rough_conductor, forward/null -> null; a checker texture
           albedo becomes the mean of its two colours (listed in the notes)
   primitives
           quad (unit square in xz, normal +y, transform scale/rotation/position) -> rectangle,
@@ -47,8 +48,8 @@ Mapping (../shared/design/REFERENCE-ALGORITHMS.md section 8 describes their form
           go to `grid_dir` (default: next to the .vdb)
 
 Everything else (procedural means, a mesh mean's `min` clamp, their radial periodic kernel,
-rough conductors, mesh proxies, .hdr environment maps, rotated cubes) is an error naming
-the key path and the reason, never silently dropped. Pass `environment` to substitute a
+GGX microfacets, .hdr environment maps, rotated cubes) is an error naming the key path and
+the reason, never silently dropped. Pass `environment` to substitute a
 missing environment map.
 """
 from __future__ import annotations
@@ -129,10 +130,26 @@ class _Converter:
             return {"type": "diffuse", "albedo": albedo}
         if kind == "mirror":
             return {"type": "mirror", "albedo": albedo}
+        if kind == "rough_conductor":
+            return self.rough_conductor(b, key)
         if kind in ("forward", "null") and not micro:
             return {"type": "null"}
         self.fail(f"{key}.type", f'BSDF "{kind}" is not supported'
                   + (" as a micro-BSDF (diffuse or mirror only)" if micro else ""))
+
+    def rough_conductor(self, b: dict, key: str) -> dict:
+        from .conductors import CONDUCTORS
+        dist = b.get("distribution", "ggx")
+        if dist != "beckmann":
+            self.fail(f"{key}.distribution", f'"{dist}" microfacets are not supported '
+                      '(beckmann only)')
+        material = b.get("material", "Cu")
+        if material not in CONDUCTORS:
+            self.fail(f"{key}.material", f'conductor "{material}" has no preset (one of: '
+                      f'{", ".join(CONDUCTORS)}); give eta and k in the converted scene')
+        albedo = self.colour(b.get("albedo", 1.0), f"{key}.albedo")
+        return {"type": "rough_conductor", "material": material,
+                "roughness": float(b.get("roughness", 0.1)), "albedo": albedo}
 
     def transform(self, t: dict, key: str, allow_rotation=True):
         pos = np.asarray(t.get("position", [0, 0, 0]), float)

@@ -60,7 +60,7 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
 
     float3 wi;
     float pdf_bsdf;
-    if (mat->kind == MATERIAL_DIFFUSE) {
+    if (mat->kind == MATERIAL_DIFFUSE || mat->kind == MATERIAL_ROUGH_CONDUCTOR) {
         /* --- next-event estimation --- */
         if (params->nee && params->num_lights > 0) {
             float4 ul = rng4(params->seed, pixel, sample, bounce, DIM_LIGHT);
@@ -71,8 +71,12 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
             float dist, pdf_light;
             float3 Le = sample_light(&lights[li], m, xo, ul.yz, &wl, &dist, &pdf_light);
             float pdf_f;
-            float3 f = diffuse_eval(albedo, n, wl, &pdf_f);
-            float w = (pdf_light > 0.0f) ? power_heuristic(pdf_light, pdf_f) : 1.0f;
+            float3 f = bsdf_eval(mat, albedo, n, -wo, wl, &pdf_f);
+            /* the light strategy's density includes choosing light li (1 / num_lights),
+             * as the BSDF strategy's weight in emission.cl and escaped_rays.cl does:
+             * the two weights of one direction must sum to 1 */
+            float w = (pdf_light > 0.0f)
+                          ? power_heuristic(pdf_light / params->num_lights, pdf_f) : 1.0f;
             float inv_pdf = (pdf_light > 0.0f) ? 1.0f / pdf_light : 1.0f;
             float3 c = beta * f * Le * (w * inv_pdf * params->num_lights);
             if (max3(c) > 0.0f) {
@@ -83,10 +87,16 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
                 shadow_path[k] = p;
             }
         }
-        /* --- BSDF sampling: cosine-weighted, so f cos / pdf = albedo --- */
+        /* --- BSDF sampling --- */
         float4 ub = rng4(params->seed, pixel, sample, bounce, DIM_BSDF);
-        wi = cosine_hemisphere(ub.xy, n, &pdf_bsdf);
-        beta *= albedo;
+        if (mat->kind == MATERIAL_DIFFUSE) {   /* cosine-weighted: f cos / pdf = albedo */
+            wi = cosine_hemisphere(ub.xy, n, &pdf_bsdf);
+            beta *= albedo;
+        } else {
+            beta *= rough_conductor_sample(albedo, mat->eta.xyz, mat->k.xyz, mat->roughness,
+                                           n, -wo, ub.xy, &wi, &pdf_bsdf);
+            if (!(max3(beta) > 0.0f)) return;   /* reflected below the surface */
+        }
     } else {
         wi = wo - 2.0f * dot(wo, n) * n;
         pdf_bsdf = 0.0f;
