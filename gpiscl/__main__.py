@@ -59,6 +59,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--device", help="OpenCL device: 'P:D' indices or a name fragment")
     r.add_argument("--batch-size", type=_positive_int, help="paths in flight per batch")
     r.add_argument("--exposure", type=float, default=0.0, help="PNG preview exposure (stops)")
+    r.add_argument("--tonemap", choices=("clamp", "filmic"),
+                   help="PNG preview curve (default: the scene's render.tonemap)")
     r.add_argument("--stats", action="store_true", help="print per-kernel timings")
     sub.add_parser("devices", help="list OpenCL platforms and devices")
     _add_uq_parser(sub)
@@ -111,7 +113,7 @@ def cmd_render(args) -> int:
     data = copy.deepcopy(scene.data)
     if args.resolution:
         data["camera"]["resolution"] = list(args.resolution)
-    for key in ("spp", "seed", "realization"):
+    for key in ("spp", "seed", "realization", "tonemap"):
         if getattr(args, key) is not None:
             data["render"][key] = getattr(args, key)
     if args.realization == NO_REALIZATION:

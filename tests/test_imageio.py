@@ -69,3 +69,17 @@ def test_tonemap_srgb8():
     np.testing.assert_array_equal(tonemap_srgb8(x / 2, exposure=1.0), out)
     # the linear toe of the sRGB curve: 0.002 -> 12.92 * 0.002 * 255 = 6.59
     assert tonemap_srgb8(np.full((1, 1, 3), 0.002))[0, 0, 0] == 7
+
+
+def test_filmic_tonemap():
+    """Hejl and Burgess-Dawson's curve: black stays black, 1.0 maps to its closed form,
+    it rises monotonically and rolls highlights off below white instead of clipping."""
+    x = np.array([[[0.0, 0.004, 1.0], [0.5, 4.0, 1e3]]])
+    out = tonemap_srgb8(x, curve="filmic").astype(int)
+    y1 = 0.996 * (6.2 * 0.996 + 0.5) / (0.996 * (6.2 * 0.996 + 1.7) + 0.06)
+    assert out[0, 0, 0] == 0 and out[0, 0, 1] == 0 and out[0, 0, 2] == round(255 * y1)
+    ramp = tonemap_srgb8(np.geomspace(1e-3, 1e3, 200).reshape(1, -1, 1).repeat(3, 2),
+                         curve="filmic")[0, :, 0].astype(int)
+    assert np.all(np.diff(ramp) >= 0) and ramp[-1] == 255
+    assert tonemap_srgb8(np.full((1, 1, 3), 4.0), curve="filmic")[0, 0, 0] < 255
+    np.testing.assert_array_equal(tonemap_srgb8(x / 2, 1.0, "filmic"), out)

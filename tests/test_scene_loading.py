@@ -43,7 +43,7 @@ def test_defaults_are_filled():
     assert data["camera"] == {"position": [0.0, 1.0, 4.0], "look_at": [0.0, 1.0, 0.0],
                               "up": [0.0, 1.0, 0.0], "fov": 40.0, "resolution": [256, 256]}
     assert data["render"] == {"spp": 16, "max_depth": 8, "seed": 0, "batch_size": None,
-                              "nee": True, "realization": None,
+                              "nee": True, "realization": None, "tonemap": "clamp",
                               "russian_roulette": {"start_depth": 3, "max_survival": 0.95}}
     assert data["shapes"] == []
     assert data["lights"] == [{"type": "environment", "radiance": [1.0, 1.0, 1.0]}]

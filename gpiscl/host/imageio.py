@@ -48,10 +48,25 @@ def read_exr_rgb(path) -> np.ndarray:
     return np.stack([channels[c] for c in "RGB"], axis=-1)
 
 
-def tonemap_srgb8(rgb, exposure: float = 0.0) -> np.ndarray:
-    """Linear radiance -> 8-bit sRGB: scale by 2**exposure, clamp, encode, round."""
-    x = np.asarray(rgb, dtype=np.float64) * 2.0 ** exposure
-    x = np.clip(np.nan_to_num(x, nan=0.0), 0.0, 1.0)
+TONEMAPS = ("clamp", "filmic")
+
+
+def tonemap_srgb8(rgb, exposure: float = 0.0, curve: str = "clamp") -> np.ndarray:
+    """Linear radiance -> 8-bit display values, after scaling by 2**exposure:
+      clamp   clamp to [0, 1], sRGB-encode
+      filmic  Hejl and Burgess-Dawson's filmic curve (the authors' Tungsten "filmic"):
+              x' = max(x - 0.004, 0), y = x' (6.2 x' + 0.5) / (x' (6.2 x' + 1.7) + 0.06),
+              display-encoded already (its shape includes the gamma); highlights roll
+              off instead of clipping
+    """
+    x = np.nan_to_num(np.asarray(rgb, dtype=np.float64) * 2.0 ** exposure, nan=0.0)
+    if curve == "filmic":
+        x = np.maximum(x - 0.004, 0.0)
+        y = np.clip(x * (6.2 * x + 0.5) / (x * (6.2 * x + 1.7) + 0.06), 0.0, 1.0)
+        return np.rint(y * 255.0).astype(np.uint8)
+    if curve != "clamp":
+        raise ValueError(f"unknown tonemap {curve!r} (expected one of {TONEMAPS})")
+    x = np.clip(x, 0.0, 1.0)
     srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
     return np.rint(srgb * 255.0).astype(np.uint8)
 

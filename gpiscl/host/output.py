@@ -20,6 +20,6 @@ def write_outputs(image: FilmImage, scene: Scene, exr_path, exposure: float = 0.
     paths["exr"].parent.mkdir(parents=True, exist_ok=True)
     extra = {f"stderr.{c}": image.stderr[..., i] for i, c in enumerate("RGB")}
     write_exr(paths["exr"], image.mean, extra)
-    write_png(paths["png"], tonemap_srgb8(image.mean, exposure))
+    write_png(paths["png"], tonemap_srgb8(image.mean, exposure, scene.data["render"]["tonemap"]))
     write_resolved(scene, paths["scene"])
     return paths

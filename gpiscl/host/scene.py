@@ -15,6 +15,7 @@ import os
 from dataclasses import dataclass, field
 
 from .conductors import CONDUCTORS
+from .imageio import TONEMAPS
 from .scene_schema import (Bool, Context, Enum, Field, File, Int, ListOf, Nullable, String,
                            Number, Record, SceneError, Tagged, Vector, kind_of, show)
 
@@ -117,6 +118,8 @@ RENDER = Record({
     "spp": Field(Int(ge=1), 16),
     "max_depth": Field(Int(ge=1), 8),
     "seed": Field(Int(ge=0, lt=2**32), 0),
+    # the PNG preview's curve (imageio.tonemap_srgb8); the EXR keeps linear radiance
+    "tonemap": Field(Enum(*TONEMAPS), "clamp"),
     "batch_size": Field(Nullable(Int(ge=1)), None),  # null: the integrator picks
     "nee": Field(Bool(), True),  # false: BSDF sampling only (a reference for the tests)
     # an integer R: every path sees GPIS realization R (shows one sample of the geometry)

@@ -5,7 +5,7 @@ Mapping (../shared/design/REFERENCE-ALGORITHMS.md section 8 describes their form
   camera  pinhole {transform {position, look_at, up}, fov (horizontal degrees), resolution}
           -> camera (fov made vertical for the image's aspect)
   renderer.spp -> render.spp;  integrator.max_bounces -> render.max_depth;
-  integrator.enable_light_sampling -> render.nee
+  integrator.enable_light_sampling -> render.nee;  camera.tonemap filmic -> render.tonemap
   bsdfs   lambert -> diffuse, mirror -> mirror, rough_conductor {material, roughness,
           distribution beckmann} -> rough_conductor, forward/null -> null; a checker texture
           albedo becomes the mean of its two colours (listed in the notes)
@@ -188,6 +188,8 @@ class _Converter:
             out["max_depth"] = integ["max_bounces"]
         if "enable_light_sampling" in integ:
             out["nee"] = bool(integ["enable_light_sampling"])
+        if self.doc.get("camera", {}).get("tonemap") == "filmic":
+            out["tonemap"] = "filmic"
         return out
 
     def mean(self, m: dict, key: str) -> dict:

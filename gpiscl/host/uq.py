@@ -285,7 +285,8 @@ def write_uq_outputs(sums: UqSums, scene, exr_path, exposure: float = 0.0) -> di
         for i, c in enumerate("RGB"):
             extra[f"{name}.{c}"] = img[..., i]
     write_exr(paths["exr"], sums.mean, extra)
-    write_png(paths["png"], tonemap_srgb8(sums.mean, exposure))
+    curve = scene.data["render"]["tonemap"] if scene is not None else "clamp"
+    write_png(paths["png"], tonemap_srgb8(sums.mean, exposure, curve))
     write_png(paths["std_png"], tonemap_srgb8(sums.std, exposure))
     sums.save(paths["sums"])
     if scene is not None:
