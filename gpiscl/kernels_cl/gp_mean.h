@@ -280,6 +280,37 @@ inline float gp_mean_value(GP_MEAN_SPACE const MeanNode* nodes, int count, float
     return gp_mean_eval(nodes, count, x, &g);
 }
 
+/* A grid leaf's slope bound over the index-space box [lo, hi], in the leaf's sample units
+ * (<= 1; gp_mean_lipschitz's 1 is the whole grid): the largest brick bound over the
+ * bricks holding the cells any point of the box evaluates in (cell = floor of the clamped
+ * point, the last cell at the far faces, as gp_grid_cell), and where the box leaves the
+ * sample box, the outside continuation's slope sqrt(a^2 + (1/S)^2) (GridMean: at most
+ * sqrt(a^2 + 1) in world units, a the face cells' bound). More than 27 bricks (a long
+ * stretch, where the global bound costs little): 1. */
+inline float gp_grid_slope_on(GP_MEAN_SPACE const MeanNode* n, float3 lo, float3 hi)
+{
+    int B = (int)n->p0.z;
+    if (B <= 0) return 1.0f;
+    float3 dims = n->p1.xyz, top = dims - 1.0f;
+    float3 cl = fmin(fmax(lo, (float3)(0.0f)), top), ch = fmin(fmax(hi, (float3)(0.0f)), top);
+    int3 c0 = convert_int3(fmin(floor(cl), top - 1.0f));
+    int3 c1 = convert_int3(fmin(floor(ch), top - 1.0f));
+    int3 b0 = c0 / B, b1 = c1 / B;
+    int3 nb = (convert_int3(dims) - 2) / B + 1;          /* ceil((n - 1) / B) */
+    int3 span = b1 - b0 + 1;
+    if (span.x * span.y * span.z > 27) return 1.0f;
+    int3 nd = convert_int3(dims) + (n->p0.y > 0.5f ? 2 : 0);   /* samples or coefficients */
+    int first = nd.x * nd.y * nd.z;
+    GP_MEAN_SPACE const MeanNode* payload = n + 1;
+    float m = 0.0f;
+    for (int i = b0.x; i <= b1.x; ++i)
+        for (int j = b0.y; j <= b1.y; ++j)
+            for (int k = b0.z; k <= b1.z; ++k)
+                m = fmax(m, gp_grid_sample(payload, first + (i * nb.y + j) * nb.z + k));
+    if (any(lo < (float3)(0.0f)) || any(hi > top)) m = sqrt(m * m + n->p0.x * n->p0.x);
+    return fmin(m, 1.0f);
+}
+
 /* Lipschitz constant of a packed mean program in world units: max over leaves of
  * |scale| ||M||_2 Lip(primitive) (smooth/sharp unions, intersections and differences never
  * exceed their children's). Distance primitives are 1-Lipschitz, a plane |scale|, a
@@ -287,6 +318,20 @@ inline float gp_mean_value(GP_MEAN_SPACE const MeanNode* nodes, int count, float
  * uniformly scaled transforms. ||M||_2^2 <= max row sum of |M M^T| (Gershgorin), exact for
  * scaled rotations. Used by the weight-space search and the occupancy bounds (per ray:
  * grid payloads are jumped over, so the cost is the number of leaves and ops). */
+inline float gp_leaf_lipschitz(GP_MEAN_SPACE const MeanNode* n, float prim)
+{
+    float3 r0 = n->row0.xyz, r1 = n->row1.xyz, r2 = n->row2.xyz;
+    float g01 = fabs(dot(r0, r1)), g02 = fabs(dot(r0, r2)), g12 = fabs(dot(r1, r2));
+    float s2 = fmax(dot(r0, r0) + g01 + g02,
+                    fmax(dot(r1, r1) + g01 + g12, dot(r2, r2) + g02 + g12));
+    return fabs(n->scale) * sqrt(s2) * prim;
+}
+
+inline float gp_leaf_prim_lipschitz(GP_MEAN_SPACE const MeanNode* n)
+{
+    return n->kind == GP_MEAN_CONSTANT ? 0.0f : n->kind == GP_MEAN_PLANE ? fabs(n->p0.y) : 1.0f;
+}
+
 inline float gp_mean_lipschitz(GP_MEAN_SPACE const MeanNode* nodes, int count)
 {
     float lip = 0.0f;
@@ -294,13 +339,43 @@ inline float gp_mean_lipschitz(GP_MEAN_SPACE const MeanNode* nodes, int count)
         GP_MEAN_SPACE const MeanNode* n = nodes + i;
         if (n->kind >= GP_MEAN_FIRST_OP) continue;
         if (n->kind == GP_MEAN_GRID) i += n->flags;   /* payload: not leaves, same result */
-        float prim = n->kind == GP_MEAN_CONSTANT ? 0.0f
-                   : n->kind == GP_MEAN_PLANE ? fabs(n->p0.y) : 1.0f;
-        float3 r0 = n->row0.xyz, r1 = n->row1.xyz, r2 = n->row2.xyz;
-        float g01 = fabs(dot(r0, r1)), g02 = fabs(dot(r0, r2)), g12 = fabs(dot(r1, r2));
-        float s2 = fmax(dot(r0, r0) + g01 + g02,
-                        fmax(dot(r1, r1) + g01 + g12, dot(r2, r2) + g02 + g12));
-        lip = fmax(lip, fabs(n->scale) * sqrt(s2) * prim);
+        lip = fmax(lip, gp_leaf_lipschitz(n, gp_leaf_prim_lipschitz(n)));
     }
     return lip;
 }
+
+/* Whether a mean program has grid leaves (gp_mean_lipschitz_on then pays). */
+inline int gp_mean_has_grid(GP_MEAN_SPACE const MeanNode* nodes, int count)
+{
+    for (int i = 0; i < count; ++i) {
+        if (nodes[i].kind == GP_MEAN_GRID) return 1;   /* the first leaf before any payload */
+    }
+    return 0;
+}
+
+/* gp_mean_lipschitz over the segment [p, q] only: grid leaves contribute their bound
+ * over the segment's cells (gp_grid_slope_on; an affine map takes the segment to a
+ * segment, so the end points' index box holds it, padded for rounding). Any interval
+ * of a ray may use it in place of the global bound. */
+inline float gp_mean_lipschitz_on(GP_MEAN_SPACE const MeanNode* nodes, int count, float3 p,
+                                  float3 q)
+{
+    float lip = 0.0f;
+    for (int i = 0; i < count; ++i) {
+        GP_MEAN_SPACE const MeanNode* n = nodes + i;
+        if (n->kind >= GP_MEAN_FIRST_OP) continue;
+        float prim = gp_leaf_prim_lipschitz(n);
+        if (n->kind == GP_MEAN_GRID) {
+            float3 up = (float3)(dot(n->row0.xyz, p) + n->row0.w, dot(n->row1.xyz, p) + n->row1.w,
+                                 dot(n->row2.xyz, p) + n->row2.w);
+            float3 uq = (float3)(dot(n->row0.xyz, q) + n->row0.w, dot(n->row1.xyz, q) + n->row1.w,
+                                 dot(n->row2.xyz, q) + n->row2.w);
+            float3 pad = 1e-3f + 4.0f * FLT_EPSILON * fmax(fabs(up), fabs(uq));
+            prim = gp_grid_slope_on(n, fmin(up, uq) - pad, fmax(up, uq) + pad);
+            i += n->flags;
+        }
+        lip = fmax(lip, gp_leaf_lipschitz(n, prim));
+    }
+    return lip;
+}
+

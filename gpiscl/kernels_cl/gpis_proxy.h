@@ -64,7 +64,8 @@ inline int gpis_proxy_clip(__global const GpisObject* g, __global const MeanNode
 inline float gpis_occupancy_march(__global const MeanNode* mean, int count, float3 o, float3 d,
                                   float t, float t_stop, float level, float lt, float min_step)
 {
-    float dir = t_stop >= t ? 1.0f : -1.0f, lip = lt / length(d);
+    float dir = t_stop >= t ? 1.0f : -1.0f, dl = length(d), lip = lt / dl;
+    int local_lip = gp_mean_has_grid(mean, count);
     for (int s = 0; s < OCC_MAX_STEPS; ++s) {
         float3 x = o + t * d;
         float mu = gp_mean_value(mean, count, x);
@@ -73,6 +74,14 @@ inline float gpis_occupancy_march(__global const MeanNode* mean, int count, floa
         if (!(g > 0.0f)) break;              /* also NaN: stop, clip nothing more */
         if (!(lt > 0.0f)) return t_stop;     /* constant mean above the level everywhere */
         float step = g / lt;
+        if (local_lip) {
+            /* the bound over the cells of a 4x longer step: if it certifies that step,
+             * take it; otherwise g / (its bound) certifies a step inside that stretch,
+             * never shorter than the global one */
+            float far = fmin(4.0f * step, fabs(t_stop - t));
+            float l4 = gp_mean_lipschitz_on(mean, count, x, o + (t + dir * far) * d) * dl;
+            step = l4 > 0.0f ? fmin(far, fmax(step, g / l4)) : far;
+        }
         if (step < min_step) break;
         t += dir * step;
         if (dir * (t - t_stop) >= 0.0f) return t_stop;

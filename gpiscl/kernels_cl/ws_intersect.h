@@ -174,6 +174,9 @@ inline float ws_first_root_post(WsPostBlock B, GpKernel k, __global const MeanNo
     *normal = (float3)(0.0f);
     if (!(t1 > t0)) return T_INFINITY;
     float lip = ws_mean_lipschitz(mean, mean_count);
+    /* grid means: each interval takes the bound of the cells it crosses (bricks of cells
+     * far from a distance's ridges are ~1, the whole grid's up to ~1.5, ~6 for cubic) */
+    int local_lip = gp_mean_has_grid(mean, mean_count);
     float tres = 4.0f * FLT_EPSILON * (fabs(t0) + fabs(t1) + length(o) / length(d));
     tol = fmax(tol, 2.0f * tres);
     float h0 = 0.5f * rsqrt(fmax(ws_lambda2(k, d), 1e-30f));
@@ -271,8 +274,10 @@ inline float ws_first_root_post(WsPostBlock B, GpKernel k, __global const MeanNo
         /* intervals never narrower than hmin: below tol the end-point sign decides
          * (below), and a bound cannot certify anything within its rounding floor */
         float b = fmin(fmin(a + fmax(step, hmin), t1), c);
+        float lip_ab = local_lip
+            ? fmin(lip, gp_mean_lipschitz_on(mean, mean_count, o + a * d, o + b * d)) : lip;
         WsTents T = ws_tents_post(cache, P, k, mean, mean_count, order_cdf, order_count, M, key,
-                                  object, o, d, a, b, lip);
+                                  object, o, d, a, b, lip_ab);
         ++evals;
         noise = T.round;
         /* bounds of phi = sgn f: certified "same sign" where phi_lo >= 0, opposite

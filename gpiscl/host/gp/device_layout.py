@@ -54,7 +54,10 @@ GP_KERNEL = Struct("GpKernel", (
 #   grid      the map goes to index coordinates u (voxel units, sample (i,j,k) at u = i,j,k);
 #             p1.xyz = sample counts (nx, ny, nz); p0.y = 1: cubic, the payload holds the
 #             (nx + 2, ny + 2, nz + 2) B-spline coefficients (means.cubic_coefficients)
-#             instead of the samples; p0.x = 1 / S, S = GridMean.lipschitz
+#             instead of the samples; p0.z = B: after the samples (C order), the slope
+#             bound of each brick of B^3 cells (means.brick_slope_bounds / S, <= 1, bricks
+#             in C order), which gp_mean_lipschitz_on reads for a segment's bound;
+#             p0.x = 1 / S, S = GridMean.lipschitz
 #             (world units), the weight of the outside distance (in voxels); flags =
 #             number of payload records that follow the leaf.
 #             Samples are stored divided by S h, with scale multiplied by S h: the leaf's
@@ -85,6 +88,9 @@ MEAN_KINDS = {"constant": 0, "plane": 1, "sphere": 2, "box": 3, "rounded_box": 4
 MEAN_FLAG_SWAPPED = 1
 MEAN_STACK_DEPTH = 8    # GP_MEAN_STACK_DEPTH in gp_mean.h
 GRID_PAYLOAD_FLOATS = 20    # the float4 fields row0..p1; kind must stay a valid int
+# Cells per brick edge of a grid leaf's slope-bound table: 4^3 cells share one bound, so a
+# table costs 1/64 of the samples and a ray interval of a few cells reads a few bricks.
+GRID_BRICK = 4
 STRUCTS = (GP_KERNEL, MEAN_NODE)
 
 _F32_MAX = float(np.finfo(np.float32).max)
@@ -257,12 +263,14 @@ def _grid_leaf(node: M.GridMean, m, scale):
     cubic = node.interpolation == "cubic"
     samples = node.coefficients if cubic else values
     _check_grid_size(samples)
-    payload = pack_payload(samples / s_index)     # C order: (i ny + j) nz + k
+    # per-brick slope bounds in the samples' units (<= 1), after the samples
+    bricks = M.brick_slope_bounds(node, GRID_BRICK) / node.lipschitz
+    payload = pack_payload(np.concatenate([(samples / s_index).ravel(), bricks.ravel()]))
     rec = MEAN_NODE.zeros(1)
     rec["kind"] = MEAN_KINDS["grid"]
     rec["flags"] = len(payload)
     rec["row0"], rec["row1"], rec["row2"] = _compose(m, to_index)
-    rec["p0"] = (h / s_index, 1.0 if cubic else 0.0, 0.0, 0.0)
+    rec["p0"] = (h / s_index, 1.0 if cubic else 0.0, GRID_BRICK, 0.0)
     rec["p1"] = (*values.shape, 0.0)
     rec["scale"] = scale * s_index
     return np.concatenate([rec, payload])

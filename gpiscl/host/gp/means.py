@@ -434,6 +434,38 @@ def cubic_slope_bound(coef: np.ndarray, h: float) -> float:
     return float(np.sqrt(max(a2, 1.0) if faces_positive else a2 + 1.0))
 
 
+def _window_max(a: np.ndarray, window) -> np.ndarray:
+    """max over every window (w0, w1, w2) of a 3-D array (valid positions only)."""
+    from numpy.lib.stride_tricks import sliding_window_view
+    return sliding_window_view(a, tuple(window)).max(axis=(-3, -2, -1))
+
+
+def cell_slope_bounds(grid: "GridMean") -> np.ndarray:
+    """A bound on |gradient| (world units) inside each cell, (nx - 1, ny - 1, nz - 1):
+    trilinear, the exact maximum (_corner_gradients2); cubic, the norm of the per-axis
+    maxima of the coefficient differences the cell's taps use (cubic_slope_bound's
+    argument, cell by cell)."""
+    h = float(grid.voxel_size)
+    if grid.interpolation == "linear":
+        return np.sqrt(_corner_gradients2(np.asarray(grid.values, np.float64))) / h
+    coef = grid.coefficients
+    total = 0.0
+    for a in range(3):
+        window = [4, 4, 4]
+        window[a] = 3          # three differences among a cell's four taps along a
+        total = total + _window_max(np.abs(np.diff(coef, axis=a)), window) ** 2
+    return np.sqrt(total) / h
+
+
+def brick_slope_bounds(grid: "GridMean", brick: int) -> np.ndarray:
+    """The largest cell bound in each brick of brick^3 cells (the last bricks partial)."""
+    cells = cell_slope_bounds(grid)
+    nb = [-(-n // brick) for n in cells.shape]
+    pad = [(0, b * brick - n) for b, n in zip(nb, cells.shape)]
+    cells = np.pad(cells, pad, constant_values=0.0)
+    return cells.reshape(nb[0], brick, nb[1], brick, nb[2], brick).max(axis=(1, 3, 5))
+
+
 def _corner_gradients2(values: np.ndarray) -> np.ndarray:
     """max over each cell's corners of |the interpolant's gradient there|^2 (voxel units),
     which is the max over the cell: each partial derivative is linear in every other
