@@ -9,7 +9,7 @@ import pyopencl as cl
 import pytest
 
 from gpiscl import render_result
-from gpiscl.host.gp import Constant, RationalQuadratic, SquaredExponential, device_layout
+from gpiscl.host.gp import Constant, RationalQuadratic, Sphere, SquaredExponential, device_layout
 from gpiscl.host.gp import function_space_layout as FL
 from gpiscl.host.gp.kernels import (GridField, LinearField, LocallyPeriodic, NonStationary,
                                     Periodic, RadialField, ThinPlate, covariance_matrix)
@@ -49,6 +49,27 @@ __kernel void fields_at(__global const GpKernel* kp, __global const MeanNode* no
     vstore3(f.gs, 0, o + 1);
     o[4] = f.ml;
     vstore3(f.gl, 0, o + 5);
+}
+
+/* The renewal memory's start at a vertex x with f(x) = 0 leaving along d: the slope it
+ * draws (row 1 of the conditioning set) per item. */
+__kernel void renewal_slope(__global const GpKernel* kp, __global const MeanNode* mean,
+                            int mc, __global const double* xd, uint seed, int first,
+                            __global double* scratch, __global double* out)
+{
+    int i = get_global_id(0);
+    FsScratch S = fs_scratch(scratch, i);
+    FsParams prm = {8, GPIS_MEMORY_RENEWAL, 8, 0, 0.9};
+    double3 x = vload3(0, xd), d = vload3(1, xd);
+    FsRay r = {x, d, 0.0, 1.0};
+    FsVertex v = {0};
+    v.pos = (float4)(convert_float3(x), 0.0f);
+    v.valid = 1;
+    FsRng rng = {seed, (uint)(first + i), 0u, 0u, 0u};
+    double f0;
+    int outside, n_old;
+    fs_begin(kp[0], mean, mc, prm, r, v, 0, rng, S, &f0, &outside, &n_old);
+    out[i] = S.rows[1].value;
 }
 
 __kernel void covariances_at(__global const GpKernel* kp, __global const MeanNode* nodes,
@@ -563,3 +584,50 @@ def test13_a_grid_sampled_from_a_linear_field_renders_like_it(device, tmp_path):
     print(f"rms difference / standard error: {rms:.2g}")
     assert rms < 0.05
     assert_agree(a.mean, a.stderr, b.mean, block=4, what="grid vs linear field")
+
+
+def test14_renewal_slope_at_a_vertex_follows_the_conditional_law(device, prg):
+    """Renewal memory at a vertex x (f(x) = 0) draws the slope along the new direction
+    from its law given f(x) = 0, truncated to >= 0. A sigma(x) field correlates the two:
+    cov(f, d_d f) = m(x) (d . grad m(x)) k0(0), which shifts the conditional mean by
+    -cov / var(f) mu(x). The draws' mean and variance match the truncated normal's
+    (z-tests, 40000 draws); the same law without the correlation is rejected."""
+    from statistics import NormalDist
+    K = NonStationary(SquaredExponential(1.0, 0.5),
+                      sigma_field=LinearField(1.0, (0.8, 0.0, 0.0)))
+    mean = Sphere(radius=0.5)
+    x, d = np.array([0.9, 0.1, 0.0]), np.array([1.0, 0.0, 0.0])
+    kp, nodes, mc = _kernel_and_nodes(K, mean)
+    n, chunk = 40000, 1000
+    stride = FL.scratch_doubles(FL.max_rows(SAMPLES_MAX, CAP_MAX))
+    scratch = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, 8 * stride * chunk)
+    out = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 8 * chunk)
+    args = [_buf(device, kp), _buf(device, nodes), np.int32(mc), _buf(device, np.r_[x, d]),
+            np.uint32(14)]
+    s = np.empty(n)
+    for first in range(0, n, chunk):
+        prg["renewal_slope"](device.queue, (chunk,), None, *args, np.int32(first), scratch,
+                             out)
+        cl.enqueue_copy(device.queue, s[first:first + chunk], out)
+    mf, gm = mean.value(x), mean.gradient(x)
+    vf, c, vs = K.cov(x, x), K.cov_vd(x, x, d), K.cov_dd(x, d, x, d)
+    assert abs(c) > 0.1 * math.sqrt(vf * vs)          # the field does correlate them
+    z = z_threshold(4)
+
+    def moments(m, v):
+        """mean and variance of N(m, v) truncated to >= 0"""
+        sd = math.sqrt(v)
+        a = -m / sd
+        lam = math.exp(-0.5 * a * a) / math.sqrt(2 * math.pi) / (1 - NormalDist().cdf(a))
+        return m + sd * lam, v * (1 + a * lam - lam * lam)
+
+    def agree(m, v):
+        mu, var = moments(m, v)
+        z_mean = (s.mean() - mu) / math.sqrt(var / n)
+        z_var = (s.var(ddof=1) - var) / (var * math.sqrt(2.0 / (n - 1)))  # ~normal s^2
+        return max(abs(z_mean), abs(z_var))
+
+    ms = float(gm @ d)
+    print(agree(ms - c / vf * mf, vs - c * c / vf), agree(ms, vs))
+    assert agree(ms - c / vf * mf, vs - c * c / vf) < z
+    assert agree(ms, vs) > z

@@ -429,7 +429,9 @@ inline int fs_begin(GpKernel p, __global const MeanNode* mean, int mc, FsParams 
         double s = dot(g, d);
         if (prm.memory == GPIS_MEMORY_RENEWAL) {   /* value and slope: independent at a point */
             double vs, ms = fs_mean_var(p, mean, mc, S, x, d, FS_OBS_DERIV, 1, &vs);
-            if (S.post.n) {   /* ... of a stationary prior; observations correlate them */
+            /* ... of a stationary prior; observations correlate them, and so does a
+             * sigma(x) field: cov(f(x), d_d f(x)) = m_s(x) (d . grad m_s(x)) k0(0) */
+            if (S.post.n || gp_kernel_nonstationary(p)) {
                 double vf, mf = fs_mean_var(p, mean, mc, S, x, d, FS_OBS_VALUE, 0, &vf);
                 GpFieldsAt fx = fs_fields(p, mean, x);
                 double c = gp_cov_at(p, x, d, 0, fx, x, d, 1, fx)
