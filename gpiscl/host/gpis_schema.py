@@ -62,14 +62,11 @@ for _op in ("union", "intersection", "difference"):  # k > 0: smooth blend of wi
                                 "k": Field(Number(ge=0), 0.0)}))
 MEANS.register("transform", Record({"child": Field(MEANS), **TRANSFORM.fields}))
 # Sampled means (mesh bakes, grids, procedural shapes) are interpolated "linear"
-# (trilinear: stays within the samples' range, slope bound ~1.4 for a distance, gradient
-# jumps at cell faces, which a mirror micro-BSDF shows as facets) or "cubic" (the
-# interpolating tricubic B-spline: C2, no facets, O(h^4) on smooth data; its certified
-# slope bound comes from coefficient differences, which spike along a distance's ridges
-# inside (~6 for the bunny and the knob, true maximum ~1.45); per-brick bounds
-# (gp_mean_lipschitz_on) keep that to the bricks near ridges, but weight-space searches
-# and occupancy marches still step shorter: renders 1.1-1.7x slower,
-# tools/bench_grid_interpolation.py).
+# (trilinear: stays within the samples' range, gradient jumps at cell faces, which a
+# mirror micro-BSDF shows as facets) or "cubic" (the interpolating tricubic B-spline: C2,
+# no facets, O(h^4) on smooth data; each evaluation reads 64 coefficients instead of 8
+# samples, and its certified slope bound, from Bezier control points, is looser along a
+# distance's ridges: renders 1.1-1.7x slower, tools/bench_grid_interpolation.py).
 _INTERPOLATION = Field(Enum("linear", "cubic"), "linear")
 # Baked signed distance of a triangle mesh (gpiscl/host/sdf_bake.py): `resolution`
 # samples along the longest axis of the mesh bounds grown by `margin` per side (null:

@@ -420,41 +420,57 @@ def cubic_eval(coef: np.ndarray, c: np.ndarray):
     return value, grad
 
 
+# A cell's piece of a uniform cubic B-spline in Bezier form: rows give the four Bezier
+# control points from the cell's four B-spline taps; its derivative (a quadratic B-spline
+# of the taps' differences) has three, from three differences.
+_CUBIC_BEZIER = np.array([[1, 4, 1, 0], [0, 4, 2, 0], [0, 2, 4, 0], [0, 1, 4, 1]]) / 6.0
+_QUAD_BEZIER = np.array([[1, 1, 0], [0, 2, 0], [0, 1, 1]]) / 2.0
+
+
+def _bezier_pieces(a: np.ndarray, axis: int, rows: np.ndarray, cells: int) -> list:
+    """For each row of `rows`, the combination of consecutive taps along axis for every
+    cell (`cells` of them)."""
+    taps = [np.take(a, np.arange(t, t + cells), axis=axis) for t in range(rows.shape[1])]
+    return [sum(w * tap for w, tap in zip(row, taps) if w) for row in rows]
+
+
+def cubic_cell_bounds(coef: np.ndarray, h: float) -> np.ndarray:
+    """A bound on |grad| (world units) over each cell of the cubic spline, (n - 1)^3:
+    per axis, the largest |Bezier control point| of the cell's derivative (the convex hull
+    property: a Bezier piece stays within its control points), a quadratic Bezier form
+    along the axis times cubic ones across; |grad| <= the norm of the three. Tighter than
+    the coefficient differences themselves, which ring along a distance's ridges."""
+    cells = [n - 3 for n in coef.shape]
+    total = np.zeros(cells)
+    for a in range(3):
+        b, c = [x for x in range(3) if x != a]
+        best = np.zeros(cells)
+        for pa in _bezier_pieces(np.diff(coef, axis=a), a, _QUAD_BEZIER, cells[a]):
+            for pb in _bezier_pieces(pa, b, _CUBIC_BEZIER, cells[b]):
+                for pc in _bezier_pieces(pb, c, _CUBIC_BEZIER, cells[c]):
+                    np.maximum(best, np.abs(pc), out=best)
+        total += best * best
+    return np.sqrt(total) / h
+
+
 def cubic_slope_bound(coef: np.ndarray, h: float) -> float:
-    """A bound on |grad| of the cubic GridMean (world units). Along each axis the
-    derivative is a quadratic B-spline (weights >= 0, sum 1) of coefficient differences
-    in that axis, times cubic B-spline weights in the others, so |d_a f| <= max |diff_a c|
-    / h and |grad| <= the norm of the three. Outside: as grid_slope_bound, max(a, 1) where
-    the face values are >= 0 (convex combinations of the three coefficient layers at the
-    face, all >= 0), sqrt(a^2 + 1) otherwise."""
-    per_axis = [float(np.max(np.abs(np.diff(coef, axis=a)))) / h for a in range(3)]
-    a2 = sum(d * d for d in per_axis)
+    """A bound on |grad| of the cubic GridMean (world units): the largest cell bound
+    (cubic_cell_bounds). Outside: as grid_slope_bound, max(a, 1) where the face values are
+    >= 0 (convex combinations of the three coefficient layers at the face, all >= 0),
+    sqrt(a^2 + 1) otherwise."""
+    a2 = float(np.max(cubic_cell_bounds(coef, h))) ** 2
     faces_positive = all(float(np.min(np.take(coef, idx, axis=a))) >= 0.0
                          for a in range(3) for idx in (np.arange(3), np.arange(-3, 0)))
     return float(np.sqrt(max(a2, 1.0) if faces_positive else a2 + 1.0))
 
 
-def _window_max(a: np.ndarray, window) -> np.ndarray:
-    """max over every window (w0, w1, w2) of a 3-D array (valid positions only)."""
-    from numpy.lib.stride_tricks import sliding_window_view
-    return sliding_window_view(a, tuple(window)).max(axis=(-3, -2, -1))
-
-
 def cell_slope_bounds(grid: "GridMean") -> np.ndarray:
     """A bound on |gradient| (world units) inside each cell, (nx - 1, ny - 1, nz - 1):
-    trilinear, the exact maximum (_corner_gradients2); cubic, the norm of the per-axis
-    maxima of the coefficient differences the cell's taps use (cubic_slope_bound's
-    argument, cell by cell)."""
+    trilinear, the exact maximum (_corner_gradients2); cubic, cubic_cell_bounds."""
     h = float(grid.voxel_size)
     if grid.interpolation == "linear":
         return np.sqrt(_corner_gradients2(np.asarray(grid.values, np.float64))) / h
-    coef = grid.coefficients
-    total = 0.0
-    for a in range(3):
-        window = [4, 4, 4]
-        window[a] = 3          # three differences among a cell's four taps along a
-        total = total + _window_max(np.abs(np.diff(coef, axis=a)), window) ** 2
-    return np.sqrt(total) / h
+    return cubic_cell_bounds(grid.coefficients, h)
 
 
 def brick_slope_bounds(grid: "GridMean", brick: int) -> np.ndarray:
