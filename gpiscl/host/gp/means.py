@@ -299,8 +299,13 @@ class GridMean(Mean):
     def lipschitz(self) -> float:
         """A bound on |gradient| (world units) over all space; >= 1 (the outside term)."""
         if self.interpolation == "cubic":
-            return cubic_slope_bound(self.coefficients, float(self.voxel_size))
+            return cubic_slope_bound(self.coefficients, self.cell_bounds)
         return grid_slope_bound(np.asarray(self.values, np.float64), float(self.voxel_size))
+
+    @cached_property
+    def cell_bounds(self) -> np.ndarray:
+        """cell_slope_bounds, computed once (the cubic form takes seconds at 128^3)."""
+        return cell_slope_bounds(self)
 
     @cached_property
     def coefficients(self) -> np.ndarray:
@@ -453,12 +458,12 @@ def cubic_cell_bounds(coef: np.ndarray, h: float) -> np.ndarray:
     return np.sqrt(total) / h
 
 
-def cubic_slope_bound(coef: np.ndarray, h: float) -> float:
+def cubic_slope_bound(coef: np.ndarray, cell_bounds: np.ndarray) -> float:
     """A bound on |grad| of the cubic GridMean (world units): the largest cell bound
     (cubic_cell_bounds). Outside: as grid_slope_bound, max(a, 1) where the face values are
     >= 0 (convex combinations of the three coefficient layers at the face, all >= 0),
     sqrt(a^2 + 1) otherwise."""
-    a2 = float(np.max(cubic_cell_bounds(coef, h))) ** 2
+    a2 = float(np.max(cell_bounds)) ** 2
     faces_positive = all(float(np.min(np.take(coef, idx, axis=a))) >= 0.0
                          for a in range(3) for idx in (np.arange(3), np.arange(-3, 0)))
     return float(np.sqrt(max(a2, 1.0) if faces_positive else a2 + 1.0))
@@ -475,7 +480,7 @@ def cell_slope_bounds(grid: "GridMean") -> np.ndarray:
 
 def brick_slope_bounds(grid: "GridMean", brick: int) -> np.ndarray:
     """The largest cell bound in each brick of brick^3 cells (the last bricks partial)."""
-    cells = cell_slope_bounds(grid)
+    cells = grid.cell_bounds
     nb = [-(-n // brick) for n in cells.shape]
     pad = [(0, b * brick - n) for b, n in zip(nb, cells.shape)]
     cells = np.pad(cells, pad, constant_values=0.0)
