@@ -13,7 +13,9 @@ import trimesh
 
 from gpiscl import load_scene, render_result
 from gpiscl.host.device import PYOPENCL_CL_DIR, join_sources
-from gpiscl.host.gp.device_layout import GRID_PAYLOAD_FLOATS, MEAN_KINDS, pack_mean
+from gpiscl.host.gp import means as means_module
+from gpiscl.host.gp.device_layout import (GRID_BRICK, GRID_PAYLOAD_FLOATS, MEAN_KINDS,
+                                         pack_mean)
 from gpiscl.host.gp.means import (Box, Difference, GridMean, Sphere, Transform, Union)
 from gpiscl.host import sdf_bake
 from gpiscl.host.scene_schema import SceneError
@@ -297,17 +299,23 @@ def test06b_cubic_grids_interpolate_smoothly_to_fourth_order(device, prg):
 
 def test07_packing_puts_the_samples_inline():
     rng = np.random.default_rng(6)
-    g = random_grid(rng)
+    g = random_grid(rng, shape=(9, 6, 7))
     nodes = pack_mean(Union(g, Sphere()))
-    n_payload = -(-g.values.size // GRID_PAYLOAD_FLOATS)
+    bricks = means_module.brick_slope_bounds(g, GRID_BRICK)
+    assert bricks.shape == (2, 2, 2)          # 8 x 5 x 6 cells in bricks of 4^3
+    n_payload = -(-(g.values.size + bricks.size) // GRID_PAYLOAD_FLOATS)
     assert len(nodes) == 1 + n_payload + 2
     assert nodes[0]["kind"] == MEAN_KINDS["grid"] and nodes[0]["flags"] == n_payload
+    assert nodes[0]["p0"][2] == GRID_BRICK
     assert np.all(nodes[1:1 + n_payload]["kind"] == MEAN_KINDS["payload"])
-    # samples in (i ny + j) nz + k order, scaled by 1 / (S h)
+    # samples in (i ny + j) nz + k order, scaled by 1 / (S h), then the brick bounds / S
     payload = nodes[1:1 + n_payload]
     floats = np.stack([payload[f] for f in ("row0", "row1", "row2", "p0", "p1")], 1).ravel()
     s_h = g.lipschitz * g.voxel_size
     np.testing.assert_allclose(floats[:g.values.size] * s_h, g.values.ravel(), rtol=1e-6)
+    np.testing.assert_allclose(floats[g.values.size:g.values.size + bricks.size],
+                               bricks.ravel() / g.lipschitz, rtol=1e-6)
+    assert bricks.max() <= g.lipschitz
 
 
 @pytest.mark.parametrize("interp", ["linear", "cubic"])
