@@ -37,8 +37,8 @@ __kernel void post_probe(__global const GpKernel* kp, __global const MeanNode* m
     uint2 key = keys[i / per_key];
     WsPostBlock B = ws_posterior_block(means, first);
     double v[WS_POST_MAX];
-    ws_post_prepare(0, kp[0], means + first, mc, cdf, nc, M, key, 0, B, v);
-    WsPost P = {B.rows, v, B.n};
+    double rho = ws_post_prepare(0, kp[0], means + first, mc, cdf, nc, M, key, 0, B, v);
+    WsPost P = {B.rows, v, B.n, rho};
     float3 g;
     float f = ws_eval_post(0, &P, kp[0], means + first, mc, cdf, nc, M, key, 0, vload3(i, x),
                            &g);
@@ -56,8 +56,8 @@ __kernel void post_tents(__global const GpKernel* kp, __global const MeanNode* m
     int r = get_global_id(0);
     WsPostBlock B = ws_posterior_block(means, first);
     double v[WS_POST_MAX];
-    ws_post_prepare(0, kp[0], means + first, mc, cdf, nc, M, keys[r], 0, B, v);
-    WsPost P = {B.rows, v, B.n};
+    double rho = ws_post_prepare(0, kp[0], means + first, mc, cdf, nc, M, keys[r], 0, B, v);
+    WsPost P = {B.rows, v, B.n, rho};
     float3 O = vload3(r, o), D = vload3(r, d), g;
     float a = ab[r].x, b = ab[r].y;
     WsTents T = ws_tents_post(0, &P, kp[0], means + first, mc, cdf, nc, M, keys[r], 0, O, D,

@@ -2,12 +2,17 @@
 
     python tools/bench_posterior.py [--sizes 100,1000,10000] [--normals]
                                     [--device-sizes 0,100,1000] [--rays 256]
+                                    [--render-sizes 0,100,300]
 
 Per size n (surface points on a sphere; --normals adds three derivative observations
 per point, so 4n in all): seconds to build K, factor it (Cholesky) and solve for the
 weights (and how much of that is building K), then per-point costs of the posterior mean
 and variance, and the setup of one pathwise (Matheron) realization (one more solve).
 Memory: two n x n float64 matrices (K and its factor), 1.6 GB at n = 10^4.
+
+Renders (--render-sizes, 0 = the prior): the reconstructed sphere of
+tests/test_posterior_render.py with n observed points, weight space and function space,
+seconds and the ratio to the same sampler's prior.
 
 Device (--device-sizes, 0 = the prior): function-space free flight through a posterior
 GPIS (fs_sampling.h with the observations of posterior_compile.py), rays through a
@@ -105,6 +110,38 @@ def device_cost(sizes, rays: int):
         print(f"{n:>8}{seg:>10}{rows:>8}{dt / seg * 1e6:>12.1f}{dt / rows * 1e6:>9.1f}")
 
 
+def render_cost(sizes, resolution: int, spp: int, repeats: int):
+    """Render seconds of the reconstructed-sphere scene of tests/test_posterior_render.py
+    (a rough prior of radius 1.2 conditioned on n noisy points of the unit sphere), both
+    samplers, and the ratio to each sampler's prior (n = 0), same run."""
+    import tempfile
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_occupancy import time_variants
+    from gpiscl.host.device import Device
+    from gpiscl.host.scene import load_scene
+    from test_posterior_render import noisy_sphere_points, sphere_scene
+    folder = Path(tempfile.mkdtemp())
+    variants = {}
+    for n in sizes:
+        for sampler in ("weight_space", "function_space"):
+            obs = (None if n == 0 else
+                   {"file": noisy_sphere_points(folder / f"p{n}.xyz", n, 0.03), "noise": 0.03})
+            scene = sphere_scene(1.2, 0.6, spp, obs, res=resolution)
+            scene["shapes"][0]["sampler"] = (
+                {"type": sampler} if sampler == "weight_space"
+                else {"type": "function_space", "samples": 16})
+            variants[(sampler, n)] = load_scene(scene).data
+    times, _ = time_variants(Device(), variants, spp, repeats)
+    print(f"\nrenders, {resolution}^2 x {spp} spp, median of {repeats}:")
+    print(f"{'n obs':>8}{'weight space [s]':>18}{'x prior':>9}{'function space [s]':>20}"
+          f"{'x prior':>9}")
+    for n in sizes:
+        ws, fs = times[("weight_space", n)], times[("function_space", n)]
+        print(f"{n:>8}{ws:>18.2f}{ws / times[('weight_space', sizes[0])]:>9.1f}"
+              f"{fs:>20.2f}{fs / times[('function_space', sizes[0])]:>9.1f}")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="100,1000,10000")
@@ -112,6 +149,8 @@ def main() -> int:
     ap.add_argument("--probes", type=int, default=2000)
     ap.add_argument("--device-sizes", default="0,100,1000")
     ap.add_argument("--rays", type=int, default=256)
+    ap.add_argument("--render-sizes", default="0,100,300",
+                    help="observation counts of the render comparison ('' skips it)")
     args = ap.parse_args()
     rng = np.random.default_rng(0)
     kernel = SquaredExponential(sigma=0.2, length_scale=0.3)
@@ -142,6 +181,8 @@ def main() -> int:
               f"{(t3 - t2) / m * 1e6:>13.1f}{t4 - t3:>14.3f}{post.jitter:>9.0e}")
     if args.device_sizes:
         device_cost([int(v) for v in args.device_sizes.split(",")], args.rays)
+    if args.render_sizes:
+        render_cost([int(v) for v in args.render_sizes.split(",")], 32, 4, 3)
     return 0
 
 

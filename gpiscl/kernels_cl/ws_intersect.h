@@ -204,8 +204,8 @@ inline float ws_first_root_post(WsPostBlock B, GpKernel k, __global const MeanNo
             *status = WS_STATUS_ROWS;
             return T_INFINITY;
         }
-        ws_post_prepare(cache, k, mean, mean_count, order_cdf, order_count, M, key, object, B,
-                        post_v);
+        post.rho = ws_post_prepare(cache, k, mean, mean_count, order_cdf, order_count, M, key,
+                                   object, B, post_v);
         post.rows = B.rows;
         post.v = post_v;
         post.n = B.n;

@@ -55,11 +55,13 @@ typedef struct {
     int n;
 } WsPostBlock;
 
-/* One ray's conditioned correction: the block and v = (K + N)^-1 (y - f(X) - e). */
+/* One ray's conditioned correction: the block, v = (K + N)^-1 (y - f(X) - e), and rho,
+ * a bound on the correction's norm in the kernel's RKHS (ws_post_prepare). */
 typedef struct {
     __global const double* rows;
     const double* v;
     int n;
+    double rho;
 } WsPost;
 
 /* The posterior block before the program at mean_first (n = 0: none, the prior). */
@@ -140,8 +142,12 @@ inline double ws_post_eval(GpKernel k, const WsPost* P, double3 x, double3* grad
 }
 
 /* v = (K + N)^-1 (y - f(X) - e) for the realization (key, object): the prior at the rows
- * (features from `cache` if given), the path's noise draws, two triangular solves. */
-inline void ws_post_prepare(const float* cache, GpKernel k, __global const MeanNode* mean,
+ * (features from `cache` if given), the path's noise draws, two triangular solves.
+ * Returns rho >= ||c||_H, the correction c = sum_j v_j c_j's norm in the kernel's RKHS:
+ * ||c||^2 = v^T K v = |z|^2 - v^T N v with z = L^-1 (y - f(X) - e) (L L^T = K + N; a jitter
+ * the host added stays in, which only raises the bound), plus 1e-6 n max_j (K+N)_jj |v|^2
+ * for the device kernel's float parameters, which differ from the host's K by ~1e-7. */
+inline double ws_post_prepare(const float* cache, GpKernel k, __global const MeanNode* mean,
                             int mean_count, __global const float* order_cdf, int order_count,
                             int M, uint2 key, int object, WsPostBlock B, double* v)
 {
@@ -162,17 +168,28 @@ inline void ws_post_prepare(const float* cache, GpKernel k, __global const MeanN
             v[j] = row[6] - fo - B.sd[j] * (double)zs[l];
         }
     }
+    double zz = 0.0, diag = 0.0, vv = 0.0, nv = 0.0;
     for (int i = 0; i < B.n; ++i) {          /* L z = r */
         __global const double* Li = B.L + i * (i + 1) / 2;
-        double s = v[i];
-        for (int j = 0; j < i; ++j) s -= Li[j] * v[j];
+        double s = v[i], row = Li[i] * Li[i];
+        for (int j = 0; j < i; ++j) {
+            s -= Li[j] * v[j];
+            row += Li[j] * Li[j];
+        }
         v[i] = s / Li[i];
+        zz += v[i] * v[i];
+        diag = fmax(diag, row);              /* (K + N)_ii */
     }
     for (int i = B.n - 1; i >= 0; --i) {     /* L^T v = z, by rows of L */
         __global const double* Li = B.L + i * (i + 1) / 2;
         v[i] /= Li[i];
         for (int j = 0; j < i; ++j) v[j] -= Li[j] * v[i];
     }
+    for (int j = 0; j < B.n; ++j) {
+        vv += v[j] * v[j];
+        nv += B.sd[j] * B.sd[j] * v[j] * v[j];
+    }
+    return sqrt(fmax(zz - nv, 0.0) * (1.0 + 1e-9) + 1e-6 * B.n * diag * vv);
 }
 
 /* The correction along o + t d over [a, b], for ws_tents_post: values at a, b and the
@@ -243,8 +260,16 @@ inline WsPostBound ws_post_bound(GpKernel k, const WsPost* P, float3 o, float3 d
         sum1 += fabs(vj) * b1;
         sum2 += fabs(vj) * b2;
     }
+    /* The reproducing property caps both sums whatever the signs of v: for a unit d (in
+     * A's metric), |d . grad c| <= rho sqrt(Var d_d f) = rho sigma / l and
+     * |d^2 c| <= rho sqrt(Var d_d^2 f) = rho sqrt(12 k''(0)) (12 k''(0) = 3 sigma^2 / l^4
+     * for SE, times (a + 1) / a for RQ). Termwise sums decay away from the observations;
+     * the RKHS caps win where large v of both signs cancel (near the observed surface). */
+    double rk1 = P->rho * sqrt(v2) / l;
+    double rk2 = P->rho * sqrt(3.0 * v2 * (rq ? (al + 1.0) / al : 1.0)) / l2;
+    sum1 = fmin(sum1, rk1);
     R.slope = sqrt(ad) * sum1;
     R.slope_any = sqrt(amax) * sum1;
-    R.curv = ad * sum2;
+    R.curv = ad * fmin(sum2, rk2);
     return R;
 }
