@@ -7,7 +7,7 @@ from gpiscl.host.scene import SceneError, load_scene
 from gpiscl.host.scene_compile import scene_box
 
 
-def _scene(proxy, kernel=None):
+def _scene(proxy, kernel=None, sampler=None):
     return {"shapes": [{"type": "rectangle", "center": [0, 0, 0], "u": [4, 0, 0],
                         "v": [0, 0, -4], "bsdf": {"type": "diffuse", "albedo": 0.5}},
                        {"type": "gpis", "proxy": proxy,
@@ -15,7 +15,7 @@ def _scene(proxy, kernel=None):
                                  "scale": 0.3},
                         "kernel": kernel or {"type": "squared_exponential", "sigma": 0.5,
                                              "length_scale": 0.3},
-                        "sampler": {"type": "function_space", "samples": 16},
+                        "sampler": sampler or {"type": "function_space", "samples": 16},
                         "bsdf": {"type": "diffuse", "albedo": 0.8}}],
             "lights": [{"type": "environment", "radiance": 1.0},
                        {"type": "point", "position": [0, 3, 0], "intensity": 2.0}],
@@ -33,12 +33,13 @@ def test_scene_box_holds_shapes_lights_and_camera():
     np.testing.assert_allclose(hi, raw_hi + grow, atol=1e-4)
 
 
-def test_a_scene_proxy_renders_like_the_explicit_box(device):
+@pytest.mark.parametrize("sampler", [None, {"type": "weight_space"}], ids=["fs", "ws"])
+def test_a_scene_proxy_renders_like_the_explicit_box(device, sampler):
     """The same box written out draws the same samples: equal images to rounding."""
     lo, hi = scene_box(load_scene(_scene({"type": "scene"})).data)
-    a = render_result(_scene({"type": "scene"}), device=device)
-    b = render_result(_scene({"type": "box", "min": lo.tolist(), "max": hi.tolist()}),
-                      device=device)
+    a = render_result(_scene({"type": "scene"}, sampler=sampler), device=device)
+    b = render_result(_scene({"type": "box", "min": lo.tolist(), "max": hi.tolist()},
+                             sampler=sampler), device=device)
     assert a.stats.gpis_failed == 0 and a.stats.nan_paths == 0, a.stats.summary()
     np.testing.assert_array_equal(a.image.mean, b.image.mean)
     assert a.stats.rays > 1.5 * a.stats.paths      # the surface is hit and scatters
