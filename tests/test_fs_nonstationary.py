@@ -306,34 +306,51 @@ def test05_joint_samples_have_the_model_variance_and_covariance(device, prg, fie
     assert abs(chi2 - dof) < tz * math.sqrt(2 * dof), (chi2, dof)
 
 
-def test06_step_rule_uses_the_smallest_length_scale(device, prg):
-    """sigma(x) alone keeps the stationary step; l(x) steps with l * min m_l (ls_step)."""
+def test06_step_rule_uses_the_smallest_length_scale_on_the_segment(device, prg):
+    """sigma(x) alone keeps the stationary step; l(x) steps with the smallest l on the ray's
+    segment (linear: at an end; radial: nearest to or farthest from the centre), never
+    below ls_step; a grid field with its smallest sample."""
     d = np.array([0.6, 0.0, 0.8]) * 1.5
     base = SquaredExponential(1.0, 0.75)
     out = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 8)
-    for kern, l in ((NonStationary(base, sigma_field=RAD), 0.75),
-                    (NonStationary(base, length_scale_field=RAD), 0.75 * 0.5),
-                    (NonStationary(base, length_scale_field=LIN, step_length_scale=0.25), 0.25)):
-        prg["step_rule"](device.queue, (1,), None, _buf(device, device_layout.pack_kernel(kern)),
-                         _buf(device, d), np.float64(0.9), out)
+    far = np.array([3.0, 0.0, 0.0])              # a segment away from RAD's centre
+    grid = _sampled(LIN, (-1.0, -1.0, -1.0), 0.5, 5)
+    cases = [
+        (NonStationary(base, sigma_field=RAD), np.zeros(3), 0.75),
+        # through RAD's inner ball (inner 0.5 < outer 1.5): the minimum is nearest its centre
+        (NonStationary(base, length_scale_field=RAD), np.zeros(3),
+         0.75 * float(RAD.eval(np.zeros(3) + d * np.clip(
+             np.dot(np.asarray(RAD.center), d) / np.dot(d, d), 0, 1))[0])),
+        (NonStationary(base, length_scale_field=RAD), far,
+         0.75 * float(RAD.eval(far)[0])),
+        # linear: the smaller end, above ls_step = 0.25
+        (NonStationary(base, length_scale_field=LIN, step_length_scale=0.25), np.zeros(3),
+         0.75 * min(float(LIN.eval(np.zeros(3))[0]), float(LIN.eval(d)[0]))),
+        (NonStationary(base, length_scale_field=grid), np.zeros(3), 0.75 * grid.minimum()),
+    ]
+    for kern, o, l in cases:
+        kp = device_layout.pack_kernel(kern)
+        prg["step_rule"](device.queue, (1,), None, _buf(device, kp),
+                         _buf(device, np.r_[o, d]), np.float64(0.9), out)
         dt = np.empty(1)
         cl.enqueue_copy(device.queue, dt, out)
-        assert abs(dt[0] - l * math.sqrt(-2 * math.log(0.9)) / 1.5) < 1e-6 * dt[0]
+        assert abs(dt[0] - l * math.sqrt(-2 * math.log(0.9)) / 1.5) < 1e-6 * dt[0], (kern, l)
 
 
 def test07_rice_rate_where_the_length_scale_is_constant(device, prg):
     """l(x) = 0.25 inside a sphere of radius 6 and 0.5 outside (blend width 0.2): a
     continued ray (global memory, mean 0) inside the sphere, and one far outside it, each
     cross level 0 at Rice's rate L / (2 pi l_local) per ray (+1/4 from f(0) >= 0), less
-    the grid's misses (between the bounds of test_fs_free_flight's test03). Outside, the
-    rays are also traced with the stationary kernel at l = 0.5 on the same grid (step
-    correlation chosen to give the same dt) and the same random numbers: the counts
-    agree ray by ray but for rounding-level flips at near-tangent crossings."""
+    the grid's misses (between the bounds of test_fs_free_flight's test03). Each steps
+    with its own segment's smallest l (test06). Outside, the rays are also traced with
+    the stationary kernel at l = 0.5 on the same grid (same step correlation, hence the
+    same dt) and the same random numbers: the counts agree ray by ray but for
+    rounding-level flips at near-tangent crossings."""
     K = NonStationary(SquaredExponential(1.0, 0.5),
                       length_scale_field=RadialField((0.0, 0.0, 0.0), 6.0, 0.2, 0.5, 1.0))
     c, n, L = 0.99, 600, 8.0
-    dt = 0.25 * math.sqrt(-2 * math.log(c))       # ls_step = 0.5 * min(0.5, 1.0)
     for o, l_local in (((-4.0, 0.0, 0.0), 0.25), ((-4.0, 9.0, 0.0), 0.5)):
+        dt = l_local * math.sqrt(-2 * math.log(c))
         out = flights(device, prg, K, Constant(0.0), n, memory="global", samples=32, cap=64,
                       c=c, o=o, t1=L, seed=21, restarts=200)
         counts = out[:, 4]
@@ -547,9 +564,11 @@ def test12_grid_field_scene_rules(tmp_path):
 
 def test13_a_grid_sampled_from_a_linear_field_renders_like_it(device, tmp_path):
     """sigma(x) = 0.3 + 0.1 x and l(x) = 0.2 + 0.05 y given analytically, and as grids of
-    their samples (trilinear reproduces them exactly up to float32 storage): the same
-    seed draws the same realizations, so the two renders agree pixel by pixel far more
-    closely than independent renders could. Also proves that the scene compiler's grid
+    their samples (trilinear reproduces them exactly up to float32 storage). With the
+    same l grid, the sigma grid and the linear sigma draw the same realizations from the
+    same seed, so the renders agree pixel by pixel far more closely than independent
+    renders could; the linear l steps by its own segment minimum, so against it only the
+    law is compared (per-pixel z-test). Also proves that the scene compiler's grid
     offsets reach the sampler (a wrong offset reads mean samples)."""
     sig = LinearField(0.3, (0.1, 0.0, 0.0))
     ls = LinearField(0.2, (0.0, 0.05, 0.0))
@@ -557,15 +576,17 @@ def test13_a_grid_sampled_from_a_linear_field_renders_like_it(device, tmp_path):
     for name, f in (("sigma", sig), ("ls", ls)):
         grid = _sampled(f, (-1.2,) * 3, 0.3, 9)
         paths[name] = _save_field_grid(tmp_path / f"{name}.npz", grid.values, (-1.2,) * 3, 0.3)
-    images = []
-    for fields in ({"sigma_field": {"type": "linear", "value": 0.3, "gradient": [0.1, 0, 0]},
-                    "length_scale_field": {"type": "linear", "value": 0.2,
-                                           "gradient": [0, 0.05, 0]}},
-                   {"sigma_field": {"type": "grid", "file": paths["sigma"]},
-                    "length_scale_field": {"type": "grid", "file": paths["ls"]}}):
-        kern = {"type": "squared_exponential", "sigma": 1.0, "length_scale": 1.0, **fields}
-        # the proxy is the grid's box: the step rule's smallest l and the occupancy
-        # bound's largest sigma are then the same for both forms, hence the samples
+    forms = {"sigma linear": {"type": "linear", "value": 0.3, "gradient": [0.1, 0, 0]},
+             "sigma grid": {"type": "grid", "file": paths["sigma"]},
+             "l linear": {"type": "linear", "value": 0.2, "gradient": [0, 0.05, 0]},
+             "l grid": {"type": "grid", "file": paths["ls"]}}
+    images = {}
+    for s_form, l_form in (("sigma linear", "l grid"), ("sigma grid", "l grid"),
+                           ("sigma grid", "l linear")):
+        kern = {"type": "squared_exponential", "sigma": 1.0, "length_scale": 1.0,
+                "sigma_field": forms[s_form], "length_scale_field": forms[l_form]}
+        # the proxy is the grid's box: the occupancy bound's largest sigma is then the
+        # same for both forms, hence the samples
         scene = _gpis({"type": "function_space", "samples": 16}, kern,
                       {"type": "box", "min": [-1.2] * 3, "max": [1.2] * 3})
         scene["camera"] = {"position": [0, 0, 3.0], "look_at": [0, 0, 0], "up": [0, 1, 0],
@@ -573,17 +594,18 @@ def test13_a_grid_sampled_from_a_linear_field_renders_like_it(device, tmp_path):
         scene["render"] = {"spp": 4, "seed": 7, "max_depth": 8}
         res = render_result(scene, device=device)
         assert res.stats.gpis_failed == 0 and res.stats.nan_paths == 0, res.stats.summary()
-        images.append(res.image)
-    a, b = images
-    # Same law: a per-pixel z-test. Same realizations: independent renders would differ
-    # by sqrt(2) x their standard error (rms); float32 field values perturb the joint
-    # covariances by ~1e-7, which the factorisation of strongly correlated samples
-    # amplifies into small continuous shifts of hits (measured: rms 0.005 x stderr),
-    # so 0.05 separates the two by ~10x either way.
+        images[s_form, l_form] = res.image
+    a, b = images["sigma linear", "l grid"], images["sigma grid", "l grid"]
+    # Same realizations: independent renders would differ by sqrt(2) x their standard
+    # error (rms); float32 field values perturb the joint covariances by ~1e-7, which the
+    # factorisation of strongly correlated samples amplifies into small continuous shifts
+    # of hits (measured: rms 0.005 x stderr), so 0.05 separates the two ~10x either way.
     rms = np.sqrt(np.mean((a.mean - b.mean) ** 2) / np.mean(a.stderr**2))
     print(f"rms difference / standard error: {rms:.2g}")
     assert rms < 0.05
-    assert_agree(a.mean, a.stderr, b.mean, block=4, what="grid vs linear field")
+    assert_agree(a.mean, a.stderr, b.mean, block=4, what="sigma grid vs linear")
+    c = images["sigma grid", "l linear"]
+    assert_agree(c.mean, c.stderr, b.mean, b.stderr, what="l grid vs linear")
 
 
 def test14_renewal_slope_at_a_vertex_follows_the_conditional_law(device, prg):

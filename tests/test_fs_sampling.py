@@ -23,10 +23,12 @@ __kernel void tn_draw(double mu, double s, uint seed, __global double* out)
     out[i] = fs_truncnorm_pos(mu, s, rng, 0u, FS_U_START);
 }
 
-__kernel void step_rule(__global const GpKernel* kp, __global const double* d, double c,
+/* the step of the ray segment o + t d, t in [0, 1] (ray: o then d) */
+__kernel void step_rule(__global const GpKernel* kp, __global const double* ray, double c,
                    __global double* out)
 {
-    out[0] = fs_step(kp[0], vload3(0, d), c);
+    FsRay r = {vload3(0, ray), vload3(1, ray), 0.0, 1.0};
+    out[0] = fs_step(kp[0], r, c);
 }
 
 /* Rays along one line, one per item; after a hit the ray goes straight on from the hit
@@ -157,7 +159,7 @@ def test_step_rule(device, prg, kernel):
     out = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 8)
     for c in (0.5, 0.9, 0.99):
         prg["step_rule"](device.queue, (1,), None, _buf(device, device_layout.pack_kernel(kernel)),
-                    _buf(device, d), np.float64(c), out)
+                         _buf(device, np.r_[np.zeros(3), d]), np.float64(c), out)
         dt = np.empty(1)
         cl.enqueue_copy(device.queue, dt, out)
         assert abs(FS.correlation(kernel, d, dt[0]) - c) < 1e-9

@@ -12,7 +12,7 @@
  *    At c = 0.9 one down-crossing in ~55 falls between two samples together with an
  *    up-crossing and is missed (Rice vs the grid's arccos(c)/(2 pi dt)); c = 0.99: 1 in 600.
  *    Spatially varying kernels (gp_kernel.h): a sigma(x) field keeps the rule exact; an
- *    l(x) field uses the smallest l over the proxy (fs_step), a conservative step.
+ *    l(x) field uses the smallest l on the ray's segment (fs_step), a conservative step.
  *  - Placement: segment k starts at the previous segment's last sample t_s (the ray's t0
  *    for the first) and samples t_i = t_s + (i + u) dt, i < N, with one fresh offset
  *    u in (0, 1] per segment, so no gap exceeds dt and grids of different rays never
@@ -235,15 +235,38 @@ inline double fs_step_stationary(GpKernel p, double3 d, double c)
     return 0.5 * (lo + hi);
 }
 
+/* The smallest l(x) on the segment [a, b] of a ray inside the proxy: a linear field at an
+ * end; a radial one (monotone in q = |x - c|^2, which is convex along the segment) where q
+ * is smallest or largest; a grid field the proxy's smallest (ls_step). Never below
+ * ls_step, the smallest over the proxy. */
+inline double fs_ls_min_on(GpKernel p, double3 a, double3 b)
+{
+    double l = p.length_scale, m = p.ls_step / l;
+    double3 g;
+    if (p.ls_field == GP_FIELD_LINEAR) {
+        m = fmin(gp_field(p.ls_field, p.ls_p0, p.ls_p1, a, &g),
+                 gp_field(p.ls_field, p.ls_p0, p.ls_p1, b, &g));
+    } else if (p.ls_field == GP_FIELD_RADIAL) {
+        double3 c = (double3)(p.ls_p0.x, p.ls_p0.y, p.ls_p0.z), ab = b - a;
+        double w = dot(ab, ab) > 0.0 ? clamp(dot(c - a, ab) / dot(ab, ab), 0.0, 1.0) : 0.0;
+        double3 near = a + w * ab, far = dot(a - c, a - c) > dot(b - c, b - c) ? a : b;
+        /* outer >= inner: m grows with q, so its minimum is nearest the centre */
+        double3 x = p.ls_p1.y >= p.ls_p1.x ? near : far;
+        m = gp_field(p.ls_field, p.ls_p0, p.ls_p1, x, &g);
+    }
+    return fmax(l * m, (double)p.ls_step);
+}
+
 /* A variance field leaves the correlation stationary (sigma(x) sigma(y) cancels), so the
  * stationary rule is exact for it. A length-scale field is stepped with the smallest l(x)
- * over the proxy (ls_step, from the scene compiler): never coarser than the local rule
+ * on the ray's segment [t0, t1] (fs_ls_min_on): never coarser than the local rule
  * anywhere on the ray, at the price of oversampling where l(x) is larger. */
-inline double fs_step(GpKernel p, double3 d, double c)
+inline double fs_step(GpKernel p, FsRay ray, double c)
 {
-    if (p.ls_field) p.length_scale = p.ls_step;
+    if (p.ls_field)
+        p.length_scale = fs_ls_min_on(p, ray.o + ray.t0 * ray.d, ray.o + ray.t1 * ray.d);
     p.sigma_field = p.ls_field = GP_FIELD_NONE;
-    return fs_step_stationary(p, d, c);
+    return fs_step_stationary(p, ray.d, c);
 }
 
 inline FsObs fs_obs(double3 x, double3 u, int kind, double value)
@@ -468,7 +491,7 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
     double f_prev;
     int outside, n_old, factored = 0;
     int m = fs_begin(p, mean, mc, prm, ray, v, ring, rng, S, &f_prev, &outside, &n_old);
-    double dlen = length(ray.d), dtc = fs_step(p, ray.d, prm.step_corr);
+    double dlen = length(ray.d), dtc = fs_step(p, ray, prm.step_corr);
     double3 dn = ray.d / dlen;
     if (!(dtc > 0.0) || !isfinite(dtc)) { res.status = FS_STATUS_NAN; return res; }
     double t = ray.t0, t_prev = ray.t0;
