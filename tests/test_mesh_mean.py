@@ -525,9 +525,9 @@ def test12_bounds_and_first_roots_hold_with_a_grid_mean(device, ws_prg, tmp_path
     evaluation of f over random intervals (the grid's Lipschitz bound is what makes the
     mean's cones valid), and its first roots miss no crossing a dense float64 scan finds."""
     from gpiscl.host.gp import SquaredExponential
-    from gpiscl.host.gp import weight_space as ws
     from test_ws_features import buf, dump, gp_args, keys_for, run
-    from test_ws_intersect import assert_tents_contain, host_values, random_rays
+    from test_ws_intersect import (assert_tents_contain, host_values, random_rays,
+                                   roots_and_scan)
     kernel = SquaredExponential(sigma=0.1, length_scale=0.25)
     mean = _sphere_grid(tmp_path, interp)
     rng = np.random.default_rng(12)
@@ -553,15 +553,8 @@ def test12_bounds_and_first_roots_hold_with_a_grid_mean(device, ws_prg, tmp_path
     o = 2.5 * o / np.linalg.norm(o, axis=1, keepdims=True) + RIGID[:, 3]
     d = rng.uniform(-1.2, 1.2, (n, 3)) + RIGID[:, 3] - o     # at the sphere, or past it
     o, d = o.astype(np.float32), (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
-    keys = keys_for(n, 92)
-    hit, st = run(device, ws_prg["ws_roots_k"], n, *gp_args(device, kernel, mean), np.int32(m),
-                  buf(device, keys), buf(device, o), buf(device, d), np.float32(t0),
-                  np.float32(t1), np.float32(tol),
-                  out_shapes=[((n, 4), np.float32), ((n, 2), np.int32)])
-    assert np.all(st[:, 0] == 0)
-    theta, tau, w = dump(device, ws_prg, kernel, keys, m)
-    ts = np.linspace(t0, t1, int((t1 - t0) / (kernel.length_scale / 200)) + 1)
-    _, t_hi = ws.dense_scan_first_root(host_values(theta, tau, w, kernel, mean, o, d, ts), ts)
+    hit, _, t_hi, ts, _ = roots_and_scan(device, ws_prg, kernel, mean, o, d, keys_for(n, 92),
+                                         m, t0, t1, tol)
     t_dev = hit[:, 3].astype(float)
     crossing = np.isfinite(t_hi)
     assert 0.2 < np.mean(crossing) < 0.95            # the rays do meet the surface

@@ -168,6 +168,23 @@ ROOT_CASES = [(KERNELS[0], MEANS[0], 512), (KERNELS[1], MEANS[1], 256),
               (KERNELS[3], MEANS[2], 256), (KERNELS[2], MEANS[3], 128)]   # 1152 rays
 
 
+def roots_and_scan(device, prg, kernel, mean, o, d, keys, m, t0, t1, tol):
+    """The device's first roots of realizations `keys` along rays o + t d, t in [t0, t1]
+    (every search decided), and a dense float64 scan of the same realizations (spacing
+    l / 200): hit (n, 4: normal, t), the scan's brackets t_lo, t_hi, its points ts, and
+    the features (theta, tau, w)."""
+    n = len(o)
+    hit, st = run(device, prg["ws_roots_k"], n, *gp_args(device, kernel, mean), np.int32(m),
+                  buf(device, keys), buf(device, o), buf(device, d), np.float32(t0),
+                  np.float32(t1), np.float32(tol),
+                  out_shapes=[((n, 4), np.float32), ((n, 2), np.int32)])
+    assert np.all(st[:, 0] == 0)
+    theta, tau, w = dump(device, prg, kernel, keys, m)
+    ts = np.linspace(t0, t1, int((t1 - t0) / (kernel.length_scale / 200)) + 1)
+    t_lo, t_hi = ws.dense_scan_first_root(host_values(theta, tau, w, kernel, mean, o, d, ts), ts)
+    return hit, t_lo, t_hi, ts, (theta, tau, w)
+
+
 @pytest.mark.parametrize("case", range(len(ROOT_CASES)))
 def test_first_roots_match_a_dense_scan(device, prg, case):
     """No crossing that a dense float64 scan finds is ever skipped, and every reported
@@ -177,15 +194,8 @@ def test_first_roots_match_a_dense_scan(device, prg, case):
     m, t0, t1 = 64, 0.0, 4.0
     tol = 1e-4 * kernel.length_scale
     o, d = random_rays(rng, n)
-    keys = keys_for(n, 50 + case)
-    hit, st = run(device, prg["ws_roots_k"], n, *gp_args(device, kernel, mean), np.int32(m),
-                  buf(device, keys), buf(device, o), buf(device, d), np.float32(t0),
-                  np.float32(t1), np.float32(tol),
-                  out_shapes=[((n, 4), np.float32), ((n, 2), np.int32)])
-    assert np.all(st[:, 0] == 0)
-    theta, tau, w = dump(device, prg, kernel, keys, m)
-    ts = np.linspace(t0, t1, int((t1 - t0) / (kernel.length_scale / 200)) + 1)
-    t_lo, t_hi = ws.dense_scan_first_root(host_values(theta, tau, w, kernel, mean, o, d, ts), ts)
+    hit, t_lo, t_hi, _, (theta, tau, w) = roots_and_scan(
+        device, prg, kernel, mean, o, d, keys_for(n, 50 + case), m, t0, t1, tol)
     t_dev = hit[:, 3].astype(float)
     found = t_dev < 1e29
     assert np.all(t_dev[np.isfinite(t_hi)] <= t_hi[np.isfinite(t_hi)] + tol), "missed a root"

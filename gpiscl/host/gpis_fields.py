@@ -35,7 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from .gp.device_layout import MEAN_NODE, pack_payload
-from .sdf_bake import check_grid_values, read_grid_arrays
+from .sdf_bake import check_grid_values, problem_of, read_grid_arrays
 from .scene_schema import (Field, File, Number, Record, Spec, Tagged, Vector, _is_number,
                            _is_sequence)
 
@@ -73,16 +73,6 @@ def save_rgb_grid(path, values, origin, voxel_size):
                         voxel_size=np.float64(voxel_size))
 
 
-def _grid_problem(upper):
-    def problem(path):
-        try:
-            load_rgb_grid(path, upper)
-        except ValueError as exc:
-            return str(exc)
-        return None
-    return problem
-
-
 # ---- declarations -------------------------------------------------------------------------
 
 def _field_family(name: str, value_spec, upper) -> Tagged:
@@ -97,7 +87,8 @@ def _field_family(name: str, value_spec, upper) -> Tagged:
                            "b": Field(value_spec), "offset": Field(VEC3, [0, 0, 0])}),
         "gradient": Record({"start": Field(VEC3), "end": Field(VEC3), "a": Field(value_spec),
                             "b": Field(value_spec)}, [gradient_length]),
-        "grid": Record({"file": Field(File((".npz",), _grid_problem(upper)))}),
+        "grid": Record({"file": Field(File((".npz",), problem_of(
+            lambda path: load_rgb_grid(path, upper))))}),
     })
 
 

@@ -20,7 +20,7 @@ from .gp import function_space_layout as FSL
 from .scene_schema import (Bool, Enum, Field, File, Int, Nullable, Number, Record, Tagged,
                            Vector)
 from .mesh_proxy import bounding_proxy, mesh_proxy_problem
-from .sdf_bake import field_grid_problem, grid_problem, load_field_grid
+from .sdf_bake import load_field_grid, load_grid, problem_of
 from . import posterior_compile as _posterior
 from .gpis_fields import COLOR, EMISSION
 
@@ -80,7 +80,7 @@ MEANS.register("mesh", Record({"file": Field(File((".obj", ".ply", ".stl", ".off
                                "transform": Field(TRANSFORM, {}),
                                "interpolation": _INTERPOLATION}))
 # A voxel grid of mean values (.npz with values (nx, ny, nz), origin, voxel_size).
-MEANS.register("grid", Record({"file": Field(File((".npz",), grid_problem)),
+MEANS.register("grid", Record({"file": Field(File((".npz",), problem_of(load_grid))),
                                "interpolation": _INTERPOLATION}))
 # the authors' procedural shapes (gp/knob.py), sampled on a grid like a baked mesh
 MEANS.register("procedural", Record({
@@ -104,7 +104,7 @@ FIELDS = Tagged("field", {
     "radial": Record({"center": Field(VEC3, [0, 0, 0]), "radius": Field(Number(gt=0)),
                       "width": Field(Number(gt=0)), "inner": Field(Number(gt=0)),
                       "outer": Field(Number(gt=0))}),
-    "grid": Record({"file": Field(File((".npz",), field_grid_problem))}),
+    "grid": Record({"file": Field(File((".npz",), problem_of(load_field_grid)))}),
 })
 _SIGMA_FIELD = Field(Nullable(FIELDS), None)
 _LS_FIELD = Field(Nullable(FIELDS), None)

@@ -41,13 +41,16 @@ def cache_dir() -> Path:
 
 # ---- .npz grids ------------------------------------------------------------------------
 
-def grid_problem(path) -> str | None:
-    """None, or why `path` is not a usable grid file (names the offending array)."""
-    try:
-        load_grid(path)
-    except ValueError as exc:
-        return str(exc)
-    return None
+def problem_of(load):
+    """A scene File check from a grid loader: None, or why the file is unusable (the
+    loader's ValueError, which names the offending array)."""
+    def problem(path) -> str | None:
+        try:
+            load(path)
+        except ValueError as exc:
+            return str(exc)
+        return None
+    return problem
 
 
 def read_grid_arrays(path, keys=GRID_KEYS) -> dict:
@@ -116,14 +119,6 @@ def load_field_grid(path):
                          f"{list(np.unravel_index(np.argmin(values), values.shape))})")
     return GridField(values, tuple(float(o) for o in arrays["origin"]),
                      float(arrays["voxel_size"].item()))
-
-
-def field_grid_problem(path) -> str | None:
-    try:
-        load_field_grid(path)
-    except ValueError as exc:
-        return str(exc)
-    return None
 
 
 def save_grid(path, grid: GridMean):

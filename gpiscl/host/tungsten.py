@@ -287,8 +287,8 @@ class _Converter:
             g = load_grid(path)
             path = str(Path(path).with_suffix("")) + ".moved.npz"
             save_grid(path, type(g)(g.values, tuple(np.asarray(g.origin) + pos), g.voxel_size))
-        from .sdf_bake import field_grid_problem
-        problem = field_grid_problem(path)
+        from .sdf_bake import load_field_grid, problem_of
+        problem = problem_of(load_field_grid)(path)
         if problem:
             self.fail(f"{key}.{gkey}", f"{path}: {problem}")
         return {**base, "sigma_field": {"type": "grid", "file": path}}

@@ -326,16 +326,6 @@ class LinearField:
         g = _vec(self.gradient)
         return self.value + np.sum((x - _vec(self.origin)) * g, -1), np.broadcast_to(g, x.shape)
 
-    def minimum(self, lo, hi):
-        """Smallest value over the box [lo, hi] (a linear function: at a corner)."""
-        g, o = _vec(self.gradient), _vec(self.origin)
-        return float(self.value + np.sum(np.minimum(g * (_vec(lo) - o), g * (_vec(hi) - o))))
-
-    def minimum_ball(self, center, radius):
-        g = _vec(self.gradient)
-        return float(self.value + g @ (_vec(center) - _vec(self.origin))
-                     - np.linalg.norm(g) * radius)
-
 
 @dataclass(frozen=True)
 class RadialField:
@@ -362,11 +352,9 @@ class RadialField:
         h = 0.5 * (self.outer - self.inner)
         return self.inner + h * (1.0 + th), (h * (1.0 - th * th) / (R * w))[..., None] * q
 
-    def minimum(self, lo=None, hi=None):
+    def minimum(self):
         return float(min(self.inner, self.outer))
 
-    def minimum_ball(self, center=None, radius=None):
-        return self.minimum()
 
 
 @dataclass(frozen=True, eq=False)
@@ -407,15 +395,13 @@ class GridField:
         g = np.where(u != c, 0.0, g) / self.voxel_size
         return m, g
 
-    def minimum(self, lo=None, hi=None):
+    def minimum(self):
         """A lower bound anywhere: trilinear values are convex combinations of samples."""
         return float(np.min(self.values))
 
     def maximum(self):
         return float(np.max(self.values))
 
-    def minimum_ball(self, center=None, radius=None):
-        return self.minimum()
 
 
 FIELDS = {cls.kind: cls for cls in (LinearField, RadialField, GridField)}
