@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import json
 import statistics
 import sys
 import time
@@ -30,13 +29,19 @@ from gpiscl.host.scene_compile import compile_scene  # noqa: E402
 SCENES = ("scenes/knob_no_csg.json", "scenes/knob.json", "scenes/ws_sphere_se.json")
 
 
-def variant(path: str, eps, resolution: int):
+def scene_variant(path: str, resolution: int, edit_gpis):
+    """The resolved scene at path, square at `resolution`, each GPIS shape passed to
+    edit_gpis(shape) (which changes it in place), validated again."""
     data = copy.deepcopy(load_scene(str(ROOT / path)).data)
     data["camera"]["resolution"] = [resolution, resolution]
     for shape in data["shapes"]:
         if shape["type"] == "gpis":
-            shape["bounds"] = {"occupancy": eps}
+            edit_gpis(shape)
     return load_scene(data).data
+
+
+def variant(path: str, eps, resolution: int):
+    return scene_variant(path, resolution, lambda g: g.update(bounds={"occupancy": eps}))
 
 
 def main():
