@@ -55,11 +55,31 @@ def _pick(spec: str | None):
             if spec.lower() in f"{plat.name} {dev.name}".lower():
                 return dev
         raise DeviceError(f"no OpenCL device matches '{spec}' (see: python -m gpiscl devices)")
-    # PoCL's CPU device is the default: it is always installable from PyPI.
-    for _, _, plat, dev in devices:
-        if "portable computing language" in plat.name.lower():
+    # PoCL's CPU device is the default. Several PoCLs may be installed (PyPI's, the
+    # distribution's): take the first that can compile for this CPU. PyPI's PoCL 3.0 is
+    # built on LLVM 14, which does not know CPUs newer than it (e.g. AMD Zen 5: "unknown
+    # target CPU 'generic'") and fails on every program.
+    pocls = [dev for _, _, plat, dev in devices
+             if "portable computing language" in plat.name.lower()]
+    for dev in pocls:
+        if _compiles(dev):
             return dev
+    if pocls:
+        raise DeviceError("no PoCL device here can compile for this CPU (PyPI's PoCL 3.0 "
+                          "predates it); install the distribution's PoCL (Debian, Ubuntu: "
+                          "apt-get install pocl-opencl-icd) or choose another --device")
     return devices[0][3]
+
+
+@functools.lru_cache(maxsize=None)
+def _compiles(dev) -> bool:
+    """Whether a one-line program builds on dev (PoCL caches it: ~10 ms after the first)."""
+    try:
+        cl.Program(cl.Context([dev]), "__kernel void probe(__global int *a) { a[0] = 1; }"
+                   ).build()
+        return True
+    except (cl.Error, RuntimeError):
+        return False
 
 
 @dataclass
