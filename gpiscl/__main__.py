@@ -6,8 +6,9 @@ import copy
 import sys
 from pathlib import Path
 
-from .host.device import Device, DeviceError, list_devices
-from .host.scene import Scene, SceneError, load_scene
+from .host.render.device import Device, DeviceError, list_devices
+from .host.errors import SceneError
+from .host.scene.loading import Scene, load_scene
 
 
 def _resolution(text: str):
@@ -107,7 +108,7 @@ def _load(args) -> Scene:
 
 def cmd_render(args) -> int:
     from .api import render_result
-    from .host.output import write_outputs
+    from .host.render.output import write_outputs
 
     scene = _load(args)
     data = copy.deepcopy(scene.data)
@@ -174,7 +175,7 @@ def cmd_devices(_args) -> int:
 
 
 def cmd_uq(args) -> int:
-    from .host.uq import UqSums, check_uq_scene, render_realizations, write_uq_outputs
+    from .host.commands.uq import UqSums, check_uq_scene, render_realizations, write_uq_outputs
 
     if args.merge:
         sums = UqSums.empty(())
@@ -264,7 +265,7 @@ def _add_sample_parser(sub):
 
 
 def cmd_sample(args) -> int:
-    from .host.sample_figures import resolve_target, write_figures
+    from .host.commands.sample_figures import resolve_target, write_figures
 
     try:
         features = tuple(int(v) for v in args.features.split(","))
@@ -274,7 +275,7 @@ def cmd_sample(args) -> int:
         raise SceneError("<command line>", "--features",
                          f"expected positive integers separated by commas (got "
                          f"{args.features!r})") from None
-    from .host.sample_figures import load_observations
+    from .host.commands.sample_figures import load_observations
 
     if not args.noise > 0:
         raise SceneError("<command line>", "--noise", f"must be > 0 (got {args.noise})")
@@ -292,7 +293,7 @@ def cl_type(dev) -> str:
 
 
 def cmd_convert_vdb(args) -> int:
-    from .host.vdb import convert_vdb
+    from .host.io.vdb import convert_vdb
     info = convert_vdb(args.input, args.output, args.grid)
     print(f"wrote {args.output}: grid '{info['grid']}', {info['shape']} samples, voxel "
           f"{info['voxel_size']:g}, origin {info['origin']}", file=sys.stderr)

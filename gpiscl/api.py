@@ -5,10 +5,11 @@ import copy
 
 import numpy as np
 
-from .host.device import Device, shared_device
-from .host.integrator import RenderResult, WavefrontIntegrator
-from .host.scene import Scene, SceneError, load_scene
-from .host.scene_compile import compile_scene
+from .host.render.device import Device, shared_device
+from .host.render.integrator import RenderResult, WavefrontIntegrator
+from .host.errors import SceneError
+from .host.scene.loading import Scene, load_scene
+from .host.compile.scene import compile_scene
 
 
 def render_result(scene, spp: int | None = None, seed: int | None = None,

@@ -3,8 +3,8 @@ import math
 import numpy as np
 import pytest
 
-from gpiscl.host.bvh import MEDIAN_DEPTH, build_bvh
-from gpiscl.host.layouts import BVH_NODE
+from gpiscl.host.compile.bvh import MEDIAN_DEPTH, build_bvh
+from gpiscl.host.layout.records import BVH_NODE
 
 
 def _random_triangles(n, rng, size=0.08):

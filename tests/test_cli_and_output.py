@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from gpiscl import load_scene, render_result
-from gpiscl.host.imageio import read_exr
-from gpiscl.host.output import write_outputs
+from gpiscl.host.io.images import read_exr
+from gpiscl.host.render.output import write_outputs
 from gpiscl.scenes import furnace_sphere
 
 
@@ -123,7 +123,7 @@ def test_errors_found_while_compiling_name_file_and_shape(tmp_path):
 def test_api_renders_share_one_device_and_its_programs():
     """Built programs are cached per context (and keep it alive): API calls without a
     device must reuse one, or a loop of renders would grow memory without bound."""
-    from gpiscl.host import device as device_mod
+    from gpiscl.host.render import device as device_mod
     from gpiscl.scenes import furnace_sphere
     render_result(furnace_sphere(), spp=1, resolution=(4, 4))
     built = len(device_mod._BUILT)

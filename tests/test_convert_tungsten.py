@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from gpiscl import load_scene, render_result
-from gpiscl.host.scene import SceneError
-from gpiscl.host.tungsten import convert_tungsten
+from gpiscl.host.errors import SceneError
+from gpiscl.host.scene.tungsten import convert_tungsten
 
 ROOT = Path(__file__).resolve().parent.parent
 CSG = ROOT / "tests" / "data" / "tungsten" / "gp-csg-test.json"
@@ -143,10 +143,10 @@ def test_mesh_mean_maps_file_and_transform(tmp_path):
     assert mean["type"] == "mesh" and mean["file"] == str(tmp_path / "meshes" / "wedge.obj")
     data = load_scene(scene).data           # the strict loader accepts it
     mt = data["shapes"][1]["mean"]["transform"]
-    from gpiscl.host.scene_compile import _euler_matrix
+    from gpiscl.host.scene.transforms import euler_matrix
     import trimesh
     v = np.asarray(trimesh.load(ROOT / "scenes" / "assets" / "wedge.obj", process=False).vertices)
-    ours = v * mt["scale"] @ _euler_matrix(mt["rotate"]).T + mt["translate"]
+    ours = v * mt["scale"] @ euler_matrix(mt["rotate"]).T + mt["translate"]
     theirs = v * t["scale"] @ _tungsten_rotation(t["rotation"]).T + t["position"]
     np.testing.assert_allclose(ours, theirs, atol=1e-12)
     assert any("signed" in n for n in notes) and any("baked" in n for n in notes)
@@ -205,7 +205,7 @@ def _baked_doc(scale=2.0, offset=0.0):
 
 
 def _assets():
-    from gpiscl.host.sdf_bake import load_grid
+    from gpiscl.host.io.grids import load_grid
     assets = ROOT / "scenes" / "assets"
     return load_grid(assets / "csg_baked_mean.npz"), load_grid(assets / "csg_baked_sigma.npz")
 
@@ -214,8 +214,8 @@ def test_vdb_grids_map_to_grid_means_and_sigma_fields(tmp_path, monkeypatch, dev
     """Without a binding, grids converted elsewhere (STEM.NAME.npz beside the .vdb) are
     used; offset/scale reach the sigma values, the grid transform becomes a transform
     mean and moves the sigma grid's origin, and the scene renders."""
-    from gpiscl.host import vdb
-    from gpiscl.host.sdf_bake import load_field_grid, save_grid
+    from gpiscl.host.io import vdb
+    from gpiscl.host.io.grids import load_field_grid, save_grid
     monkeypatch.setattr(vdb, "import_openvdb", lambda: None)
     mean, sd = _assets()
     save_grid(tmp_path / "baked.mean.npz", mean)
@@ -235,7 +235,7 @@ def test_vdb_grids_map_to_grid_means_and_sigma_fields(tmp_path, monkeypatch, dev
 
 
 def test_vdb_grids_without_a_binding_or_a_converted_copy_say_how(tmp_path, monkeypatch):
-    from gpiscl.host import vdb
+    from gpiscl.host.io import vdb
     monkeypatch.setattr(vdb, "import_openvdb", lambda: None)
     (tmp_path / "baked.vdb").write_bytes(b"")
     with pytest.raises(SceneError) as info:
@@ -248,7 +248,7 @@ def test_vdb_grids_convert_with_a_binding_and_refuse_a_negative_sigma(tmp_path, 
     """With a (stand-in) OpenVDB binding the grids are converted into grid_dir; a sigma
     grid that offset and scale make negative is an error at the covariance's key."""
     import types
-    from gpiscl.host import vdb
+    from gpiscl.host.io import vdb
     from test_convert_vdb import FakeGrid
     mean, sd = _assets()
 

@@ -5,9 +5,9 @@ import types
 import numpy as np
 import pytest
 
-from gpiscl.host import vdb
-from gpiscl.host.scene import SceneError
-from gpiscl.host.sdf_bake import load_grid
+from gpiscl.host.io import vdb
+from gpiscl.host.errors import SceneError
+from gpiscl.host.io.grids import load_grid
 
 
 def test_without_a_binding_the_command_says_how_to_get_one(tmp_path, monkeypatch, capsys):

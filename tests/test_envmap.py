@@ -4,7 +4,7 @@ from statistics import NormalDist
 import numpy as np
 import pytest
 
-from gpiscl.host.envmap import (build_envmap_tables, direction_to_pixel, envmap_lookup,
+from gpiscl.host.compile.envmap import (build_envmap_tables, direction_to_pixel, envmap_lookup,
                                 envmap_pdf, sample_envmap)
 from stats import ALPHA
 

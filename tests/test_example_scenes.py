@@ -29,7 +29,7 @@ def test_bunny_sigma_grid_is_small_where_the_scan_saw_the_surface():
     the multiplier is near the floor (0.05) on the left flank and near the prior's 1 on
     the right. Measured medians 0.07 and 0.67; the bounds leave room for a re-run of the
     tool with another surface sample, not for a grid that lost its left/right contrast."""
-    from gpiscl.host.sdf_bake import load_field_grid, load_grid
+    from gpiscl.host.io.grids import load_field_grid, load_grid
     assets = SCENES[0].parent / "assets"
     mean, sigma = load_grid(assets / "bunny_mean.npz"), load_field_grid(assets / "bunny_sigma.npz")
     v = np.asarray(mean.values)

@@ -6,10 +6,15 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from gpiscl.host.gp import (Periodic, RationalQuadratic, Sphere, SquaredExponential,
-                            ThinPlate, device_layout)
+from gpiscl.host.gp import Periodic
+from gpiscl.host.gp import RationalQuadratic
+from gpiscl.host.gp import Sphere
+from gpiscl.host.gp import SquaredExponential
+from gpiscl.host.gp import ThinPlate
+from gpiscl.host.layout import gp_records
 from gpiscl.host.gp import function_space as FS
-from gpiscl.host.gp import function_space_layout as FL
+from gpiscl.host.layout import function_space_records as FL
+from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_source
 from test_fs_sampling import chi2_threshold
 
 WRAPPERS = r"""
@@ -56,8 +61,8 @@ MEAN = Sphere(center=(0.1, -0.2, 0.3), radius=0.6)
 
 @pytest.fixture(scope="module")
 def prg(device):
-    p = cl.Program(device.ctx, FL.program_source(WRAPPERS)).build(
-        options=FL.build_options(N_ROWS, 2, 0))
+    p = cl.Program(device.ctx, fs_sampler_source(WRAPPERS)).build(
+        options=fs_sampler_options(N_ROWS, 2, 0))
     return {k.function_name: k for k in p.all_kernels()}
 
 
@@ -89,8 +94,8 @@ def _buf(device, a):
 
 
 def _gp(device, kernel):
-    nodes = device_layout.pack_mean(MEAN)
-    return (_buf(device, device_layout.pack_kernel(kernel)), _buf(device, nodes),
+    nodes = gp_records.pack_mean(MEAN)
+    return (_buf(device, gp_records.pack_kernel(kernel)), _buf(device, nodes),
             np.int32(len(nodes)))
 
 

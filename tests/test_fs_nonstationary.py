@@ -9,12 +9,18 @@ import pyopencl as cl
 import pytest
 
 from gpiscl import render_result
-from gpiscl.host.gp import Constant, RationalQuadratic, Sphere, SquaredExponential, device_layout
-from gpiscl.host.gp import function_space_layout as FL
+from gpiscl.host.gp import Constant
+from gpiscl.host.gp import RationalQuadratic
+from gpiscl.host.gp import Sphere
+from gpiscl.host.gp import SquaredExponential
+from gpiscl.host.layout import gp_records
+from gpiscl.host.layout import function_space_records as FL
+from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_source
 from gpiscl.host.gp.kernels import (GridField, LinearField, LocallyPeriodic, NonStationary,
                                     Periodic, RadialField, ThinPlate, covariance_matrix)
-from gpiscl.host.gpis_compile import build_kernel
-from gpiscl.host.scene import SceneError, load_scene
+from gpiscl.host.compile.gpis import build_kernel
+from gpiscl.host.errors import SceneError
+from gpiscl.host.scene.loading import load_scene
 from stats import assert_agree, z_threshold
 from test_gp_device import COV_WRAPPER
 from test_fs_sampling import CAP_MAX, SAMPLES_MAX, WRAPPERS, flights
@@ -116,8 +122,8 @@ def _points(rng, n):
 
 @pytest.fixture(scope="module")
 def prg(device):
-    p = cl.Program(device.ctx, FL.program_source(WRAPPERS + EXTRA)).build(
-        options=FL.build_options(SAMPLES_MAX, CAP_MAX))
+    p = cl.Program(device.ctx, fs_sampler_source(WRAPPERS + EXTRA)).build(
+        options=fs_sampler_options(SAMPLES_MAX, CAP_MAX))
     return {k.function_name: k for k in p.all_kernels()}
 
 
@@ -129,7 +135,7 @@ def _buf(device, a):
 def _device_cov(device, prg, kernel, a, u, b, v):
     n = len(a)
     out = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 64 * n)
-    prg["covariances"](device.queue, (n,), None, _buf(device, device_layout.pack_kernel(kernel)),
+    prg["covariances"](device.queue, (n,), None, _buf(device, gp_records.pack_kernel(kernel)),
                        *(_buf(device, np.asarray(x, np.float64)) for x in (a, u, b, v)), out)
     res = np.empty((n, 8))
     cl.enqueue_copy(device.queue, res, out)
@@ -226,9 +232,9 @@ def test04_device_matches_numpy(device, prg, name):
 def _kernel_and_nodes(kernel, mean=Constant(0.0)):
     """The packed kernel and a mean program followed by the kernel's grid-field records,
     laid out as the scene compiler does."""
-    kp = device_layout.pack_kernel(kernel)
-    nodes = device_layout.pack_mean(mean)
-    grids = device_layout.pack_kernel_grids(kernel, kp, len(nodes))
+    kp = gp_records.pack_kernel(kernel)
+    nodes = gp_records.pack_mean(mean)
+    grids = gp_records.pack_kernel_grids(kernel, kp, len(nodes))
     return kp, np.concatenate([nodes, *grids]), len(nodes)
 
 
@@ -329,7 +335,7 @@ def test06_step_rule_uses_the_smallest_length_scale_on_the_segment(device, prg):
         (NonStationary(base, length_scale_field=grid), np.zeros(3), 0.75 * grid.minimum()),
     ]
     for kern, o, l in cases:
-        kp = device_layout.pack_kernel(kern)
+        kp = gp_records.pack_kernel(kern)
         prg["step_rule"](device.queue, (1,), None, _buf(device, kp),
                          _buf(device, np.r_[o, d]), np.float64(0.9), out)
         dt = np.empty(1)
@@ -398,7 +404,7 @@ def test08_scene_rules():
     g = s.data["shapes"][0]
     k = build_kernel(g["kernel"], g["proxy"])
     assert abs(k.step_length_scale - 0.2 * (1 - 0.25 * 1.1)) < 1e-12
-    assert device_layout.pack_kernel(k)["ls_field"] == device_layout.FIELD_KINDS["linear"]
+    assert gp_records.pack_kernel(k)["ls_field"] == gp_records.FIELD_KINDS["linear"]
 
 
 @pytest.mark.parametrize("bsdf, memory", [("mirror", "renewal_plus"), ("diffuse", "global")])
@@ -528,7 +534,7 @@ def _save_field_grid(path, values, origin=(-1.2, -1.2, -1.2), h=0.6):
 def test12_grid_field_scene_rules(tmp_path):
     """Bad grids name the file key and the reason; weight space refuses a grid field;
     the occupancy bound uses the grid's largest sigma and the step rule its smallest l."""
-    from gpiscl.host.gpis_compile import occupancy_level
+    from gpiscl.host.compile.gpis import occupancy_level
     kern = {"type": "squared_exponential", "sigma": 0.3, "length_scale": 0.2}
     good = np.full((5, 5, 5), 1.0)
     bad = {"shape": (np.ones((5, 5)), "3-D (nx, ny, nz)"),
@@ -558,8 +564,8 @@ def test12_grid_field_scene_rules(tmp_path):
     assert abs(occupancy_level(g) / stationary - 2.5) < 1e-6
     k = build_kernel(g["kernel"], g["proxy"])
     assert abs(k.step_length_scale - 0.2 * 0.4) < 1e-12
-    packed = device_layout.pack_kernel(k)
-    assert packed["sigma_field"] == packed["ls_field"] == device_layout.FIELD_KINDS["grid"]
+    packed = gp_records.pack_kernel(k)
+    assert packed["sigma_field"] == packed["ls_field"] == gp_records.FIELD_KINDS["grid"]
 
 
 def test13_a_grid_sampled_from_a_linear_field_renders_like_it(device, tmp_path):

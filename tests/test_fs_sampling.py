@@ -8,11 +8,17 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from gpiscl.host.gp import (Constant, Plane, RationalQuadratic, SquaredExponential,
-                            ThinPlate, Periodic, device_layout)
+from gpiscl.host.gp import Constant
+from gpiscl.host.gp import Plane
+from gpiscl.host.gp import RationalQuadratic
+from gpiscl.host.gp import SquaredExponential
+from gpiscl.host.gp import ThinPlate
+from gpiscl.host.gp import Periodic
+from gpiscl.host.layout import gp_records
 from gpiscl.host.gp import function_space as FS
-from gpiscl.host.gp import function_space_layout as FL
-from gpiscl.host.layouts import GPIS_MEMORIES
+from gpiscl.host.layout import function_space_records as FL
+from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_source
+from gpiscl.host.layout.records import GPIS_MEMORIES
 from tests.stats import z_threshold
 
 WRAPPERS = r"""
@@ -70,8 +76,8 @@ RQ = RationalQuadratic(sigma=1.0, length_scale=1.0, alpha=1.0)
 
 @functools.lru_cache(maxsize=None)
 def _program(ctx):
-    p = cl.Program(ctx, FL.program_source(WRAPPERS)).build(
-        options=FL.build_options(SAMPLES_MAX, CAP_MAX))
+    p = cl.Program(ctx, fs_sampler_source(WRAPPERS)).build(
+        options=fs_sampler_options(SAMPLES_MAX, CAP_MAX))
     return {k.function_name: k for k in p.all_kernels()}
 
 
@@ -91,8 +97,8 @@ def flights(device, prg, kernel, mean, n, memory="global", samples=8, cap=64, re
             c=0.9, o=(0, 0, 0), d=(1, 0, 0), t0=0.0, t1=6.0, seed=1, restarts=0):
     """Per ray: first-hit t (-1: none), gradient, hits, status, first-hit segment, segments."""
     q = device.queue
-    mean_nodes = device_layout.pack_mean(mean)
-    kp, mb = _buf(device, device_layout.pack_kernel(kernel)), _buf(device, mean_nodes)
+    mean_nodes = gp_records.pack_mean(mean)
+    kp, mb = _buf(device, gp_records.pack_kernel(kernel)), _buf(device, mean_nodes)
     rb = _buf(device, np.array([*o, *d, t0, t1], np.float64))
     stride = FL.scratch_doubles(FL.max_rows(SAMPLES_MAX, CAP_MAX))
     chunk = max(1, min(n, (256 << 20) // (8 * stride)))
@@ -158,7 +164,7 @@ def test_step_rule(device, prg, kernel):
     d = np.array([0.6, 0.0, 0.8]) * 1.5
     out = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 8)
     for c in (0.5, 0.9, 0.99):
-        prg["step_rule"](device.queue, (1,), None, _buf(device, device_layout.pack_kernel(kernel)),
+        prg["step_rule"](device.queue, (1,), None, _buf(device, gp_records.pack_kernel(kernel)),
                          _buf(device, np.r_[np.zeros(3), d]), np.float64(c), out)
         dt = np.empty(1)
         cl.enqueue_copy(device.queue, dt, out)

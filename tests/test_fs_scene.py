@@ -1,9 +1,10 @@
 """The function_space sampler in scene files: defaults, strict validation, compilation."""
 import pytest
 
-from gpiscl.host import layouts
-from gpiscl.host.scene import SceneError, load_scene
-from gpiscl.host.scene_compile import compile_scene
+from gpiscl.host.layout import records as layouts
+from gpiscl.host.errors import SceneError
+from gpiscl.host.scene.loading import load_scene
+from gpiscl.host.compile.scene import compile_scene
 
 
 def scene(sampler, kernel=None):

@@ -1,5 +1,4 @@
 """gp_kernel.h and gp_mean.h on the device against the numpy references."""
-from pathlib import Path
 
 import numpy as np
 import pyopencl as cl
@@ -9,9 +8,9 @@ from gpiscl.host.gp import (Box, Capsule, Constant, Difference, Intersection,
                             LocallyPeriodic, Periodic, Plane, RationalQuadratic,
                             RoundedBox, Sphere, SquaredExponential, ThinPlate, Torus,
                             Transform, Union)
-from gpiscl.host.gp import device_layout
+from gpiscl.host.layout import gp_records
+from gpiscl.host.render.program_sources import kernel_source
 
-KERNEL_DIR = Path(__file__).resolve().parent.parent / "gpiscl" / "kernels_cl"
 
 COV_WRAPPER = r"""
 __kernel void covariances(__global const GpKernel* kp, __global const GP_REAL* a,
@@ -57,8 +56,8 @@ KERNELS = [
 
 
 def _program(device, real):
-    src = ["#pragma OPENCL EXTENSION cl_khr_fp64 : enable", device_layout.c_declarations()]
-    src += [(KERNEL_DIR / h).read_text() for h in ("gp_kernel.h", "gp_mean.h")]
+    src = ["#pragma OPENCL EXTENSION cl_khr_fp64 : enable", gp_records.c_declarations()]
+    src += [kernel_source(h) for h in ("gp_kernel.h", "gp_mean.h")]
     return cl.Program(device.ctx, "\n".join(src) + WRAPPERS).build(
         options=[f"-DGP_REAL={real}"])
 
@@ -86,7 +85,7 @@ def test_kernel_covariances_match_host(device, program, kernel):
     a, u, b, v = (x.astype(dtype) for x in (a, u, b, v))
     out = np.empty((n, 8), dtype)
     out_buf = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
-    prg["covariances"](device.queue, (n,), None, _buffer(device, device_layout.pack_kernel(kernel)),
+    prg["covariances"](device.queue, (n,), None, _buffer(device, gp_records.pack_kernel(kernel)),
                     *(_buffer(device, x) for x in (a, u, b, v)), out_buf)
     cl.enqueue_copy(device.queue, out, out_buf)
     a, u, b, v = (x.astype(np.float64) for x in (a, u, b, v))
@@ -128,7 +127,7 @@ MEANS = {"constant": Constant(0.5), "plane": Plane(normal=(1, 2, 2), scale=2.0),
 def test_mean_values_and_gradients_match_host(device, program, name):
     _, prg = program
     mean = MEANS[name]
-    nodes = device_layout.pack_mean(mean)
+    nodes = gp_records.pack_mean(mean)
     x = np.random.default_rng(9).uniform(-1.5, 1.5, (1000, 3)).astype(np.float32)
     out = np.empty((len(x), 4), np.float32)
     out_buf = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
@@ -143,27 +142,27 @@ def test_mean_values_and_gradients_match_host(device, program, name):
 
 
 def test_csg_packing_keeps_the_stack_small():
-    nodes = device_layout.pack_mean(CSG)
+    nodes = gp_records.pack_mean(CSG)
     chain = Sphere()
     for i in range(30):                          # right-deep: needs 2 entries after swaps
         chain = Union(Sphere(center=(i, 0, 0)), chain)
-    assert device_layout._stack_need(chain) == 2
+    assert gp_records._stack_need(chain) == 2
     # every union but the innermost (two single leaves) emits its deeper right child first
-    assert np.sum(device_layout.pack_mean(chain)["flags"]) == 29
+    assert np.sum(gp_records.pack_mean(chain)["flags"]) == 29
     def balanced(depth):
         return Sphere() if depth == 0 else Union(balanced(depth - 1), balanced(depth - 1))
-    device_layout.pack_mean(balanced(device_layout.MEAN_STACK_DEPTH - 1))
+    gp_records.pack_mean(balanced(gp_records.MEAN_STACK_DEPTH - 1))
     with pytest.raises(ValueError, match="stack"):
-        device_layout.pack_mean(balanced(device_layout.MEAN_STACK_DEPTH))
-    assert nodes.dtype == device_layout.MEAN_NODE.dtype
+        gp_records.pack_mean(balanced(gp_records.MEAN_STACK_DEPTH))
+    assert nodes.dtype == gp_records.MEAN_NODE.dtype
 
 
-@pytest.mark.parametrize("struct", device_layout.STRUCTS, ids=lambda s: s.name)
+@pytest.mark.parametrize("struct", gp_records.STRUCTS, ids=lambda s: s.name)
 def test_struct_offsets_match_device(device, struct):
     fields = [f for _, f in struct.fields]
     body = "\n".join(f"out[{i + 1}] = (int)((char*)&s.{f} - (char*)&s);"
                       for i, f in enumerate(fields))
-    src = (device_layout.c_declarations() + f"__kernel void offsets(__global int* out) {{\n"
+    src = (gp_records.c_declarations() + f"__kernel void offsets(__global int* out) {{\n"
            f"{struct.name} s; out[0] = sizeof({struct.name});\n{body}\n}}\n")
     prg = cl.Program(device.ctx, src).build()
     out = np.zeros(len(fields) + 1, np.int32)

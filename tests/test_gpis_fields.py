@@ -1,21 +1,21 @@
-"""Colour and emission fields on GPIS objects (gpiscl/host/gpis_fields.py, gpis_fields.h):
+"""Colour and emission fields on GPIS objects (gpiscl/host/scene/colour_fields.py, gpis_fields.h):
 the device evaluator against the numpy reference, closed-form renders, and scene errors."""
 import math
 import re
-from pathlib import Path
 
 import numpy as np
 import pyopencl as cl
 import pytest
 
 from gpiscl import load_scene, render_result
-from gpiscl.host.device import PYOPENCL_CL_DIR, join_sources
-from gpiscl.host.gpis_fields import FIELD_KINDS, evaluate, pack_field, save_rgb_grid
-from gpiscl.host.scene_schema import SceneError
+from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, join_sources, kernel_source
+from gpiscl.host.scene.colour_fields import evaluate
+from gpiscl.host.io.grids import save_rgb_grid
+from gpiscl.host.compile.colour_fields import FIELD_KINDS, pack_field
+from gpiscl.host.errors import SceneError
 from reference import hit_sphere, pixel_rays
 from stats import z_threshold
 
-KERNEL_DIR = Path(__file__).resolve().parent.parent / "gpiscl" / "kernels_cl"
 
 WRAPPER = r"""
 __kernel void field_eval(__global const MeanNode* nodes, int f, __global const float* x,
@@ -43,7 +43,7 @@ def _linear_grid(tmp_path, name, axis, lo, hi, a, b, n=(3, 4, 5)):
 
 
 def test01_kinds_match_the_header():
-    text = (KERNEL_DIR / "gpis_fields.h").read_text()
+    text = kernel_source("gpis_fields.h")
     found = {m[0].lower(): int(m[1]) for m in re.findall(r"#define GPIS_FIELD_(\w+) (\d+)", text)}
     assert found == FIELD_KINDS
 

@@ -4,7 +4,7 @@ import zlib
 import numpy as np
 import pytest
 
-from gpiscl.host.imageio import (read_exr, read_exr_rgb, tonemap_srgb8, write_exr,
+from gpiscl.host.io.images import (read_exr, read_exr_rgb, tonemap_srgb8, write_exr,
                                  write_png)
 
 

@@ -3,7 +3,7 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from gpiscl.host import layouts
+from gpiscl.host.layout import records as layouts
 
 
 def _offset_kernel(struct) -> str:
@@ -29,6 +29,7 @@ def test_struct_offsets_match_device(device, struct):
 
 
 def test_every_stage_kernel_is_built_once_under_its_own_name(device):
-    from gpiscl.host.integrator import STAGE_FILES, stage_program
+    from gpiscl.host.render.integrator import stage_program
+    from gpiscl.host.render.program_sources import STAGE_FILES
     program = stage_program(device)
     assert sorted(program.kernels) == sorted(f[:-3] for f in STAGE_FILES)

@@ -12,13 +12,13 @@ import pytest
 import trimesh
 
 from gpiscl import load_scene, render_result
-from gpiscl.host.device import PYOPENCL_CL_DIR, join_sources
+from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, join_sources
 from gpiscl.host.gp import means as means_module
-from gpiscl.host.gp.device_layout import (GRID_BRICK, GRID_PAYLOAD_FLOATS, MEAN_KINDS,
+from gpiscl.host.layout.gp_records import (GRID_BRICK, GRID_PAYLOAD_FLOATS, MEAN_KINDS,
                                          pack_mean)
 from gpiscl.host.gp.means import (Box, Difference, GridMean, Sphere, Transform, Union)
-from gpiscl.host import sdf_bake
-from gpiscl.host.scene_schema import SceneError
+from gpiscl.host.compile import sdf_bake
+from gpiscl.host.errors import SceneError
 from stats import assert_agree
 from test_gp_device import MEAN_WRAPPER
 
@@ -150,9 +150,9 @@ def test02b_transform_applies_to_the_vertices_before_baking(tmp_path):
     """The scene's transform (scale, then rotate, then translate, as for mesh shapes) is
     baked in, so even a non-uniform scale gives exact distances: a unit cube scaled to
     (1, 0.6, 0.8) and turned 90 degrees about y is the box of half extents (0.4, 0.3, 0.5)."""
-    from gpiscl.host.gpis_compile import _transform_matrix
+    from gpiscl.host.scene.transforms import transform_matrix
     path = write_mesh(tmp_path, trimesh.creation.box(extents=(1.0, 1.0, 1.0)))
-    m = _transform_matrix({"scale": [1.0, 0.6, 0.8], "rotate": [0.0, 90.0, 0.0],
+    m = transform_matrix({"scale": [1.0, 0.6, 0.8], "rotate": [0.0, 90.0, 0.0],
                            "translate": [0.2, 0.1, -0.3]})
     grid, _ = sdf_bake.mesh_mean(path, resolution=24, object_to_world=m)
     box = Box(half_extents=(0.4, 0.3, 0.5), center=(0.2, 0.1, -0.3))
@@ -466,7 +466,7 @@ def test10_grid_file_round_trips_into_the_program(tmp_path):
     sdf_bake.save_grid(tmp_path / "g.npz", g)
     scene = _load(tmp_path, _gpis_scene({"type": "transform", "translate": [0.5, 0, 0],
                                          "child": {"type": "grid", "file": "g.npz"}}))
-    from gpiscl.host.gpis_compile import build_mean
+    from gpiscl.host.compile.gpis import build_mean
     mean = build_mean(scene.data["shapes"][0]["mean"])
     x = np.random.default_rng(9).uniform(-2, 2, (100, 3))
     np.testing.assert_allclose(mean.value(x), Transform(g, np.concatenate(

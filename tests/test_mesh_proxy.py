@@ -1,4 +1,4 @@
-"""Convex mesh proxies (mesh_proxy.py, gpis_proxy.h): the device clips rays to exactly the
+"""Convex mesh proxies (scene/proxies.py, gpis_proxy.h): the device clips rays to exactly the
 convex mesh, non-convex or open meshes are errors, and a mesh box bounds a GPIS like a box."""
 import math
 
@@ -8,12 +8,13 @@ import pytest
 import trimesh
 
 from gpiscl import load_scene, render_result
-from gpiscl.host import layouts
-from gpiscl.host.device import PYOPENCL_CL_DIR, join_sources
-from gpiscl.host.gp.device_layout import MEAN_NODE
-from gpiscl.host.mesh_proxy import analyse, pack_planes
-from gpiscl.host.scene import SceneError
-from gpiscl.host.scene_compile import _euler_matrix
+from gpiscl.host.layout import records as layouts
+from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, join_sources
+from gpiscl.host.layout.gp_records import MEAN_NODE
+from gpiscl.host.scene.proxies import analyse
+from gpiscl.host.compile.gpis import pack_planes
+from gpiscl.host.errors import SceneError
+from gpiscl.host.scene.transforms import euler_matrix
 from stats import assert_agree
 from test_occupancy import CLIP_KERNEL
 
@@ -30,7 +31,7 @@ def box_mesh(tmp_path):
 def slab_interval(o, d):
     """Ray parameters inside the rotated box, by the slab test in the box's own frame, and
     |cos| between the ray and the faces that bound it at each end."""
-    R = _euler_matrix(ROTATE)
+    R = euler_matrix(ROTATE)
     ol, dl = (o - TRANSLATE) @ R, d @ R          # R^T applied to row vectors
     half = np.asarray(EXTENT) / 2
     with np.errstate(divide="ignore", invalid="ignore"):

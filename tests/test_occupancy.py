@@ -9,14 +9,14 @@ import pyopencl as cl
 import pytest
 
 from gpiscl import render_result
-from gpiscl.host import layouts
-from gpiscl.host.device import PYOPENCL_CL_DIR, join_sources
+from gpiscl.host.layout import records as layouts
+from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, join_sources
 from gpiscl.host.gp import Box, Sphere, SquaredExponential, Torus, Transform, Union
 from gpiscl.host.gp import kernels as K
 from gpiscl.host.gp import means as M
-from gpiscl.host.gp.device_layout import pack_mean
+from gpiscl.host.layout.gp_records import pack_mean
 from gpiscl.host.gp.spectral import RandomFeatures
-from gpiscl.host.gpis_compile import build_kernel, occupancy_level
+from gpiscl.host.compile.gpis import build_kernel, occupancy_level
 from stats import assert_agree, z_threshold
 
 PHI = NormalDist().cdf
@@ -228,8 +228,8 @@ def test05_function_space_keeps_a_conditioned_start(device, clip_prg):
 
 def test06_scenes_get_the_bound_by_default():
     """Scenes get the bound by default (epsilon 1e-4: z = 3.719) and null turns it off."""
-    from gpiscl.host.scene import load_scene
-    from gpiscl.host.scene_compile import compile_scene
+    from gpiscl.host.scene.loading import load_scene
+    from gpiscl.host.compile.scene import compile_scene
     for eps, level in ((1e-4, 3.719016 * 0.08), (1e-2, 2.326348 * 0.08), (None, 0.0)):
         sc = scene(SAMPLERS["function_space"], occupancy=eps)
         if eps == 1e-4:

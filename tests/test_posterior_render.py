@@ -2,23 +2,27 @@
 and joint covariance that fs_sampling.h uses against gpiscl/host/gp/posterior.py and a
 dense numpy regression, the scene key, and renders of a sphere reconstructed from noisy
 points."""
-import json
 
 import numpy as np
 import pyopencl as cl
 import pytest
 
-from gpiscl.host.device import PYOPENCL_CL_DIR, KERNEL_DIR
-from gpiscl.host.gp import RationalQuadratic, Sphere, SquaredExponential, device_layout
+from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, kernel_source
+from gpiscl.host.gp import RationalQuadratic
+from gpiscl.host.gp import Sphere
+from gpiscl.host.gp import SquaredExponential
+from gpiscl.host.layout import gp_records
 from gpiscl.host.gp.kernels import GridField, LinearField, NonStationary
-from gpiscl.host.gp import function_space_layout as FL
+from gpiscl.host.layout import function_space_records as FL
+from gpiscl.host.render.program_sources import fs_sampler_source
 from gpiscl.host.gp.posterior import Posterior, surface_observations
-from gpiscl.host import posterior_compile as PC
+from gpiscl.host.compile import posterior as PC
+from gpiscl.host.scene import observations as OBS
 
 from stats import assert_agree, block_means, z_threshold
 from test_posterior import dense_reference
 
-WRAPPERS = (KERNEL_DIR / "fs_posterior.h").read_text() + r"""
+WRAPPERS = kernel_source("fs_posterior.h") + r"""
 /* per probe: posterior mean, variance, prior mean, and n seen by the lookup */
 __kernel void post_probe(__global const GpKernel* kp, __global const MeanNode* means,
                          int mean_first, int mc, __global const double* x,
@@ -65,7 +69,7 @@ def defines(post_max=POST_MAX):
 @pytest.fixture(scope="module")
 def prg(device):
     opts = [f"-I{PYOPENCL_CL_DIR}"] + [f"-D{k}={v}" for k, v in sorted(defines().items())]
-    p = cl.Program(device.ctx, FL.program_source(WRAPPERS)).build(options=opts)
+    p = cl.Program(device.ctx, fs_sampler_source(WRAPPERS)).build(options=opts)
     return {k.function_name: k for k in p.all_kernels()}
 
 
@@ -92,11 +96,11 @@ def packed(post, mean):
     """A mean-node buffer with a posterior-free program first (so the lookup must skip
     it) and the posterior object second, its kernel's grid fields last, as the scene
     compiler lays them out; returns nodes, mean_first, mean_count, the packed kernel."""
-    other = device_layout.pack_mean(Sphere(radius=0.5))
+    other = gp_records.pack_mean(Sphere(radius=0.5))
     block = PC.pack_posterior(post)
-    prog = device_layout.pack_mean(mean)
-    kp = device_layout.pack_kernel(post.kernel)
-    grids = device_layout.pack_kernel_grids(post.kernel, kp, len(prog))
+    prog = gp_records.pack_mean(mean)
+    kp = gp_records.pack_kernel(post.kernel)
+    grids = gp_records.pack_kernel_grids(post.kernel, kp, len(prog))
     nodes = np.concatenate([other, block, prog, *grids])
     return nodes, len(other) + len(block), len(prog), kp
 
@@ -213,11 +217,11 @@ def test03_objects_without_observations_see_the_prior(device, prg):
     rng = np.random.default_rng(3)
     kernel = SquaredExponential(sigma=0.5, length_scale=0.6)
     mean = Sphere(radius=1.0)
-    prog = device_layout.pack_mean(mean)
+    prog = gp_records.pack_mean(mean)
     nodes = np.concatenate([prog, prog])
     x = rng.uniform(-1, 1, (50, 3))
     for first in (0, len(prog)):
-        out = probe(device, prg, device_layout.pack_kernel(kernel), nodes, first, len(prog),
+        out = probe(device, prg, gp_records.pack_kernel(kernel), nodes, first, len(prog),
                     x)
         assert np.all(out[:, 3] == 0)
         np.testing.assert_allclose(out[:, 1], kernel.variance, rtol=1e-12)
@@ -297,7 +301,8 @@ def _scene_with(obs, sampler=None):
 
 
 def test05_observations_key_is_validated(tmp_path):
-    from gpiscl.host.scene import SceneError, load_scene
+    from gpiscl.host.errors import SceneError
+    from gpiscl.host.scene.loading import load_scene
     good = noisy_sphere_points(tmp_path / "p.xyz", 30, 0.01)
     s = load_scene(_scene_with({"file": good}))
     assert s.data["shapes"][0]["observations"] == {
@@ -306,7 +311,7 @@ def test05_observations_key_is_validated(tmp_path):
     np.save(tmp_path / "nan.npy", np.full((5, 3), np.nan))
     np.save(tmp_path / "six.npy", np.concatenate([np.eye(3), np.zeros((3, 3))], 1))
     (tmp_path / "text.xyz").write_text("1 2 three\n")
-    x = fibonacci_sphere(PC.MAX_ROWS // 4 + 1)
+    x = fibonacci_sphere(OBS.MAX_ROWS // 4 + 1)
     np.save(tmp_path / "big.npy", np.concatenate([x, x], 1))
     # (the weight_space sampler's own checks: test_ws_posterior.test06)
     cases = [
@@ -328,8 +333,8 @@ def test05_observations_key_is_validated(tmp_path):
 
 def test06_compiled_scene_carries_the_posterior(tmp_path):
     """The block precedes the object's program; normals add three rows per point."""
-    from gpiscl.host.scene import load_scene
-    from gpiscl.host.scene_compile import compile_scene
+    from gpiscl.host.scene.loading import load_scene
+    from gpiscl.host.compile.scene import compile_scene
     x = fibonacci_sphere(25)
     np.savetxt(tmp_path / "pn.xyz", np.concatenate([x, x], 1))
     gp = compile_scene(load_scene(_scene_with({"file": str(tmp_path / "pn.xyz"),
@@ -337,7 +342,7 @@ def test06_compiled_scene_carries_the_posterior(tmp_path):
     assert list(PC.posterior_rows(gp.mean_nodes, gp.objects)) == [100]
     o = gp.objects[0]
     prog = gp.mean_nodes[o["mean_first"]:o["mean_first"] + o["mean_count"]]
-    assert prog["kind"][0] == device_layout.MEAN_KINDS["sphere"]
+    assert prog["kind"][0] == gp_records.MEAN_KINDS["sphere"]
     if "occupancy_level" in gp.objects.dtype.names:
         assert o["occupancy_level"] == 0.0
 

@@ -4,7 +4,7 @@ import math
 import numpy as np
 
 from gpiscl import render_result
-from gpiscl.host.imageio import write_exr
+from gpiscl.host.io.images import write_exr
 from stats import assert_agree
 
 

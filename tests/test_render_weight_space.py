@@ -13,7 +13,7 @@ import pytest
 from gpiscl import render_result
 from gpiscl.host.gp import Plane, Sphere, SquaredExponential
 from gpiscl.host.gp import weight_space as ws
-from gpiscl.host.gp.device_layout import pack_kernel, pack_mean
+from gpiscl.host.layout.gp_records import pack_kernel, pack_mean
 from reference import pixel_rays
 from stats import assert_agree, z_threshold
 from test_ws_features import build, buf
@@ -194,7 +194,7 @@ def test_surface_type_slopes_follow_the_beckmann_law(device):
 
 
 def test_a_fixed_realization_needs_weight_space(device):
-    from gpiscl.host.scene import SceneError
+    from gpiscl.host.errors import SceneError
     shape = gpis("squared_exponential", "diffuse", 0.5)
     shape["sampler"] = {"type": "function_space"}
     scene = {"camera": camera(4), "lights": [{"type": "environment"}], "shapes": [shape]}

@@ -10,12 +10,12 @@ import pytest
 
 from gpiscl.__main__ import main
 from gpiscl.host.gp import RationalQuadratic, Sphere, SquaredExponential
-from gpiscl.host.sample_figures import (PLOTS_MISSING, empirical_covariance, exact_samples,
+from gpiscl.host.commands.sample_figures import (PLOTS_MISSING, empirical_covariance, exact_samples,
                                         fig2_data, implied_kernel, kernel_covariance,
                                         line_points, load_observations, occupancy,
                                         plane_points, posterior_maps, resolve_target,
                                         weight_space_samples, write_figures)
-from gpiscl.host.scene import SceneError
+from gpiscl.host.errors import SceneError
 
 from stats import z_threshold
 
@@ -119,7 +119,7 @@ def test07_without_matplotlib_the_command_says_how_to_install(monkeypatch, tmp_p
 
 
 def test08_the_renderer_does_not_import_matplotlib():
-    code = ("import sys, gpiscl, gpiscl.__main__, gpiscl.host.uq, gpiscl.host.sample_figures;"
+    code = ("import sys, gpiscl, gpiscl.__main__, gpiscl.host.commands.uq, gpiscl.host.commands.sample_figures;"
             "sys.exit('matplotlib' in sys.modules)")
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
 

@@ -7,7 +7,8 @@ import os
 import numpy as np
 import pytest
 
-from gpiscl.host.scene import SceneError, load_scene, write_resolved
+from gpiscl.host.errors import SceneError
+from gpiscl.host.scene.loading import load_scene, write_resolved
 from gpiscl.scenes import default_scene, furnace_sphere
 
 
@@ -313,8 +314,8 @@ def test_not_a_scene_argument():
 
 def test_new_kinds_are_declared_not_coded():
     """A later object kind needs only a declaration (here registered and then removed)."""
-    from gpiscl.host.scene import SHAPES, shape
-    from gpiscl.host.scene_schema import Field, Number, Vector
+    from gpiscl.host.scene.records import SHAPES, shape
+    from gpiscl.host.scene.schema import Field, Number, Vector
     SHAPES.register("blob", shape({"center": Field(Vector(), [0, 0, 0]),
                                    "lengthscale": Field(Number(gt=0), 0.5)}))
     try:

@@ -3,8 +3,9 @@ import numpy as np
 import pytest
 
 from gpiscl import render_result
-from gpiscl.host.scene import SceneError, load_scene
-from gpiscl.host.scene_compile import scene_box
+from gpiscl.host.errors import SceneError
+from gpiscl.host.scene.loading import load_scene
+from gpiscl.host.compile.scene import scene_box
 
 
 def _scene(proxy, kernel=None, sampler=None):

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from gpiscl.__main__ import main
-from gpiscl.host.camera import compile_camera
+from gpiscl.host.compile.camera import compile_camera
 from gpiscl.host.gp import weight_space as ws
-from gpiscl.host.gpis_compile import build_kernel, build_mean
-from gpiscl.host.imageio import read_exr
-from gpiscl.host.scene import load_scene
-from gpiscl.host.uq import UqSums, realization_ids, render_realizations
+from gpiscl.host.compile.gpis import build_kernel, build_mean
+from gpiscl.host.io.images import read_exr
+from gpiscl.host.scene.loading import load_scene
+from gpiscl.host.commands.uq import UqSums, realization_ids, render_realizations
 
 from stats import z_threshold
 

@@ -3,11 +3,11 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from gpiscl.host.device import PYOPENCL_CL_DIR, join_sources
+from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, join_sources
 from gpiscl.host.gp import (Box, Constant, LocallyPeriodic, Periodic, RationalQuadratic, Sphere,
                             SquaredExponential, Transform, Union)
 from gpiscl.host.gp import weight_space as ws
-from gpiscl.host.gp.device_layout import pack_kernel, pack_mean
+from gpiscl.host.layout.gp_records import pack_kernel, pack_mean
 from stats import z_threshold
 
 EPS = float(np.finfo(np.float32).eps)

@@ -8,7 +8,7 @@ from gpiscl.host.gp import (Box, Constant, LocallyPeriodic, Periodic, Plane, Rat
                             Sphere, SquaredExponential, ThinPlate, Torus, Transform, Union,
                             sample_frequencies)
 from gpiscl.host.gp import weight_space as ws
-from gpiscl.host.gp.device_layout import pack_mean
+from gpiscl.host.layout.gp_records import pack_mean
 from stats import z_threshold
 from test_ws_features import ROT, build, buf, dump, eval_tolerance, gp_args, keys_for, run
 

@@ -4,10 +4,11 @@ search, and function-space renders of the same posterior."""
 import numpy as np
 import pytest
 
-from gpiscl.host import posterior_compile as PC
+from gpiscl.host.compile import posterior as PC
+from gpiscl.host.scene import observations as OBS
 from gpiscl.host.gp import RationalQuadratic, Sphere, SquaredExponential
 from gpiscl.host.gp import weight_space as ws
-from gpiscl.host.gp.device_layout import pack_kernel, pack_mean
+from gpiscl.host.layout.gp_records import pack_kernel, pack_mean
 from gpiscl.host.gp.posterior import Posterior, solve_triangular, surface_observations
 from stats import assert_agree, z_threshold
 from test_posterior_render import fibonacci_sphere, noisy_sphere_points, run, sphere_scene
@@ -310,7 +311,8 @@ def test05_first_roots_match_a_dense_scan(device, prg, kind):
 def test06_scene_key_accepts_weight_space(tmp_path):
     """Observations on a weight-space object load; kernels whose cross-covariance slopes
     ws_posterior.h does not bound, and more rows than its private vector holds, do not."""
-    from gpiscl.host.scene import SceneError, load_scene
+    from gpiscl.host.errors import SceneError
+    from gpiscl.host.scene.loading import load_scene
     pts = noisy_sphere_points(tmp_path / "p.xyz", 30, 0.01)
     s = sphere_scene(1.2, 0.3, 1, {"file": pts})
     s["shapes"][0]["sampler"] = {"type": "weight_space", "features": 64}
@@ -318,7 +320,7 @@ def test06_scene_key_accepts_weight_space(tmp_path):
     bad = dict(s, shapes=[dict(s["shapes"][0], kernel={"type": "periodic", "sigma": 0.3})])
     with pytest.raises(SceneError, match="squared_exponential and rational_quadratic"):
         load_scene(bad)
-    np.savetxt(tmp_path / "big.xyz", fibonacci_sphere(PC.WS_MAX_ROWS + 1))
+    np.savetxt(tmp_path / "big.xyz", fibonacci_sphere(OBS.WS_MAX_ROWS + 1))
     s["shapes"][0]["observations"] = {"file": str(tmp_path / "big.xyz")}
     with pytest.raises(SceneError, match="weight_space sampler"):
         load_scene(s)

@@ -28,11 +28,15 @@ import pyopencl as cl
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from gpiscl.host.device import Device  # noqa: E402
-from gpiscl.host.gp import Constant, Sphere, SquaredExponential, device_layout  # noqa: E402
+from gpiscl.host.render.device import Device  # noqa: E402
+from gpiscl.host.gp import Constant
+from gpiscl.host.gp import Sphere
+from gpiscl.host.gp import SquaredExponential
+from gpiscl.host.layout import gp_records  # noqa: E402
 from gpiscl.host.gp import function_space as FS  # noqa: E402
-from gpiscl.host.gp import function_space_layout as FL  # noqa: E402
-from gpiscl.host.layouts import GPIS_MEMORIES  # noqa: E402
+from gpiscl.host.layout import function_space_records as FL  # noqa: E402
+from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_source  # noqa: E402
+from gpiscl.host.layout.records import GPIS_MEMORIES  # noqa: E402
 
 WRAPPERS = r"""
 __kernel void segment(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
@@ -153,12 +157,12 @@ def main():
     args = ap.parse_args()
     dev = Device()
     print(f"device: {dev.name}")
-    p = cl.Program(dev.ctx, FL.program_source(WRAPPERS)).build(options=FL.build_options(128, 64))
+    p = cl.Program(dev.ctx, fs_sampler_source(WRAPPERS)).build(options=fs_sampler_options(128, 64))
     k = {kk.function_name: kk for kk in p.all_kernels()}
-    nodes = device_layout.pack_mean(MEAN)
+    nodes = gp_records.pack_mean(MEAN)
     mf = cl.mem_flags
     kp = cl.Buffer(dev.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR,
-                   hostbuf=device_layout.pack_kernel(KERNEL))
+                   hostbuf=gp_records.pack_kernel(KERNEL))
     mb = cl.Buffer(dev.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=nodes)
     stride = FL.scratch_doubles(FL.max_rows(128, 64))
     dt = FS.step_size(KERNEL, (0, 0, 1), 0.9)
@@ -202,7 +206,7 @@ def main():
             scratch = cl.Buffer(dev.ctx, mf.READ_WRITE, 8 * stride * rays)
             out = cl.Buffer(dev.ctx, mf.WRITE_ONLY, 8 * rays)
             far = Constant(3.0)
-            far_nodes = device_layout.pack_mean(far)
+            far_nodes = gp_records.pack_mean(far)
             fb = cl.Buffer(dev.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=far_nodes)
 
             def run_flight():

@@ -22,7 +22,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tools"))
 
 from bench_occupancy import scene_variant, time_variants  # noqa: E402
-from gpiscl.host.device import Device  # noqa: E402
+from gpiscl.host.render.device import Device  # noqa: E402
 import numpy as np  # noqa: E402
 
 SCENES = ("scenes/knob_no_csg.json", "scenes/bunny_grid.json", "scenes/csg_baked.json")

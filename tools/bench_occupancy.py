@@ -21,10 +21,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from gpiscl.host.device import Device  # noqa: E402
-from gpiscl.host.integrator import WavefrontIntegrator  # noqa: E402
-from gpiscl.host.scene import load_scene  # noqa: E402
-from gpiscl.host.scene_compile import compile_scene  # noqa: E402
+from gpiscl.host.render.device import Device  # noqa: E402
+from gpiscl.host.render.integrator import WavefrontIntegrator  # noqa: E402
+from gpiscl.host.scene.loading import load_scene  # noqa: E402
+from gpiscl.host.compile.scene import compile_scene  # noqa: E402
 
 SCENES = ("scenes/knob_no_csg.json", "scenes/knob.json", "scenes/ws_sphere_se.json")
 

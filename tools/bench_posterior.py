@@ -15,7 +15,7 @@ tests/test_posterior_render.py with n observed points, weight space and function
 seconds and the ratio to the same sampler's prior.
 
 Device (--device-sizes, 0 = the prior): function-space free flight through a posterior
-GPIS (fs_sampling.h with the observations of posterior_compile.py), rays through a
+GPIS (fs_sampling.h with the observations of compile/posterior.py), rays through a
 sphere of observed points; microseconds per segment and per conditioned row (one row:
 n kernel evaluations, an n x n triangular solve, and its covariance entries).
 """
@@ -63,21 +63,23 @@ __kernel void flight(__global const GpKernel* kp, __global const MeanNode* means
 
 def device_cost(sizes, rays: int):
     import pyopencl as cl
-    from gpiscl.host import posterior_compile as PC
-    from gpiscl.host.device import KERNEL_DIR, PYOPENCL_CL_DIR, Device
-    from gpiscl.host.gp import device_layout
-    from gpiscl.host.gp import function_space_layout as FL
+    from gpiscl.host.compile import posterior as PC
+    from gpiscl.host.render.device import Device
+    from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, kernel_source
+    from gpiscl.host.layout import gp_records
+    from gpiscl.host.layout import function_space_records as FL
+    from gpiscl.host.render.program_sources import fs_sampler_source
     dev = Device()
     kernel = SquaredExponential(sigma=0.2, length_scale=0.3)
     mean = Sphere(radius=1.0)
     rng = np.random.default_rng(1)
     dirs = rng.standard_normal((rays, 3)) * [0.2, 0.2, 1.0]
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-    src = FL.program_source((KERNEL_DIR / "fs_posterior.h").read_text() + FLIGHT)
+    src = fs_sampler_source(kernel_source("fs_posterior.h") + FLIGHT)
     print(f"\ndevice ({dev.name}), {rays} rays, N = 16, renewal_plus:")
     print(f"{'n obs':>8}{'segments':>10}{'rows':>8}{'us/segment':>12}{'us/row':>9}")
     for n in sizes:
-        prog = device_layout.pack_mean(mean)
+        prog = gp_records.pack_mean(mean)
         nodes, first = prog, 0
         if n:
             d = rng.standard_normal((n, 3))
@@ -98,7 +100,7 @@ def device_cost(sizes, rays: int):
         scratch = cl.Buffer(dev.ctx, mf.READ_WRITE, 8 * defs["FS_SCRATCH_DOUBLES"] * rays)
         out = np.zeros((rays, 3), np.int32)
         ob = cl.Buffer(dev.ctx, mf.WRITE_ONLY, out.nbytes)
-        args = (buf(device_layout.pack_kernel(kernel)), buf(nodes), np.int32(first),
+        args = (buf(gp_records.pack_kernel(kernel)), buf(nodes), np.int32(first),
                 np.int32(len(prog)), buf(dirs), scratch, ob)
         k(dev.queue, (rays,), None, *args).wait()      # warm-up (compilation per size)
         t0 = time.perf_counter()
@@ -118,8 +120,8 @@ def render_cost(sizes, resolution: int, spp: int, repeats: int):
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from bench_occupancy import time_variants
-    from gpiscl.host.device import Device
-    from gpiscl.host.scene import load_scene
+    from gpiscl.host.render.device import Device
+    from gpiscl.host.scene.loading import load_scene
     from test_posterior_render import noisy_sphere_points, sphere_scene
     folder = Path(tempfile.mkdtemp())
     variants = {}

@@ -23,7 +23,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from gpiscl.host import sdf_bake  # noqa: E402
+from gpiscl.host.compile import sdf_bake  # noqa: E402
 
 
 def bumpy_torus():

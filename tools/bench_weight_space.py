@@ -31,10 +31,11 @@ import pyopencl as cl
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from gpiscl.host.device import PYOPENCL_CL_DIR, Device, join_sources  # noqa: E402
+from gpiscl.host.render.device import Device
+from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, join_sources  # noqa: E402
 from gpiscl.host.gp import Sphere, SquaredExponential  # noqa: E402
 from gpiscl.host.gp import weight_space as ws  # noqa: E402
-from gpiscl.host.gp.device_layout import pack_kernel, pack_mean  # noqa: E402
+from gpiscl.host.layout.gp_records import pack_kernel, pack_mean  # noqa: E402
 
 C_SOURCE = Path(__file__).resolve().parent / "ws_feature_loop.c"
 KERNEL = SquaredExponential(sigma=0.1, length_scale=0.1)

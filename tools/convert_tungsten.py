@@ -12,8 +12,9 @@ import json
 import sys
 from pathlib import Path
 
-from gpiscl.host.scene import SceneError, load_scene
-from gpiscl.host.tungsten import convert_tungsten
+from gpiscl.host.errors import SceneError
+from gpiscl.host.scene.loading import load_scene
+from gpiscl.host.scene.tungsten import convert_tungsten
 
 
 def _environment(text):

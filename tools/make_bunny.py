@@ -5,7 +5,7 @@ The authors' bunny (gp-spsr/bunny.json) reads its mean and variance grids from b
 a stochastic Poisson reconstruction that is not public. This stand-in follows the same
 path from a surface to grids: a blobby rabbit (a smooth union of spheres and capsules) is
 meshed by surface nets, the mesh's signed distance is baked with gpiscl's own mesh bake
-(libigl, gpiscl/host/sdf_bake.py), and the grid is stored like the authors' (about 45^3
+(libigl, gpiscl/host/compile/sdf_bake.py), and the grid is stored like the authors' (about 45^3
 samples, float32). The colour grid (16^3) paints a brown coat, a white belly and tail and
 pink inner ears.
 
@@ -29,8 +29,8 @@ import numpy as np
 
 from gpiscl.host.gp import SquaredExponential
 from gpiscl.host.gp.posterior import Observations, Posterior
-from gpiscl.host.gpis_fields import save_rgb_grid
-from gpiscl.host.sdf_bake import bake_mesh
+from gpiscl.host.io.grids import save_rgb_grid
+from gpiscl.host.compile.sdf_bake import bake_mesh
 
 ASSETS = Path(__file__).resolve().parent.parent / "scenes" / "assets"
 

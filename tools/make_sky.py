@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gpiscl.host.imageio import write_exr
+from gpiscl.host.io.images import write_exr
 
 SUN = np.array([0.6, 0.7, 0.4])
 

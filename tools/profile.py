@@ -17,12 +17,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from gpiscl.host import layouts  # noqa: E402
-from gpiscl.host.camera import compile_camera  # noqa: E402
-from gpiscl.host.device import Device  # noqa: E402
-from gpiscl.host.integrator import WavefrontIntegrator  # noqa: E402
-from gpiscl.host.scene import load_scene  # noqa: E402
-from gpiscl.host.scene_compile import compile_scene  # noqa: E402
+from gpiscl.host.layout import records as layouts  # noqa: E402
+from gpiscl.host.compile.camera import compile_camera  # noqa: E402
+from gpiscl.host.render.device import Device  # noqa: E402
+from gpiscl.host.render.integrator import WavefrontIntegrator  # noqa: E402
+from gpiscl.host.scene.loading import load_scene  # noqa: E402
+from gpiscl.host.compile.scene import compile_scene  # noqa: E402
 
 PRIM = layouts.PRIM_KINDS
 

@@ -1,7 +1,9 @@
-"""The Gaussian-process model: kernels, means, spectral samplers and their device layouts.
+"""The Gaussian-process model: kernels, means, spectral samplers, posteriors and numpy
+twins of both samplers. Imports numpy only: every other package builds on it.
 
 numpy implementations here are the references for gp_kernel.h and gp_mean.h and for the
-scene compiler; see kernels.py, means.py and spectral.py for the pinned conventions.
+scene compiler (their device records: layout/gp_records.py); see kernels.py, means.py and
+spectral.py for the pinned conventions.
 """
 from .kernels import (KERNELS, Jet, Kernel, LocallyPeriodic, Periodic, RationalQuadratic,
                       SquaredExponential, ThinPlate, covariance_matrix)

@@ -1,0 +1,234 @@
+"""Resolved GPIS scene objects -> host GP model objects -> device arrays."""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from statistics import NormalDist
+
+import numpy as np
+
+from ..layout import records as layouts
+from ..gp import kernels as K
+from ..gp import means as M
+from ..gp.knob import knob_grid
+from ..scene.proxies import analyse, bounding_proxy
+from ..scene.transforms import transform_matrix
+from ..gp.weight_space import pack_order_tables
+from ..layout.gp_records import GP_KERNEL, MEAN_NODE, pack_kernel, pack_kernel_grids, pack_mean
+from ..scene.gpis import FIELD_KEYS, field_minimum
+from .colour_fields import pack_field
+from ..errors import SceneError
+from .posterior import build_posterior, pack_posterior
+
+_KERNELS = {"squared_exponential": K.SquaredExponential, "rational_quadratic": K.RationalQuadratic,
+            "periodic": K.Periodic, "locally_periodic": K.LocallyPeriodic,
+            "thin_plate": K.ThinPlate}
+
+# Roots are refined to this fraction of the kernel's length scale: far below the scale
+# on which the realization varies, far above float32 resolution of scene coordinates.
+ROOT_TOLERANCE = 1e-4
+
+
+def _build_field(f: dict):
+    if f["type"] == "grid":
+        from ..io.grids import load_field_grid
+        return load_field_grid(f["file"])
+    params = {key: (tuple(v) if isinstance(v, list) else v) for key, v in f.items()
+              if key != "type"}
+    return K.FIELDS[f["type"]](**params)
+
+
+def pack_planes(planes: np.ndarray, record_dtype) -> np.ndarray:
+    """Planes as MeanNode-sized records (6 float4 each), read back as a float4 array."""
+    floats_per_record = record_dtype.itemsize // 4
+    per = floats_per_record // 4
+    count = -(-len(planes) // per)
+    raw = np.zeros(count * floats_per_record, np.float32)
+    raw[: planes.size] = planes.ravel()
+    return raw.view(record_dtype)
+
+
+def build_kernel(k: dict, proxy: dict | None = None) -> K.Kernel:
+    """proxy: where rays sample, for the step rule's smallest l(x) (required with a
+    linear length_scale_field)."""
+    params = {key: (tuple(v) if isinstance(v, list) else v) for key, v in k.items()
+              if key not in ("type", *FIELD_KEYS)}
+    base = _KERNELS[k["type"]](**params)
+    sf, lf = k.get("sigma_field"), k.get("length_scale_field")
+    if sf is None and lf is None:
+        return base
+    step = None
+    if lf is not None and proxy is not None:
+        step = base.length_scale * field_minimum(lf, proxy)
+    return K.NonStationary(base, sigma_field=sf and _build_field(sf),
+                           length_scale_field=lf and _build_field(lf), step_length_scale=step)
+
+
+def build_mean(m: dict) -> M.Mean:
+    kind = m["type"]
+    if kind == "constant":
+        return M.Constant(offset=m["value"])
+    if kind == "plane":
+        return M.Plane(point=tuple(m["point"]), normal=tuple(m["normal"]), scale=m["scale"])
+    if kind == "sphere":
+        return M.Sphere(center=tuple(m["center"]), radius=m["radius"])
+    if kind == "box":
+        return M.Box(half_extents=tuple(m["half_extents"]), center=tuple(m["center"]))
+    if kind == "rounded_box":
+        return M.RoundedBox(half_extents=tuple(m["half_extents"]), radius=m["radius"],
+                            center=tuple(m["center"]))
+    if kind == "torus":
+        return M.Torus(major=m["major"], minor=m["minor"], center=tuple(m["center"]))
+    if kind == "capsule":
+        return M.Capsule(a=tuple(m["a"]), b=tuple(m["b"]), radius=m["radius"])
+    if kind in ("union", "intersection", "difference"):
+        cls = {"union": M.Union, "intersection": M.Intersection, "difference": M.Difference}
+        return cls[kind](build_mean(m["left"]), build_mean(m["right"]), k=m["k"])
+    if kind == "transform":
+        return M.Transform(build_mean(m["child"]), transform_matrix(m))
+    if kind == "mesh":
+        from .sdf_bake import mesh_mean
+        grid = mesh_mean(m["file"], m["resolution"], m["margin"], m["band"],
+                         transform_matrix(m["transform"]))[0]
+    elif kind == "grid":
+        from ..io.grids import load_grid
+        grid = load_grid(m["file"])
+    elif kind == "procedural":
+        grid = knob_grid(m["function"], m["resolution"])
+    else:
+        raise AssertionError(kind)
+    return dataclasses.replace(grid, interpolation=m["interpolation"])
+
+
+def kernel_length_scale(k: dict) -> float:
+    """The length on which a realization varies: root tolerances and steps scale with it."""
+    if k["type"] == "thin_plate":
+        return k["radius"]
+    if k["type"] == "locally_periodic":
+        return min(k["length_scale"] / k["w"], k["se_length_scale"])
+    if k["type"] == "periodic":
+        return k["length_scale"] / k["w"]
+    return k["length_scale"] / max(k["aniso"]) ** 0.5
+
+
+# The occupancy bound's marches stop at steps below this fraction of the length scale:
+# finer clipping saves less sampling than the march costs (tools/bench_occupancy.py).
+OCCUPANCY_MIN_STEP = 0.1
+
+
+def occupancy_level(g: dict) -> float:
+    """z sigma_max for the object's occupancy bound epsilon (0: off): where the mean
+    exceeds it, P(f <= 0) = Phi(-mu / sigma(x)) < Phi(-z) = epsilon, because sigma(x) <=
+    sigma_max everywhere in the proxy. Rounded up to the next float32, as the device
+    compares in float."""
+    eps = (g.get("bounds") or {}).get("occupancy")
+    if eps is None:
+        return 0.0
+    kernel = build_kernel(g["kernel"], g["proxy"])
+    base = kernel.base if isinstance(kernel, K.NonStationary) else kernel
+    m_max, sf = 1.0, g["kernel"].get("sigma_field")
+    if sf is not None and sf["type"] == "radial":
+        m_max = max(sf["inner"], sf["outer"])
+    elif sf is not None and sf["type"] == "grid":
+        m_max = kernel.sigma_field.maximum()
+    elif sf is not None:   # max of a linear field = -(min of its negation)
+        neg = dict(sf, value=-sf["value"], gradient=[-c for c in sf["gradient"]])
+        m_max = -field_minimum(neg, g["proxy"])
+    level = NormalDist().inv_cdf(1.0 - eps) * math.sqrt(base.variance) * m_max
+    return float(np.nextafter(np.float32(level), np.float32(np.inf)))
+
+
+def _posterior_block(g: dict, proxy: dict, source: str, key: str) -> np.ndarray:
+    try:
+        post = build_posterior(g["observations"], build_kernel(g["kernel"], proxy),
+                               build_mean(g["mean"]))
+    except np.linalg.LinAlgError as exc:
+        raise SceneError(source, f"{key}.observations", str(exc)) from None
+    return pack_posterior(post)
+
+
+@dataclass
+class CompiledGpis:
+    objects: np.ndarray     # GpisObject records
+    kernels: np.ndarray     # GpKernel records, one per object
+    mean_nodes: np.ndarray  # MeanNode programs of all objects, concatenated
+    order_table: np.ndarray  # weight space: periodic-order CDFs of all objects (float32)
+
+    def uses(self, sampler: str) -> bool:
+        return bool(np.any(self.objects["sampler"] == layouts.GPIS_SAMPLERS[sampler]))
+
+
+def compile_gpis(shapes: list, material_of, source: str = "<scene>",
+                 keys: list | None = None) -> CompiledGpis:
+    """shapes: the resolved "gpis" shapes in scene order; material_of(bsdf) -> index;
+    source and keys (each shape's key path) name what a compile-time error is about."""
+    keys = keys or [f"gpis[{i}]" for i in range(len(shapes))]
+    objects = layouts.GPIS_OBJECT.zeros(len(shapes))
+    kernels = GP_KERNEL.zeros(len(shapes))
+    programs, built = [], []
+    first = 0
+    for i, g in enumerate(shapes):
+        o = objects[i]
+        proxy = g["proxy"]
+        o["proxy_kind"] = layouts.GPIS_PROXIES[proxy["type"]]
+        box = bounding_proxy(proxy)
+        if box["type"] == "box":
+            o["proxy_p0"][:3], o["proxy_p1"][:3] = box["min"], box["max"]
+        else:
+            o["proxy_p0"][:] = (*box["center"], box["radius"])
+        o["sampler"] = layouts.GPIS_SAMPLERS[g["sampler"]["type"]]
+        o["features"] = g["sampler"].get("features") or 0
+        if g["sampler"]["type"] == "function_space":
+            fs = g["sampler"]
+            o["memory"] = layouts.GPIS_MEMORIES[fs["memory"]]
+            for key in ("samples", "memory_cap", "refine", "step_corr"):
+                o[key] = fs[key]
+        o["material"] = material_of(g["bsdf"])
+        o["tolerance"] = ROOT_TOLERANCE * kernel_length_scale(g["kernel"])
+        built.append(build_kernel(g["kernel"], proxy))
+        kernels[i] = pack_kernel(built[-1])[0]
+        o["occupancy_level"] = occupancy_level(g)
+        o["occupancy_step"] = OCCUPANCY_MIN_STEP * kernel_length_scale(g["kernel"])
+        try:
+            prog = pack_mean(build_mean(g["mean"]))
+        except ValueError as exc:
+            raise SceneError(source, f"{keys[i]}.mean", str(exc)) from None
+        if g.get("observations") is not None:
+            # the posterior block sits just before the mean program (fs_posterior.h)
+            block = _posterior_block(g, proxy, source, keys[i])
+            first += len(block)
+            programs.append(block)
+            if "occupancy_level" in objects.dtype.names:
+                o["occupancy_level"] = 0.0   # the bound follows the prior mean, not this one
+        o["mean_first"], o["mean_count"] = first, len(prog)
+        first += len(prog)
+        programs.append(prog)
+    # mesh proxies' face planes, after every mean program like the fields below
+    for i, g in enumerate(shapes):
+        if g["proxy"]["type"] == "mesh":
+            planes = analyse(g["proxy"])[0]
+            records = pack_planes(planes, MEAN_NODE.dtype)
+            objects[i]["proxy_first"], objects[i]["proxy_count"] = first, len(planes)
+            first += len(records)
+            programs.append(records)
+    # grid fields of sigma(x) and l(x): the kernel holds their offsets from the object's
+    # mean program (fs_sampling.h fs_fields)
+    for i, kern in enumerate(built):
+        offset = first - objects[i]["mean_first"]
+        for records in pack_kernel_grids(kern, kernels[i:i + 1], offset):
+            first += len(records)
+            programs.append(records)
+    # colour and emission fields follow every mean program, so index 0 (never a field)
+    # can stand for "no field" (scene/colour_fields.py)
+    for i, g in enumerate(shapes):
+        for key, slot in (("color", "color_field"), ("emission", "emission_field")):
+            if g.get(key) is not None:
+                records = pack_field(g[key])
+                objects[i][slot] = first
+                first += len(records)
+                programs.append(records)
+    nodes = np.concatenate(programs) if programs else MEAN_NODE.zeros(0)
+    table, t_first, t_count = pack_order_tables([build_kernel(g["kernel"]) for g in shapes])
+    objects["order_first"], objects["order_count"] = t_first, t_count
+    return CompiledGpis(objects, kernels, nodes, table)

@@ -1,0 +1,84 @@
+"""Posterior GPIS: the "observations" of a gpis record -> host Posterior -> the device
+block that fs_posterior.h reads (the record and its limits: scene/observations.py).
+
+    "observations": {"file": "points.xyz", "noise": 1e-3, "normals": false,
+                     "normal_noise": 1e-2}
+
+file: .xyz / .txt (whitespace-separated rows "x y z" or "x y z nx ny nz", '#' comments)
+or .npy of shape (n, 3) or (n, 6), in world coordinates. Every point is observed on the
+surface, f(x) = 0, with standard deviation `noise` (world units: f is a signed distance,
+so this is the points' scatter across the surface); with "normals": true the file's
+normals are observed as the gradient (three derivative rows per point, standard
+deviation `normal_noise`), which also tells inside from outside.
+
+Function space: the observations join every segment's conditioning set exactly
+(fs_sampling.h, FsPost). Cost on the device: for each conditioned row, n kernel
+evaluations and an n x n triangular solve (n = observation rows: points, times 4 with
+normals), so a segment of R rows costs ~R n^2 / 2 multiply-adds; tools/bench_posterior.py
+measures it. Measured on PoCL, 2 shared cores (SE, N = 16): 17 us per prior segment,
+0.35 ms at n = 100, 25 ms at n = 1000; a 16x16 x 8 spp sphere render takes 0.03 s
+(prior), 0.5 s (n = 100), 1.8 s (200), 6.6 s (400), ~45 s (1000). So a few hundred rows
+are practical, a thousand only for small images. MAX_ROWS bounds n: the factor (n^2 / 2
+doubles) and the per-row v cache (FS_MAX_ROWS n doubles per work item) grow with it.
+
+Weight space: each ray conditions its path's realization by Matheron's rule
+(ws_posterior.h), reading the same block plus the noise deviations appended after the
+factor; SE and RQ kernels only, at most WS_MAX_ROWS rows.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..layout.gp_records import MEAN_NODE
+from ..layout.function_space_records import FS_OBS, OBS_KINDS
+from ..gp.posterior import Posterior, surface_observations
+from ..io.points import load_points
+from ..scene.observations import MAX_ROWS
+
+POSTERIOR_KIND = 48          # FS_POSTERIOR_KIND in fs_posterior.h, WS_POSTERIOR_KIND
+
+
+def build_posterior(o: dict, kernel, mean) -> Posterior:
+    """The host posterior of a resolved "observations" record."""
+    pts = load_points(o["file"])
+    nrm = pts[:, 3:] if o["normals"] else None
+    obs = surface_observations(pts[:, :3], nrm, noise=o["noise"] ** 2,
+                               normal_noise=o["normal_noise"] ** 2)
+    return Posterior(kernel, mean, obs)
+
+
+def pack_posterior(post: Posterior) -> np.ndarray:
+    """MeanNode records to place just before the object's mean program (fs_posterior.h)."""
+    obs = post.obs
+    n = len(obs)
+    if n > MAX_ROWS:
+        raise ValueError(f"{n} observation rows exceed {MAX_ROWS}")
+    rows = FS_OBS.zeros(n)
+    rows["px"], rows["py"], rows["pz"] = obs.x.T
+    u = np.where(obs.is_value[:, None], 0.0, np.nan_to_num(obs.u))
+    rows["ux"], rows["uy"], rows["uz"] = u.T
+    rows["value"] = obs.y
+    rows["kind"] = np.where(obs.is_value, OBS_KINDS["value"], OBS_KINDS["deriv"])
+    tri = post.L[np.tril_indices(n)]          # row-major packed, as fs_tri
+    # the noise deviations trail the factor: weight space draws each path's noise with them
+    # (ws_posterior.h); fs_posterior.h never reads past the factor
+    raw = (rows.tobytes() + np.ascontiguousarray(post.alpha, "<f8").tobytes()
+           + np.ascontiguousarray(tri, "<f8").tobytes()
+           + np.ascontiguousarray(np.sqrt(obs.noise), "<f8").tobytes())
+    size = MEAN_NODE.dtype.itemsize
+    raw += bytes(-len(raw) % size)
+    block = np.frombuffer(raw, MEAN_NODE.dtype).copy()
+    header = MEAN_NODE.zeros(1)
+    header["kind"] = POSTERIOR_KIND
+    header["flags"] = len(block)
+    header["p0"] = (n, 0.0, 0.0, 0.0)
+    return np.concatenate([block, header])
+
+
+def posterior_rows(nodes: np.ndarray, objects: np.ndarray) -> np.ndarray:
+    """Observation rows of each object's posterior (0: none), read as fs_posterior_of does."""
+    out = np.zeros(len(objects), np.int64)
+    for k, first in enumerate(objects["mean_first"]):
+        if first > 0 and nodes[first - 1]["kind"] == POSTERIOR_KIND:
+            out[k] = int(nodes[first - 1]["p0"][0])
+    return out

@@ -1,0 +1,251 @@
+"""Turns a resolved scene (scene.py) into the flat arrays the device traverses."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..layout import records as layouts
+from .bvh import build_bvh
+from .camera import compile_camera
+from ..scene.conductors import eta_k
+from .envmap import build_envmap_tables
+from .gpis import CompiledGpis, compile_gpis
+from ..scene.proxies import bounding_proxy
+from ..scene.transforms import mesh_triangles
+from ..io.images import read_exr_rgb
+
+PRIM = layouts.PRIM_KINDS
+LIGHT = layouts.LIGHT_KINDS
+
+
+@dataclass
+class CompiledScene:
+    camera: np.ndarray
+    primitives: np.ndarray
+    materials: np.ndarray
+    lights: np.ndarray
+    bvh_nodes: np.ndarray
+    env_texels: np.ndarray      # (H*W, 4) float32, a dummy texel when no map
+    env_marginal: np.ndarray
+    env_conditional: np.ndarray
+    env_size: tuple             # (width, height), (1, 1) when no map
+    gpis: CompiledGpis
+
+    @property
+    def resolution(self) -> tuple:
+        return int(self.camera["width"][0]), int(self.camera["height"][0])
+
+
+class _Builder:
+    def __init__(self):
+        self.prims, self.materials, self.lights = [], [], []
+        self.black = self.material({"type": "diffuse", "albedo": [0.0, 0.0, 0.0]})
+
+    def material(self, bsdf: dict) -> int:
+        m = layouts.MATERIAL.zeros(1)[0]
+        m["kind"] = layouts.MATERIAL_KINDS[bsdf["type"]]
+        m["albedo"][:3] = bsdf.get("albedo", [0.0, 0.0, 0.0])
+        if bsdf["type"] == "rough_conductor":
+            m["eta"][:3], m["k"][:3] = eta_k(bsdf)
+            m["roughness"] = bsdf["roughness"]
+        self.materials.append(m)
+        return len(self.materials) - 1
+
+    def prim(self, kind, material, p0=(0, 0, 0, 0), p1=(0, 0, 0, 0), p2=(0, 0, 0, 0),
+             light=-1):
+        p = layouts.PRIMITIVE.zeros(1)[0]
+        p["kind"], p["material"], p["light"], p["medium"] = PRIM[kind], material, light, -1
+        p["p0"], p["p1"], p["p2"] = _vec4(p0), _vec4(p1), _vec4(p2)
+        self.prims.append(p)
+
+    def light(self, kind, radiance, p0=(0, 0, 0, 0), p1=(0, 0, 0, 0), p2=(0, 0, 0, 0),
+              area=0.0, cos_max=1.0) -> int:
+        rec = layouts.LIGHT.zeros(1)[0]
+        rec["kind"], rec["radiance"][:3] = LIGHT[kind], radiance
+        rec["p0"], rec["p1"], rec["p2"] = _vec4(p0), _vec4(p1), _vec4(p2)
+        rec["area"], rec["cos_max"], rec["primitive"] = area, cos_max, -1
+        self.lights.append(rec)
+        return len(self.lights) - 1
+
+
+def _vec4(v):
+    v = list(v)
+    return np.array(v + [0.0] * (4 - len(v)), dtype=np.float32)
+
+
+def _rectangle(b: _Builder, center, u, v, material, light=-1):
+    corner = np.asarray(center) - 0.5 * np.asarray(u) - 0.5 * np.asarray(v)
+    b.prim("rectangle", material, corner, u, v, light=light)
+
+
+def _box(b: _Builder, lo, hi, material):
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    dx, dy, dz = hi - lo
+    X, Y, Z = np.array([dx, 0, 0]), np.array([0, dy, 0]), np.array([0, 0, dz])
+    # corner, u, v with cross(u, v) pointing out of the box
+    faces = [(lo, Z, Y), ((hi[0], lo[1], lo[2]), Y, Z), (lo, X, Z),
+             ((lo[0], hi[1], lo[2]), Z, X), (lo, Y, X), ((lo[0], lo[1], hi[2]), X, Y)]
+    for corner, u, v in faces:
+        b.prim("rectangle", material, corner, u, v)
+
+
+def _mesh(b: _Builder, shape, material):
+    tris = mesh_triangles(shape).astype(np.float32)
+    base = layouts.PRIMITIVE.zeros(len(tris))
+    base["kind"], base["material"], base["light"], base["medium"] = PRIM["triangle"], material, -1, -1
+    for k, field in enumerate(("p0", "p1", "p2")):
+        base[field][:, :3] = tris[:, k]
+    b.prims.extend(base)
+
+
+def _add_shape(b: _Builder, s: dict):
+    mat = b.material(s["bsdf"])
+    kind = s["type"]
+    if kind == "sphere":
+        b.prim("sphere", mat, (*s["center"], s["radius"]))
+    elif kind == "rectangle":
+        _rectangle(b, s["center"], s["u"], s["v"], mat)
+    elif kind == "box":
+        _box(b, s["min"], s["max"], mat)
+    elif kind == "disk":
+        b.prim("disk", mat, (*s["center"], s["radius"]), s["normal"])
+    elif kind == "mesh":
+        _mesh(b, s, mat)
+    else:  # the schema admits only the kinds above
+        raise AssertionError(kind)
+
+
+def _add_light(b: _Builder, lt: dict, env: dict):
+    kind = lt["type"]
+    if kind == "environment":
+        b.light(kind, lt["radiance"])
+    elif kind == "environment_map":
+        rgb = read_exr_rgb(lt["file"]).astype(np.float32)
+        env["rgb"] = rgb
+        b.light(kind, [lt["scale"]] * 3, p0=(math.radians(lt["rotation"]),))
+    elif kind == "point":
+        b.light(kind, lt["intensity"], p0=lt["position"])
+    elif kind == "sphere":
+        li = b.light(kind, lt["radiance"], p0=(*lt["center"], lt["radius"]))
+        b.prim("sphere", b.black, (*lt["center"], lt["radius"]), light=li)
+    elif kind == "rectangle":
+        u, v = np.asarray(lt["u"], float), np.asarray(lt["v"], float)
+        corner = np.asarray(lt["center"]) - 0.5 * u - 0.5 * v
+        li = b.light(kind, lt["radiance"], p0=corner, p1=u,
+                     p2=(*v, 1.0 if lt["two_sided"] else 0.0),
+                     area=float(np.linalg.norm(np.cross(u, v))))
+        b.prim("rectangle", b.black, corner, u, v, light=li)
+    elif kind == "directional":
+        theta = math.radians(lt["angular_radius"])
+        E = np.asarray(lt["irradiance"], dtype=np.float64)
+        if theta == 0.0:
+            b.light(kind, E, p0=lt["direction"], cos_max=1.0)
+        else:
+            # uniform radiance L over the cone delivers E = L * pi * sin^2(theta) on axis
+            b.light(kind, E / (math.pi * math.sin(theta) ** 2), p0=lt["direction"],
+                    cos_max=math.cos(theta))
+    else:
+        raise AssertionError(kind)
+
+
+def _bounds(prims: np.ndarray):
+    p0, p1, p2 = (prims[f][:, :3].astype(np.float64) for f in ("p0", "p1", "p2"))
+    kind = prims["kind"]
+    r = prims["p0"][:, 3:4].astype(np.float64)
+    lo = np.minimum(np.minimum(p0, p1), p2)
+    hi = np.maximum(np.maximum(p0, p1), p2)
+    sph = kind == PRIM["sphere"]
+    lo[sph], hi[sph] = p0[sph] - r[sph], p0[sph] + r[sph]
+    rect = kind == PRIM["rectangle"]
+    corners = np.stack([p0, p0 + p1, p0 + p2, p0 + p1 + p2])[:, rect]
+    lo[rect], hi[rect] = corners.min(0), corners.max(0)
+    disk = kind == PRIM["disk"]
+    ext = r[disk] * np.sqrt(np.clip(1.0 - p1[disk] ** 2, 0.0, 1.0))
+    lo[disk], hi[disk] = p0[disk] - ext, p0[disk] + ext
+    # pad so flat, axis-aligned primitives never get zero-thickness boxes
+    pad = 1e-5 * (1.0 + np.abs(np.concatenate([lo, hi], 1)).max(1, keepdims=True))
+    return lo - pad, hi + pad
+
+
+def scene_box(data: dict, prims: np.ndarray | None = None):
+    """(lo, hi) of everything bounded in the scene: primitives (area lights included),
+    bounded GPIS proxies, point lights and the camera, grown by 1% of the diagonal. A
+    path that leaves it meets nothing but infinitely far lights. prims: the compiled
+    primitives, or None to build them."""
+    if prims is None:
+        b = _Builder()
+        for s in data.get("shapes", []):
+            if s["type"] != "gpis":
+                _add_shape(b, s)
+        for lt in data["lights"]:
+            if lt["type"] in ("sphere", "rectangle"):
+                _add_light(b, lt, {})
+        prims = np.array(b.prims, dtype=layouts.PRIMITIVE.dtype)
+    pts = [np.asarray(data["camera"]["position"], float)[None]]
+    if len(prims):
+        pts += list(_bounds(prims))
+    for s in data.get("shapes", []):
+        if s["type"] == "gpis" and s["proxy"]["type"] != "scene":
+            box = bounding_proxy(s["proxy"])
+            if box["type"] == "box":
+                pts.append(np.asarray([box["min"], box["max"]], float))
+            else:
+                pts.append(np.asarray(box["center"], float) + box["radius"] * np.array([[-1.0], [1.0]]))
+    pts += [np.asarray(lt["position"], float)[None] for lt in data["lights"]
+            if lt["type"] == "point"]
+    pts = np.concatenate(pts)
+    lo, hi = pts.min(0), pts.max(0)
+    grow = 0.01 * float(np.linalg.norm(hi - lo)) + 1e-3
+    return lo - grow, hi + grow
+
+
+def bound_scene_proxies(data: dict, prims: np.ndarray | None = None) -> list:
+    """The gpis shapes with every "scene" proxy replaced by the scene's box (scene_box)."""
+    shapes = [s for s in data.get("shapes", []) if s["type"] == "gpis"]
+    if not any(s["proxy"]["type"] == "scene" for s in shapes):
+        return shapes
+    lo, hi = scene_box(data, prims)
+    box = {"type": "box", "min": lo.tolist(), "max": hi.tolist()}
+    return [dict(s, proxy=box) if s["proxy"]["type"] == "scene" else s for s in shapes]
+
+
+def compile_scene(data: dict, source: str = "<scene>") -> CompiledScene:
+    """source: the scene's file, for errors found only while compiling (e.g. a mesh bake)."""
+    b = _Builder()
+    env = {}
+    for s in data.get("shapes", []):
+        if s["type"] != "gpis":
+            _add_shape(b, s)
+    for lt in data["lights"]:
+        _add_light(b, lt, env)
+    prims = np.array(b.prims, dtype=layouts.PRIMITIVE.dtype)
+    gpis_at = [i for i, s in enumerate(data.get("shapes", [])) if s["type"] == "gpis"]
+    gpis = compile_gpis(bound_scene_proxies(data, prims), b.material, source,
+                        [f"shapes[{i}]" for i in gpis_at])
+    if len(prims):
+        nodes, order = build_bvh(*_bounds(prims))
+        prims = prims[order]
+    else:
+        nodes, _ = build_bvh(np.zeros((0, 3)), np.zeros((0, 3)))
+    lights = np.array(b.lights, dtype=layouts.LIGHT.dtype)
+    # area lights need to know their primitive after the BVH reordering
+    for pi in np.nonzero(prims["light"] >= 0)[0]:
+        lights["primitive"][prims["light"][pi]] = pi
+    if "rgb" in env:
+        rgb = env["rgb"]
+        tables = build_envmap_tables(rgb)
+        h, w = rgb.shape[:2]
+        texels = np.zeros((h * w, 4), np.float32)
+        texels[:, :3] = rgb.reshape(-1, 3)
+        marginal, conditional = tables.marginal_cdf, tables.conditional_cdf.reshape(-1)
+    else:
+        w = h = 1
+        texels = np.zeros((1, 4), np.float32)
+        marginal = np.array([0.0, 1.0], np.float32)
+        conditional = np.array([0.0, 1.0], np.float32)
+    return CompiledScene(compile_camera(data["camera"]), prims,
+                         np.array(b.materials, dtype=layouts.MATERIAL.dtype), lights, nodes,
+                         texels, marginal.astype(np.float32), conditional.astype(np.float32),
+                         (w, h), gpis)

@@ -1,0 +1,15 @@
+"""The user-facing error of every layer: a mistake in a scene or an input file.
+Imports nothing of gpiscl: every package may import it."""
+from __future__ import annotations
+
+
+class SceneError(Exception):
+    """A user mistake in a scene; str() is one line: `<file>: <key path>: <reason>`."""
+
+    def __init__(self, file: str, key: str, reason: str):
+        self.file, self.key, self.reason = str(file), key, reason
+        parts = [self.file] + ([key] if key else []) + [reason]
+        super().__init__(": ".join(parts))
+
+    def __reduce__(self):  # keep it picklable despite the 3-argument constructor
+        return type(self), (self.file, self.key, self.reason)

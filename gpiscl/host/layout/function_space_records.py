@@ -1,0 +1,78 @@
+"""Device layouts of the function-space sampler (fs_linalg.h, fs_sampling.h).
+
+FsObs is one Gaussian observation: a value f(x) or a directional derivative u . grad f(x),
+each derivative with its own direction (the reference shared one direction, the Elephant
+bug). Rows of a segment's joint system and the per-path ring of the `global` memory model
+both hold FsObs.
+
+FsVertex is the immutable record of a GPIS vertex (a hit). Every outgoing ray (the
+continuation and each shadow ray) builds its conditioning set from it and from the path's
+ring; nothing traced from a vertex writes to it, so shadow rays never change a path's
+memory (the reference mutated the shared context in place).
+
+Scratch: each work item owns a slice of a __global double buffer (PoCL's CPU device
+crashes on private arrays of a few KiB at its automatic work-group sizes, see
+fs_linalg.h). `scratch_doubles` sizes the slice.
+"""
+from __future__ import annotations
+
+from .struct import Struct
+
+FS_OBS = Struct("FsObs", (
+    ("double", "px"), ("double", "py"), ("double", "pz"),
+    ("double", "ux"), ("double", "uy"), ("double", "uz"),   # derivative direction (unit)
+    ("double", "value"),
+    ("int", "kind"),        # FS_OBS_VALUE or FS_OBS_DERIV
+    ("int", "pad"),
+))
+
+FS_VERTEX = Struct("FsVertex", (
+    ("float4", "pos"),       # xyz: the vertex (outgoing rays start here), w: f there (0)
+    ("float4", "grad"),      # xyz: the sampled gradient of f at the vertex
+    ("int", "valid"),        # 0: no memory (fresh entry from free space or a surface)
+    ("int", "obs_end"),      # global model: observations ever appended to the path's ring
+    ("int", "obs_count"),    # global model: how many of them the ring still holds
+    ("int", "pad"),
+))
+
+OBS_KINDS = {"value": 0, "deriv": 1}
+STATUS = {"ok": 0, "not_pd": 1, "nan": 2, "rows": 3, "segments": 4}
+STRUCTS = (FS_OBS, FS_VERTEX)
+
+DEFAULT_SAMPLES = 32      # N per segment
+MAX_SAMPLES = 256
+DEFAULT_STEP_CORR = 0.9   # c: correlation between neighbouring samples
+DEFAULT_REFINE = 6        # bisection steps in a crossing bracket: width dt / 64
+DEFAULT_GLOBAL_CAP = 64   # observations the global model keeps
+HIT_ROWS = 4              # f(x_h), d_d f, d_T f, d_B f appended at a hit
+
+
+def c_declarations() -> str:
+    """#defines and structs fs_linalg.h / fs_sampling.h assume (the lead adds this to the
+    generated header, or passes it as Program(extra_c=...))."""
+    lines = ["/* Generated from gpiscl/host/layout/function_space_records.py: do not edit. */"]
+    lines += [f"#define FS_OBS_{k.upper()} {v}" for k, v in OBS_KINDS.items()]
+    lines += [f"#define FS_STATUS_{k.upper()} {v}" for k, v in STATUS.items()]
+    lines.append(f"#define FS_HIT_ROWS {HIT_ROWS}")
+    return "\n".join(lines) + "\n" + "\n".join(s.c_declaration() for s in STRUCTS)
+
+
+def max_rows(samples: int, memory_cap: int, refine: int = DEFAULT_REFINE) -> int:
+    """Rows of the largest joint system: conditioning (<= max(cap, 2) and, for the global
+    model, the ring plus this ray's earlier segments trimmed to cap), N targets, the
+    refinement bisection, one segment-end slope, and the hit rows."""
+    return max(memory_cap, 2) + samples + refine + 1 + HIT_ROWS
+
+
+def scratch_doubles(rows: int) -> int:
+    """Doubles per work item for `rows` rows: FsObs rows (8 doubles each), the packed
+    lower triangle, the whitened vector e, the prior means and the rows' kernel-field
+    multipliers (8 doubles each; FsScratch in fs_sampling.h)."""
+    return 8 * rows + rows * (rows + 1) // 2 + 2 * rows + 8 * rows
+
+
+def defines(samples_max: int, memory_cap: int, refine: int = DEFAULT_REFINE) -> dict:
+    """-D options of a program that includes fs_sampling.h."""
+    rows = max_rows(samples_max, memory_cap, refine)
+    return {"GP_REAL": "double", "FS_MAX_ROWS": rows,
+            "FS_SCRATCH_DOUBLES": scratch_doubles(rows)}

@@ -1,0 +1,305 @@
+"""Device layouts of the GP model and packing of host objects into them.
+
+A kernel packs into one GpKernel. A mean tree packs into a postfix program of MeanNode
+records that gp_mean.h runs with a fixed-size stack:
+  * Transforms are folded into the leaves: each leaf carries its composite world-to-local
+    affine map and distance scale, so the device has no transform nodes. A smooth CSG op
+    under accumulated scale S gets blend width S k (smin is positively homogeneous), which
+    keeps the result identical to the host's node-by-node semantics.
+  * Primitive centres fold into the leaf's translation.
+  * Children are emitted deeper-first (Sethi-Ullman), with a flag when that swaps the
+    operands, so the stack never holds more than log2(leaves) + 1 entries.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .struct import Struct
+from ..gp import kernels as K
+from ..gp import means as M
+
+GP_KERNEL = Struct("GpKernel", (
+    ("float4", "aniso"),            # xyz: diagonal of A
+    ("int", "kind"),
+    ("float", "sigma2"),
+    ("float", "length_scale"),      # l; of the periodic factor for locally_periodic
+    ("float", "alpha"),             # rational quadratic shape a
+    ("float", "w"),                 # periodic frequency
+    ("float", "se_length_scale"),   # locally periodic envelope
+    ("float", "radius"),            # thin-plate R
+    # Spatially varying multipliers sigma(x) = sigma m_s(x), l(x) = l m_l(x) (kernels.py):
+    # kind GP_FIELD_*; linear p0 = (gradient, value), p1.xyz = origin; radial
+    # p0 = (center, radius), p1 = (inner, outer, width, 0); grid: a grid record
+    # (pack_grid_field) at sigma_grid / ls_grid records after the object's mean program
+    # (function space only: fs_sampling.h reads it).
+    ("int", "sigma_field"),
+    ("int", "ls_field"),
+    ("float", "ls_step"),           # smallest l(x) where rays sample: the step rule's l
+    ("int", "sigma_grid"),
+    ("int", "ls_grid"),
+    ("float4", "sigma_p0"),
+    ("float4", "sigma_p1"),
+    ("float4", "ls_p0"),
+    ("float4", "ls_p1"),
+))
+
+# Leaf parameters (local coordinates, centre folded into the map):
+#   constant  p0.x = value
+#   plane     p0.x = offset d, p0.y = scale, p0.z = min value; p1.xyz = unit normal;
+#             value max(scale (n.y - d), min)
+#   sphere    p0.x = radius          box        p1.xyz = half extents
+#   rounded_box p0.x = radius, p1.xyz = half extents
+#   torus     p0.x = major, p0.y = minor
+#   capsule   p0.xyz = a, p0.w = radius, p1.xyz = b
+#   grid      the map goes to index coordinates u (voxel units, sample (i,j,k) at u = i,j,k);
+#             p1.xyz = sample counts (nx, ny, nz); p0.y = 1: cubic, the payload holds the
+#             (nx + 2, ny + 2, nz + 2) B-spline coefficients (means.cubic_coefficients)
+#             instead of the samples; p0.z = B: after the samples (C order), the slope
+#             bound of each brick of B^3 cells (means.brick_slope_bounds / S, <= 1, bricks
+#             in C order), which gp_mean_lipschitz_on reads for a segment's bound;
+#             p0.x = 1 / S, S = GridMean.lipschitz
+#             (world units), the weight of the outside distance (in voxels); flags =
+#             number of payload records that follow the leaf.
+#             Samples are stored divided by S h, with scale multiplied by S h: the leaf's
+#             primitive is then 1-Lipschitz in index units like every distance, so
+#             ws_mean_lipschitz's |scale| ||M|| is the grid's bound with no special case.
+# Grid payload: GRID_PAYLOAD_FLOATS floats per record in row0..p1, sample (i, j, k) at
+# float index (i ny + j) nz + k; kind = payload, which every walker of the program skips
+# as a non-leaf (gp_mean_eval jumps over it using the leaf's flags).
+MEAN_NODE = Struct("MeanNode", (
+    ("float4", "row0"),     # world -> local affine map, w = translation
+    ("float4", "row1"),
+    ("float4", "row2"),
+    ("float4", "p0"),
+    ("float4", "p1"),
+    ("int", "kind"),
+    ("int", "flags"),       # ops: MEAN_FLAG_SWAPPED if the right operand was emitted first;
+                            # grid leaves: payload record count
+    ("float", "scale"),     # leaves: distance scale of the composite transform
+    ("float", "k"),         # ops: smooth blend width, 0 = sharp
+))
+
+KERNEL_KINDS = {"squared_exponential": 0, "rational_quadratic": 1, "periodic": 2,
+                "locally_periodic": 3, "thin_plate": 4}
+FIELD_KINDS = {"none": 0, "linear": 1, "radial": 2, "grid": 3}
+MEAN_KINDS = {"constant": 0, "plane": 1, "sphere": 2, "box": 3, "rounded_box": 4,
+              "torus": 5, "capsule": 6, "grid": 7, "union": 16, "intersection": 17,
+              "difference": 18, "payload": 31}
+MEAN_FLAG_SWAPPED = 1
+MEAN_STACK_DEPTH = 8    # GP_MEAN_STACK_DEPTH in gp_mean.h
+GRID_PAYLOAD_FLOATS = 20    # the float4 fields row0..p1; kind must stay a valid int
+# Cells per brick edge of a grid leaf's slope-bound table: 4^3 cells share one bound, so a
+# table costs 1/64 of the samples and a ray interval of a few cells reads a few bricks.
+GRID_BRICK = 4
+STRUCTS = (GP_KERNEL, MEAN_NODE)
+
+_F32_MAX = float(np.finfo(np.float32).max)
+
+
+def c_declarations() -> str:
+    """#defines and struct declarations that gp_kernel.h and gp_mean.h assume."""
+    lines = ["/* Generated from gpiscl/host/layout/gp_records.py: do not edit. */"]
+    lines += [f"#define GP_KERNEL_{k.upper()} {v}" for k, v in KERNEL_KINDS.items()]
+    lines += [f"#define GP_FIELD_{k.upper()} {v}" for k, v in FIELD_KINDS.items()]
+    lines += [f"#define GP_MEAN_{k.upper()} {v}" for k, v in MEAN_KINDS.items()]
+    lines.append(f"#define GP_MEAN_FIRST_OP {MEAN_KINDS['union']}")
+    lines.append(f"#define GP_MEAN_FLAG_SWAPPED {MEAN_FLAG_SWAPPED}")
+    lines.append(f"#define GP_MEAN_STACK_DEPTH {MEAN_STACK_DEPTH}")
+    lines.append(f"#define GP_MEAN_GRID_PAYLOAD_FLOATS {GRID_PAYLOAD_FLOATS}")
+    return "\n".join(lines) + "\n" + "\n".join(s.c_declaration() for s in STRUCTS)
+
+
+def _pack_field(field):
+    p0, p1 = np.zeros(4), np.zeros(4)
+    if isinstance(field, K.LinearField):
+        p0[:3], p0[3], p1[:3] = field.gradient, field.value, field.origin
+    elif isinstance(field, K.RadialField):
+        p0[:3], p0[3] = field.center, field.radius
+        p1[:3] = field.inner, field.outer, field.width
+    elif not isinstance(field, K.GridField):   # a grid's record offset: the scene compiler
+        raise TypeError(f"no device form for field {type(field).__name__}")
+    return FIELD_KINDS[field.kind], p0, p1
+
+
+def pack_kernel(kernel: K.Kernel) -> np.ndarray:
+    if isinstance(kernel, K.NonStationary):
+        out = pack_kernel(kernel.base)
+        if kernel.sigma_field is not None:
+            out["sigma_field"], out["sigma_p0"], out["sigma_p1"] = _pack_field(kernel.sigma_field)
+        if kernel.length_scale_field is not None:
+            out["ls_field"], out["ls_p0"], out["ls_p1"] = _pack_field(kernel.length_scale_field)
+            step = kernel.step_length_scale
+            if step is None:   # without a proxy only a bounded field gives a bound
+                if isinstance(kernel.length_scale_field, K.LinearField):
+                    raise ValueError("a linear length_scale field needs step_length_scale "
+                                     "(its minimum over the sampled region)")
+                step = kernel.length_scale * kernel.length_scale_field.minimum()
+            out["ls_step"] = step
+        return out
+    out = GP_KERNEL.zeros(1)
+    out["aniso"] = (*np.asarray(kernel.aniso, dtype=np.float64), 0.0)
+    out["kind"] = KERNEL_KINDS[kernel.kind]
+    out["sigma2"] = float(kernel.sigma) ** 2
+    for name in ("length_scale", "alpha", "w", "se_length_scale", "radius"):
+        if hasattr(kernel, name):
+            out[name] = getattr(kernel, name)
+    return out
+
+
+# --- means -----------------------------------------------------------------------------
+
+_OPS = {M.Union: "union", M.Intersection: "intersection", M.Difference: "difference"}
+
+
+def _stack_need(node) -> int:
+    if isinstance(node, M.Transform):
+        return _stack_need(node.child)
+    if type(node) in _OPS:
+        a, b = _stack_need(node.left), _stack_need(node.right)
+        return max(a, b) if a != b else a + 1
+    return 1
+
+
+def _compose(outer: np.ndarray, inner: np.ndarray) -> np.ndarray:
+    """The map y -> inner(outer(y)) of two 3x4 affine maps."""
+    return np.concatenate([inner[:, :3] @ outer[:, :3],
+                           (inner[:, :3] @ outer[:, 3] + inner[:, 3])[:, None]], axis=1)
+
+
+def _translate(m: np.ndarray, center) -> np.ndarray:
+    return _compose(m, np.concatenate([np.eye(3), -np.asarray(center, float)[:, None]], 1))
+
+
+def _leaf(node, m, scale):
+    rec = MEAN_NODE.zeros(1)
+    p0, p1 = np.zeros(4), np.zeros(4)
+    if isinstance(node, M.Constant):
+        kind, p0[0] = "constant", node.offset
+    elif isinstance(node, M.Plane):
+        n = np.asarray(node.normal, float) / np.linalg.norm(node.normal)
+        kind = "plane"
+        p0[:3] = (np.dot(n, node.point), node.scale, max(node.min_value, -_F32_MAX))
+        p1[:3] = n
+    elif isinstance(node, M.Sphere):
+        kind, m, p0[0] = "sphere", _translate(m, node.center), node.radius
+    elif isinstance(node, M.RoundedBox):
+        kind, m = "rounded_box", _translate(m, node.center)
+        p0[0], p1[:3] = node.radius, node.half_extents
+    elif isinstance(node, M.Box):
+        kind, m, p1[:3] = "box", _translate(m, node.center), node.half_extents
+    elif isinstance(node, M.Torus):
+        kind, m = "torus", _translate(m, node.center)
+        p0[:2] = node.major, node.minor
+    elif isinstance(node, M.Capsule):
+        kind = "capsule"
+        p0[:3], p0[3], p1[:3] = node.a, node.radius, node.b
+    elif isinstance(node, M.GridMean):
+        return _grid_leaf(node, m, scale)
+    else:
+        raise TypeError(f"no device form for mean {type(node).__name__}")
+    rec["kind"] = MEAN_KINDS[kind]
+    rec["row0"], rec["row1"], rec["row2"] = m
+    rec["p0"], rec["p1"], rec["scale"] = p0, p1, scale
+    return rec
+
+
+def pack_payload(floats) -> np.ndarray:
+    """Payload records holding `floats` (float32, flattened) in row0..p1, as grid leaves,
+    grid colour fields and grid kernel fields store their samples."""
+    flat = np.asarray(floats, np.float32).ravel()
+    n_rec = -(-flat.size // GRID_PAYLOAD_FLOATS)
+    padded = np.zeros(n_rec * GRID_PAYLOAD_FLOATS, np.float32)
+    padded[:flat.size] = flat
+    padded = padded.reshape(n_rec, GRID_PAYLOAD_FLOATS // 4, 4)
+    payload = MEAN_NODE.zeros(n_rec)
+    for f, name in enumerate(("row0", "row1", "row2", "p0", "p1")):
+        payload[name] = padded[:, f]
+    payload["kind"] = MEAN_KINDS["payload"]
+    return payload
+
+
+def _check_grid_size(values):
+    if np.asarray(values).size >= 2**31:
+        raise ValueError(f"grid of {np.shape(values)} samples is too large: the device "
+                         f"indexes samples with 32-bit ints")
+
+
+def pack_grid_field(field: K.GridField) -> np.ndarray:
+    """A kernel grid field's record (row0..row2: world -> index coordinates, p1.xyz: sample
+    counts, flags: payload count; fs_sampling.h fs_grid_field) and its samples."""
+    values = np.asarray(field.values, np.float64)
+    _check_grid_size(values)
+    h = float(field.voxel_size)
+    payload = pack_payload(values)         # C order: (i ny + j) nz + k
+    rec = MEAN_NODE.zeros(1)
+    rec["kind"] = MEAN_KINDS["payload"]    # never run as a mean leaf
+    rec["flags"] = len(payload)
+    rec["row0"], rec["row1"], rec["row2"] = np.concatenate(
+        [np.eye(3) / h, -np.asarray(field.origin, float)[:, None] / h], 1)
+    rec["p1"] = (*values.shape, 0.0)
+    return np.concatenate([rec, payload])
+
+
+def pack_kernel_grids(kernel: K.Kernel, record: np.ndarray, offset: int) -> list:
+    """The records of kernel's grid fields, to be stored from `offset` records after the
+    start of the object's mean program on; sets record's sigma_grid / ls_grid to match."""
+    out = []
+    for attr, slot in (("sigma_field", "sigma_grid"), ("length_scale_field", "ls_grid")):
+        field = getattr(kernel, attr, None) if isinstance(kernel, K.NonStationary) else None
+        if isinstance(field, K.GridField):
+            record[slot] = offset
+            out.append(pack_grid_field(field))
+            offset += len(out[-1])
+    return out
+
+
+def _grid_leaf(node: M.GridMean, m, scale):
+    """The grid leaf record followed by its payload records."""
+    values = np.asarray(node.values, np.float64)
+    h = float(node.voxel_size)
+    s_index = node.lipschitz * h            # slope bound per voxel
+    to_index = np.concatenate([np.eye(3) / h, -np.asarray(node.origin, float)[:, None] / h], 1)
+    cubic = node.interpolation == "cubic"
+    samples = node.coefficients if cubic else values
+    _check_grid_size(samples)
+    # per-brick slope bounds in the samples' units (<= 1), after the samples
+    bricks = M.brick_slope_bounds(node, GRID_BRICK) / node.lipschitz
+    payload = pack_payload(np.concatenate([(samples / s_index).ravel(), bricks.ravel()]))
+    rec = MEAN_NODE.zeros(1)
+    rec["kind"] = MEAN_KINDS["grid"]
+    rec["flags"] = len(payload)
+    rec["row0"], rec["row1"], rec["row2"] = _compose(m, to_index)
+    rec["p0"] = (h / s_index, 1.0 if cubic else 0.0, GRID_BRICK, 0.0)
+    rec["p1"] = (*values.shape, 0.0)
+    rec["scale"] = scale * s_index
+    return np.concatenate([rec, payload])
+
+
+def _emit(node, m, scale, out):
+    if isinstance(node, M.Transform):
+        _emit(node.child, _compose(m, node.world_to_object), scale * node.distance_scale, out)
+        return
+    if type(node) in _OPS:
+        swapped = _stack_need(node.right) > _stack_need(node.left)
+        first, second = (node.right, node.left) if swapped else (node.left, node.right)
+        _emit(first, m, scale, out)
+        _emit(second, m, scale, out)
+        rec = MEAN_NODE.zeros(1)
+        rec["kind"] = MEAN_KINDS[_OPS[type(node)]]
+        rec["flags"] = MEAN_FLAG_SWAPPED if swapped else 0
+        rec["k"] = max(node.k, 0.0) * scale
+        out.append(rec)
+        return
+    out.append(_leaf(node, m, scale))
+
+
+def pack_mean(mean: M.Mean) -> np.ndarray:
+    """The postfix MeanNode program of a mean tree (raises if it needs too deep a stack)."""
+    need = _stack_need(mean)
+    if need > MEAN_STACK_DEPTH:
+        raise ValueError(f"mean CSG tree needs a stack of {need} entries; the device "
+                         f"evaluator holds {MEAN_STACK_DEPTH} (about 2^{MEAN_STACK_DEPTH - 1}"
+                         " leaves in a balanced tree): rebalance the unions")
+    out = []
+    _emit(mean, np.eye(3, 4), 1.0, out)
+    return np.concatenate(out)

@@ -1,0 +1,182 @@
+"""The renderer's structs and SoA queues shared by host and device, and the C header
+of every shared layout.
+
+Each layout yields both a numpy dtype (host) and C text (device), so the two cannot
+drift apart; tests/test_layouts.py checks the offsets on the device itself.
+"""
+from __future__ import annotations
+
+
+from .gp_records import c_declarations as gp_declarations
+from .struct import Queue, Struct
+
+# --- structs --------------------------------------------------------------------------
+
+CAMERA = Struct("Camera", (
+    ("float4", "position"),
+    ("float4", "forward"),    # unit vector towards look_at
+    ("float4", "right"),      # scaled by tan(fov/2) * aspect
+    ("float4", "up"),         # scaled by tan(fov/2)
+    ("int", "width"),
+    ("int", "height"),
+))
+
+# Every surface primitive in one array so one BVH covers them all.
+# sphere: p0 = (center, radius); rectangle: p0 = corner, p1 = edge u, p2 = edge v;
+# disk: p0 = (center, radius), p1 = unit normal; triangle: p0, p1, p2 = vertices.
+PRIMITIVE = Struct("Primitive", (
+    ("float4", "p0"),
+    ("float4", "p1"),
+    ("float4", "p2"),
+    ("int", "kind"),
+    ("int", "material"),
+    ("int", "light"),        # index into the light array if emissive, else -1
+    ("int", "medium"),       # GPIS object enclosed by this proxy, else -1
+))
+
+MATERIAL = Struct("Material", (
+    ("float4", "albedo"),
+    ("float4", "eta"),       # rough_conductor: complex index eta + i k (RGB)
+    ("float4", "k"),
+    ("int", "kind"),
+    ("float", "roughness"),  # rough_conductor: Beckmann alpha
+))
+
+# Lights: the meaning of the vectors depends on kind (see lights.h).
+LIGHT = Struct("Light", (
+    ("float4", "radiance"),  # radiance, intensity (point) or in-cone radiance (sun)
+    ("float4", "p0"),
+    ("float4", "p1"),
+    ("float4", "p2"),
+    ("int", "kind"),
+    ("int", "primitive"),    # area lights: the primitive that carries the emission
+    ("float", "area"),
+    ("float", "cos_max"),    # sun: cosine of the angular radius
+))
+
+BVH_NODE = Struct("BvhNode", (
+    ("float4", "lo"),
+    ("float4", "hi"),
+    ("int", "left_or_first"),  # inner: index of left child (right = left + 1); leaf: first prim
+    ("int", "count"),          # 0 for inner nodes
+))
+
+# A GPIS object: a random field inside an analytic proxy (box or sphere). The proxy is
+# clipped analytically by the GPIS stage, so it needs no primitive in the BVH.
+GPIS_OBJECT = Struct("GpisObject", (
+    ("float4", "proxy_p0"),    # box: min corner; sphere: (centre, radius)
+    ("float4", "proxy_p1"),    # box: max corner
+    ("int", "proxy_kind"),     # GPIS_PROXY_*
+    ("int", "sampler"),        # GPIS_SAMPLER_*
+    ("int", "mean_first"),     # its mean program: MeanNode records [first, first+count)
+    ("int", "mean_count"),
+    ("int", "features"),       # weight space: number of random Fourier features M
+    ("int", "material"),       # micro-BSDF
+    ("int", "memory"),         # function space: GPIS_MEMORY_*
+    ("int", "samples"),        # function space: values per segment N
+    ("int", "order_first"),    # weight space: its periodic-order CDF in the order table
+    ("int", "order_count"),
+    ("float", "tolerance"),    # root refinement tolerance (world units)
+    ("int", "memory_cap"),     # function space, global memory: observations kept
+    ("int", "refine"),         # function space: bisection steps in a crossing bracket
+    ("float", "step_corr"),    # function space: correlation of neighbouring samples
+    ("int", "color_field"),    # albedo multiplier: its MeanNode record, 0 = none (scene/colour_fields.py)
+    ("int", "emission_field"), # emitted radiance: its MeanNode record, 0 = none
+    ("float", "occupancy_level"),  # z sigma_max: mean above it = occupancy below the
+                                   # object's epsilon (gpis_proxy.h); 0: bounds off
+    ("float", "occupancy_step"),   # world length: the bound's marches stop below it
+    ("int", "proxy_first"),    # mesh proxy: its face planes (float4 n, w: n.x <= w) start
+    ("int", "proxy_count"),    # at this record of the mean-node array; how many planes
+))
+
+# Per-launch constants of the integrator.
+RENDER_PARAMS = Struct("RenderParams", (
+    ("uint", "seed"),
+    ("int", "max_depth"),
+    ("int", "rr_start_depth"),
+    ("float", "rr_max_survival"),
+    ("int", "num_lights"),
+    ("int", "env_light"),      # index of the environment map light, or -1
+    ("int", "num_pixels"),
+    ("int", "bounce"),         # wavefront iteration: one key of the random numbers
+    ("int", "sample_base"),    # first sample index of this batch's first path
+    ("int", "path_base"),      # first path id of this batch
+    ("int", "num_paths"),      # paths in this batch
+    ("int", "env_width"),
+    ("int", "env_height"),
+    ("int", "nee"),            # 1: next-event estimation with MIS; 0: BSDF sampling only
+    ("int", "num_gpis"),
+    ("int", "realization"),    # >= 0: every path uses this one GPIS realization
+))
+
+# --- queues ---------------------------------------------------------------------------
+
+PATH_STATE = Queue("path", (
+    ("int", "pixel"),
+    ("int", "sample"),
+    ("float4", "beta"),       # throughput
+    ("float4", "radiance"),   # radiance gathered so far
+    ("float4", "prev_pos"),   # last scattering vertex, for emitter pdfs (w = bsdf pdf, 0 = delta)
+    ("int", "depth"),         # scattering events so far
+    ("int", "medium"),        # GPIS object the ray travels in, or -1
+))
+
+RAY_QUEUE = Queue("ray", (
+    ("float4", "o"),          # w = tmin
+    ("float4", "d"),          # w = tmax
+    ("int", "path"),
+    ("float", "hit_t"),
+    ("int", "hit_prim"),      # >= 0 surface, -1 none, GPIS_HIT_BASE - k: GPIS object k
+    ("float4", "hit_n"),      # GPIS hits: the sampled unit normal (outward)
+))
+
+INDEX_QUEUE = Queue("index", (
+    ("int", "ray"),
+))
+
+SHADOW_QUEUE = Queue("shadow", (
+    ("float4", "o"),
+    ("float4", "d"),          # w = distance to the light sample
+    ("float4", "contribution"),
+    ("int", "path"),
+))
+
+# --- enumerations shared with the device (emitted as #defines) ----------------------
+
+PRIM_KINDS = {"sphere": 0, "rectangle": 1, "disk": 2, "triangle": 3}
+MATERIAL_KINDS = {"diffuse": 0, "mirror": 1, "null": 2, "rough_conductor": 3}
+LIGHT_KINDS = {"environment": 0, "environment_map": 1, "point": 2, "sphere": 3,
+               "rectangle": 4, "directional": 5}
+# Device-side counters; the host reads only rays_out between bounces.
+COUNTERS = {"rays_out": 0, "hits": 1, "escaped": 2, "shadow": 3, "nan_paths": 4,
+            "killed": 5, "gpis_failed": 6}
+NUM_COUNTERS = 8
+GPIS_PROXIES = {"box": 0, "sphere": 1, "mesh": 2}
+GPIS_SAMPLERS = {"weight_space": 0, "function_space": 1}
+GPIS_MEMORIES = {"none": 0, "renewal": 1, "renewal_plus": 2, "global": 3}
+GPIS_HIT_BASE = -2
+
+
+def _defines() -> str:
+    lines = []
+    for prefix, table in (("PRIM", PRIM_KINDS), ("MATERIAL", MATERIAL_KINDS),
+                          ("LIGHT", LIGHT_KINDS), ("COUNT", COUNTERS),
+                          ("GPIS_PROXY", GPIS_PROXIES), ("GPIS_SAMPLER", GPIS_SAMPLERS),
+                          ("GPIS_MEMORY", GPIS_MEMORIES)):
+        lines += [f"#define {prefix}_{k.upper()} {v}" for k, v in table.items()]
+    lines.append(f"#define NUM_COUNTERS {NUM_COUNTERS}")
+    lines.append(f"#define GPIS_HIT_BASE ({GPIS_HIT_BASE})")
+    return "\n".join(lines) + "\n"
+
+
+STRUCTS = (CAMERA, PRIMITIVE, MATERIAL, LIGHT, BVH_NODE, GPIS_OBJECT, RENDER_PARAMS)
+QUEUES = (PATH_STATE, RAY_QUEUE, INDEX_QUEUE, SHADOW_QUEUE)
+
+
+def c_header() -> str:
+    """The device-side declarations of every shared layout."""
+    parts = ["/* Generated from gpiscl/host/layout/records.py: do not edit. */\n", _defines()]
+    parts += [s.c_declaration() for s in STRUCTS]
+    parts.append(gp_declarations())
+    parts += [q.c_declaration() for q in QUEUES]
+    return "\n".join(parts)

@@ -1,0 +1,199 @@
+"""OpenCL device selection, the one program builder, and named, timed launches."""
+from __future__ import annotations
+
+import functools
+import os
+import tempfile
+import time
+from collections import defaultdict
+from dataclasses import dataclass, field
+
+import numpy as np
+import pyopencl as cl
+
+from .program_sources import PYOPENCL_CL_DIR, join_sources
+
+class DeviceError(RuntimeError):
+    """No usable OpenCL device, or a device-side build failure (a user-facing error)."""
+
+
+def list_devices():
+    """(platform index, device index, platform, device) for every OpenCL device."""
+    found = []
+    try:
+        platforms = cl.get_platforms()
+    except cl.Error:
+        return found
+    for pi, plat in enumerate(platforms):
+        for di, dev in enumerate(plat.get_devices()):
+            found.append((pi, di, plat, dev))
+    return found
+
+
+def _pick(spec: str | None):
+    devices = list_devices()
+    if not devices:
+        raise DeviceError("no OpenCL platform found; install the CPU runtime with "
+                          "pip install 'pyopencl[pocl]'")
+    if spec:
+        if ":" in spec and all(p.isdigit() for p in spec.split(":")):
+            pi, di = (int(p) for p in spec.split(":"))
+            for p_i, d_i, _, dev in devices:
+                if (p_i, d_i) == (pi, di):
+                    return dev
+            raise DeviceError(f"no OpenCL device {spec} (see: python -m gpiscl devices)")
+        for _, _, plat, dev in devices:
+            if spec.lower() in f"{plat.name} {dev.name}".lower():
+                return dev
+        raise DeviceError(f"no OpenCL device matches '{spec}' (see: python -m gpiscl devices)")
+    # PoCL's CPU device is the default. Several PoCLs may be installed (PyPI's, the
+    # distribution's): take the first that can compile for this CPU. PyPI's PoCL 3.0 is
+    # built on LLVM 14, which does not know CPUs newer than it (e.g. AMD Zen 5: "unknown
+    # target CPU 'generic'") and fails on every program.
+    pocls = [dev for _, _, plat, dev in devices
+             if "portable computing language" in plat.name.lower()]
+    for dev in pocls:
+        if _compiles(dev):
+            return dev
+    if pocls:
+        raise DeviceError("no PoCL device here can compile for this CPU (PyPI's PoCL 3.0 "
+                          "predates it); install the distribution's PoCL (Debian, Ubuntu: "
+                          "apt-get install pocl-opencl-icd) or choose another --device")
+    return devices[0][3]
+
+
+@functools.lru_cache(maxsize=None)
+def _compiles(dev) -> bool:
+    """Whether a one-line program builds on dev (PoCL caches it: ~10 ms after the first)."""
+    try:
+        cl.Program(cl.Context([dev]), "__kernel void probe(__global int *a) { a[0] = 1; }"
+                   ).build()
+        return True
+    except (cl.Error, RuntimeError):
+        return False
+
+
+@dataclass
+class Device:
+    """A context and a profiling queue on one OpenCL device."""
+
+    spec: str | None = None
+    ctx: cl.Context = field(init=False)
+    queue: cl.CommandQueue = field(init=False)
+    device: cl.Device = field(init=False)
+
+    def __post_init__(self):
+        spec = self.spec
+        if spec is None and os.environ.get("PYOPENCL_CTX"):
+            spec = os.environ["PYOPENCL_CTX"]
+        self.device = _pick(spec)
+        self.ctx = cl.Context([self.device])
+        self.queue = cl.CommandQueue(
+            self.ctx, properties=cl.command_queue_properties.PROFILING_ENABLE)
+        if not self.device.double_fp_config:
+            raise DeviceError(f"device '{self.device.name}' lacks double precision, which "
+                              "the film needs for batch-independent accumulation")
+
+    @property
+    def name(self) -> str:
+        return f"{self.device.platform.name.strip()} / {self.device.name.strip()}"
+
+
+@functools.lru_cache(maxsize=None)
+def shared_device(spec: str | None = None) -> "Device":
+    """One Device per spec for the Python API: the program cache below keeps every context
+    it has built for alive, so a fresh context per render call would grow without bound."""
+    return Device(spec)
+
+
+WORK_GROUP = 64
+# Built programs by (context, source, options): even a PoCL cache hit costs ~0.1 s, paid
+# by every integrator (one per UQ realization, one per test render) without this.
+_BUILT: dict = {}
+
+
+class Program:
+    """Builds one program once and hands out its kernels, each launch named and timed."""
+
+    def __init__(self, device: Device, stage_files, defines: dict | None = None,
+                 extra_headers=(), extra_c=""):
+        self.device = device
+        self.source = join_sources(stage_files, extra_headers, extra_c)
+        opts = [f"-I{PYOPENCL_CL_DIR}"]
+        opts += [f"-D{k}={v}" for k, v in sorted((defines or {}).items())]
+        self.options = opts
+        key = (device.ctx.int_ptr, self.source, tuple(opts))
+        if key not in _BUILT:
+            _BUILT[key] = self._build(device, opts)
+        self.kernels = _BUILT[key]
+        self.timings = KernelTimings()
+
+    def _build(self, device: Device, opts) -> dict:
+        try:
+            prg = cl.Program(device.ctx, self.source).build(options=opts)
+        except cl.Error as exc:
+            fd, path = tempfile.mkstemp(prefix="gpiscl-build-", suffix=".cl")
+            with os.fdopen(fd, "w") as f:
+                f.write(self.source)
+            raise DeviceError(f"OpenCL build failed on '{device.name}' with options "
+                              f"{' '.join(opts)}; source saved to {path}:\n{exc}") from None
+        return {k.function_name: k for k in prg.all_kernels()}
+
+    def launch(self, name: str, global_size: int, *args):
+        """Enqueue kernel `name` over global_size items; returns the event."""
+        if global_size <= 0:
+            return None
+        kernel = self.kernels[name]
+        kernel.set_args(*args)
+        # One fixed work-group size: PoCL compiles a work-group function per local size,
+        # so letting it pick one per global size recompiles big kernels every bounce
+        # (seconds each). Kernels bound-check their index, so padding is harmless.
+        local = min(WORK_GROUP, self.device.device.max_work_group_size)
+        padded = -(-int(global_size) // local) * local
+        event = cl.enqueue_nd_range_kernel(self.device.queue, kernel, (padded,), (local,))
+        self.timings.record(name, int(global_size), event)
+        return event
+
+
+class KernelTimings:
+    """Per-kernel device time from profiling events, resolved lazily."""
+
+    def __init__(self):
+        self.pending = []
+        self.seconds = defaultdict(float)
+        self.items = defaultdict(int)
+        self.launches = defaultdict(int)
+        self.wall_start = time.perf_counter()
+
+    def record(self, name, items, event):
+        self.pending.append((name, items, event))
+        if len(self.pending) > 4096:
+            self.resolve()
+
+    def resolve(self):
+        for name, items, event in self.pending:
+            event.wait()
+            self.seconds[name] += (event.profile.end - event.profile.start) * 1e-9
+            self.items[name] += items
+            self.launches[name] += 1
+        self.pending.clear()
+
+    def table(self) -> str:
+        self.resolve()
+        rows = [f"{'kernel':<24}{'launches':>10}{'time [s]':>12}{'items':>14}{'items/s':>14}"]
+        for name in sorted(self.seconds, key=self.seconds.get, reverse=True):
+            s, n = self.seconds[name], self.items[name]
+            rate = n / s if s > 0 else float("inf")
+            rows.append(f"{name:<24}{self.launches[name]:>10}{s:>12.4f}{n:>14}{rate:>14.3e}")
+        total = sum(self.seconds.values())
+        rows.append(f"{'total':<24}{'':>10}{total:>12.4f}")
+        return "\n".join(rows)
+
+
+def to_device(device: Device, array: np.ndarray, writable=False) -> cl.Buffer:
+    """Upload an array (a 1-element dummy for empty arrays, which OpenCL cannot hold)."""
+    mf = cl.mem_flags
+    if array.size == 0:
+        array = np.zeros(1, dtype=array.dtype)
+    flags = (mf.READ_WRITE if writable else mf.READ_ONLY) | mf.COPY_HOST_PTR
+    return cl.Buffer(device.ctx, flags, hostbuf=np.ascontiguousarray(array))

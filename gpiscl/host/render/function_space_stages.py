@@ -1,0 +1,130 @@
+"""Function-space GPIS stages of the integrator: free flight and shadow rays.
+
+They form a second program because fs_sampling.h needs gp_kernel.h in double
+(-DGP_REAL=double) while the weight-space stages stay in float; it is built only when a
+scene has function-space objects. Per-path state (the vertex record, its object and the
+global model's ring) is indexed by path id; scratch is per work item and the stages run
+in chunks, so its size does not grow with the batch.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+
+from ..layout import records as layouts
+from .program_sources import FS_HEADERS, FS_STAGE_FILES
+from .device import Device, KernelTimings, Program
+from ..layout import function_space_records as FL
+
+RING_BUDGET = 256 << 20      # bytes of global-model rings per batch: caps the batch size
+SCRATCH_BUDGET = 256 << 20   # bytes of scratch per launch: sets the chunk size
+
+
+def _fs_objects(objects: np.ndarray) -> np.ndarray:
+    return objects[objects["sampler"] == layouts.GPIS_SAMPLERS["function_space"]]
+
+
+def ring_stride(objects: np.ndarray) -> int:
+    """Observations per path ring: the largest cap of a global-memory object, else 1."""
+    fs = _fs_objects(objects)
+    glob = fs[fs["memory"] == layouts.GPIS_MEMORIES["global"]]
+    return int(glob["memory_cap"].max()) if len(glob) else 1
+
+
+def max_batch(objects: np.ndarray) -> int:
+    """The largest batch whose rings fit RING_BUDGET."""
+    return max(1, RING_BUDGET // (ring_stride(objects) * FL.FS_OBS.dtype.itemsize))
+
+
+def posterior_rows_on_device(device: Device, objects: np.ndarray, means) -> int:
+    """The most observation rows of any function-space object's posterior, read from the
+    header records just before the mean programs in the device's mean buffer
+    (fs_posterior.h): the stages are built from GpisObject records alone, which do not
+    carry it, and one record per object is all that is read."""
+    from ..layout.gp_records import MEAN_NODE
+    from ..compile.posterior import POSTERIOR_KIND
+    size, best = MEAN_NODE.dtype.itemsize, 0
+    for first in _fs_objects(objects)["mean_first"]:
+        if first <= 0:
+            continue
+        rec = MEAN_NODE.zeros(1)
+        cl.enqueue_copy(device.queue, rec, means, src_offset=int(first - 1) * size)
+        if rec["kind"][0] == POSTERIOR_KIND:
+            best = max(best, int(rec["p0"][0][0]))
+    return best
+
+
+class FunctionSpaceStages:
+    """mean_nodes: the host mean-node array, to size the posterior cache now. Without it
+    the stages are built for the prior and, if the first launch finds a posterior in the
+    device's mean buffer, rebuilt then (its compilation then counts as render time)."""
+
+    def __init__(self, device: Device, objects: np.ndarray, batch: int,
+                 timings: KernelTimings | None = None, mean_nodes: np.ndarray | None = None):
+        self.device, self.objects, self.batch, self.timings = device, objects, batch, timings
+        self.stride = ring_stride(objects)
+        self.local = 16 if device.device.type & cl.device_type.CPU else 64
+        self.checked = mean_nodes is not None
+        rows = 0
+        if mean_nodes is not None:
+            from ..compile.posterior import posterior_rows
+            rows = int(posterior_rows(mean_nodes, objects).max(initial=0))
+        self._build(rows)
+        mf, ctx = cl.mem_flags, device.ctx
+        self.vertex = cl.Buffer(ctx, mf.READ_WRITE, FL.FS_VERTEX.dtype.itemsize * batch)
+        self.vertex_object = cl.Buffer(ctx, mf.READ_WRITE, 4 * batch)
+        self.rings = cl.Buffer(ctx, mf.READ_WRITE,
+                               FL.FS_OBS.dtype.itemsize * self.stride * batch)
+
+    def _check_posterior(self, means):
+        if not self.checked:
+            self.checked = True
+            rows = posterior_rows_on_device(self.device, self.objects, means)
+            if rows > self.post_rows:
+                self._build(rows)
+
+    def _build(self, post_rows: int):
+        """Program and scratch: a posterior of n rows adds a v cache of n doubles per row
+        (fs_sampling.h, FsScratch.v) to every scratch slice."""
+        fs = _fs_objects(self.objects)
+        rows_cap = self.stride if self.stride > 1 else 2
+        defines = FL.defines(int(fs["samples"].max()), rows_cap, int(fs["refine"].max()))
+        self.post_rows = post_rows
+        defines["FS_POST_MAX"] = self.post_rows
+        defines["FS_SCRATCH_DOUBLES"] += defines["FS_MAX_ROWS"] * self.post_rows
+        self.program = Program(self.device, FS_STAGE_FILES, defines=defines,
+                               extra_headers=FS_HEADERS, extra_c=FL.c_declarations())
+        if self.timings is not None:   # one kernel table for both programs
+            self.program.timings = self.timings
+        slice_bytes = 8 * defines["FS_SCRATCH_DOUBLES"]
+        chunk = max(1, min(self.batch, SCRATCH_BUDGET // (2 * slice_bytes)))
+        self.chunk = int(-(-chunk // self.local) * self.local)
+        self.scratch = cl.Buffer(self.device.ctx, cl.mem_flags.READ_WRITE,
+                                 2 * slice_bytes * self.chunk)
+
+    def _chunks(self, name, n, head, tail):
+        """Launch over [0, n) in chunks with a fixed local size: PoCL compiles a kernel
+        once per work-group size, and these kernels take seconds to compile."""
+        kernel, queue = self.program.kernels[name], self.device.queue
+        for first in range(0, n, self.chunk):
+            m = min(self.chunk, n - first)
+            kernel.set_args(*head, np.int32(first), np.int32(first + m), *tail)
+            padded = -(-m // self.local) * self.local
+            event = cl.enqueue_nd_range_kernel(queue, kernel, (padded,), (self.local,))
+            self.program.timings.record(name, m, event)
+
+    def free_flight(self, params, paths, rays, n, gpis_objects, kernels, means, counters):
+        """Rays [0, n) of `rays`: hits moved to function-space crossings, vertices recorded."""
+        self._check_posterior(means)
+        self._chunks("gpis_function_space", n, (params,),
+                     (*paths.args, *rays.args, gpis_objects, kernels, means, self.vertex,
+                      self.vertex_object, self.rings, np.int32(self.stride), self.scratch,
+                      counters))
+
+    def shadow(self, params, paths, shadow, n, gpis_objects, kernels, means, counters):
+        """Shadow rays (at most n: one per hit) blocked by function-space crossings."""
+        self._check_posterior(means)
+        self._chunks("gpis_shadow_function_space", n, (params,),
+                     (*paths.args, *shadow.args, gpis_objects, kernels, means, self.vertex,
+                      self.vertex_object, self.rings, np.int32(self.stride), self.scratch,
+                      counters))

@@ -1,0 +1,67 @@
+"""Which device sources make each program, in the one fixed order they are joined.
+
+gpiscl/kernels_cl/lib/ holds the shared device library (.h), gpiscl/kernels_cl/stages/
+one .cl per wavefront stage (file, kernel, host method and timing label share a name).
+Sources are concatenated, not #included: the generated layout header comes first, then
+the library in the order below (each header uses only those before it), then stages.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pyopencl as cl
+
+from ..layout import records
+from ..layout.function_space_records import c_declarations, defines
+
+KERNEL_DIR = Path(__file__).resolve().parent.parent.parent / "kernels_cl"
+PYOPENCL_CL_DIR = Path(cl.__file__).resolve().parent / "cl"
+
+# The library every program starts with.
+SHARED_HEADERS = ("compat.h", "rng.h", "geometry.h", "bvh.h", "lights.h", "bsdf.h",
+                  "gp_kernel.h", "gp_mean.h")
+# The path tracer's stages, and the weight-space GPIS library they need.
+STAGE_FILES = ("generate_camera_rays.cl", "intersect.cl", "gpis_weight_space.cl",
+               "queue_hits.cl", "escaped_rays.cl", "emission.cl", "scatter.cl",
+               "gpis_shadow_weight_space.cl", "shadow_rays.cl", "accumulate.cl")
+GPIS_HEADERS = ("gpis_proxy.h", "ws_features.h", "ws_posterior.h", "ws_intersect.h",
+                "ws_objects.h", "gpis_fields.h")
+# The function-space stages (a second program, built only for scenes that use them).
+FS_STAGE_FILES = ("gpis_function_space.cl", "gpis_shadow_function_space.cl")
+FS_HEADERS = ("gpis_proxy.h", "fs_linalg.h", "fs_sampling.h", "fs_posterior.h",
+              "fs_objects.h")
+# The function-space sampler alone, for tests and benchmarks.
+FS_SAMPLER_HEADERS = ("compat.h", "rng.h", "gp_kernel.h", "gp_mean.h", "fs_linalg.h",
+                      "fs_sampling.h")
+
+
+def kernel_source(name: str) -> str:
+    """The text of one device source file: lib/ for headers, stages/ for stages."""
+    return (KERNEL_DIR / ("lib" if name.endswith(".h") else "stages") / name).read_text()
+
+
+def _marked(name: str) -> str:
+    # #line markers keep compiler messages pointing at the real files
+    return f'#line 1 "{name}"\n{kernel_source(name)}'
+
+
+def join_sources(stage_files, extra_headers=(), extra_c="") -> str:
+    """The whole program text: generated layouts, shared headers, then stages."""
+    parts = [records.c_header(), extra_c]
+    parts += [_marked(name) for name in (*SHARED_HEADERS, *extra_headers, *stage_files)]
+    return "\n".join(parts)
+
+
+def fs_sampler_source(wrappers: str = "") -> str:
+    """Stand-alone source of the function-space sampler plus `wrappers` (tests and
+    benchmarks; the renderer builds FS_STAGE_FILES through render.device.Program)."""
+    parts = [records.c_header(), c_declarations()]
+    parts += [_marked(h) for h in FS_SAMPLER_HEADERS]
+    return "\n".join(parts) + '\n#line 1 "wrappers"\n' + wrappers
+
+
+def fs_sampler_options(samples_max: int, memory_cap: int, refine: int | None = None) -> list:
+    """Build options of fs_sampler_source."""
+    d = defines(samples_max, memory_cap) if refine is None else \
+        defines(samples_max, memory_cap, refine)
+    return [f"-I{PYOPENCL_CL_DIR}"] + [f"-D{k}={v}" for k, v in sorted(d.items())]

@@ -1,0 +1,22 @@
+"""Device-resident SoA queues built from the layouts in layout/records.py."""
+from __future__ import annotations
+
+import pyopencl as cl
+
+from ..layout.records import Queue
+
+
+class DeviceQueue:
+    """One buffer per field of a Queue layout, in the order the C macro lists them."""
+
+    def __init__(self, ctx: cl.Context, layout: Queue, capacity: int):
+        self.layout = layout
+        self.capacity = capacity
+        self.buffers = {}
+        for _, fname in layout.fields:
+            nbytes = layout.numpy_dtype(fname).itemsize * max(capacity, 1)
+            self.buffers[fname] = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, nbytes)
+
+    @property
+    def args(self) -> list:
+        return [self.buffers[f] for _, f in self.layout.fields]

@@ -1,0 +1,275 @@
+"""Scene declarations of GPIS objects: a random field f ~ GP(mean, kernel) inside a proxy.
+
+    {"type": "gpis", "proxy": {...}, "mean": {...}, "kernel": {...},
+     "sampler": {"type": "weight_space", "features": null}, "bsdf": {...}}
+    sampler alternative: {"type": "function_space", "samples": 32, "memory": "renewal_plus",
+                          "memory_cap": 64, "step_corr": 0.9, "refine": 6}
+
+The proxy must bound the object: a realization is only searched inside it, and a ray
+that enters the proxy where f < 0 counts as starting inside (it must first come back out),
+so an object cut by its proxy shows holes. Leave ~5 sigma between the mean's zero set and
+the proxy.
+
+Importing this module registers the "gpis" shape with the scene loader.
+"""
+from __future__ import annotations
+
+from ..io.meshes import mesh_problem
+from .records import ALBEDO, ROUGH_CONDUCTOR, SHAPES, TRANSFORM, VEC3, box_extent
+from ..layout import function_space_records as FSL
+from .schema import (Bool, Enum, Field, File, Int, Nullable, Number, Record, Tagged,
+                           Vector)
+from .proxies import bounding_proxy, mesh_proxy_problem
+from ..io.grids import load_field_grid, load_grid, problem_of
+from ..io.points import EXTENSIONS as POINT_FILES
+from .observations import observations_problem, points_problem
+from .colour_fields import COLOR, EMISSION
+
+DIRECTION = Vector(normalize=True)
+POSITIVE3 = Vector(broadcast=True, item=Number(gt=0))
+
+PROXIES = Tagged("proxy", {
+    "box": Record({"min": Field(VEC3), "max": Field(VEC3)}, [box_extent]),
+    "sphere": Record({"center": Field(VEC3, [0, 0, 0]), "radius": Field(Number(gt=0))}),
+    # a closed convex mesh (scene/proxies.py), e.g. the authors' wedge prism
+    "mesh": Record({"file": Field(File((".obj", ".ply", ".stl", ".off"), mesh_problem)),
+                    "transform": Field(TRANSFORM, {})}),
+    # unbounded: the scene's box (compile/scene.scene_box: every other shape and proxy,
+    # positioned lights, the camera), e.g. a volume-type GPIS filling the scene, which
+    # rays sample in progressive segments until they leave the scene
+    "scene": Record({}),
+})
+
+# Means are signed distances, positive outside (gpiscl/host/gp/means.py).
+MEANS = Tagged("mean")
+MEANS.register("constant", Record({"value": Field(Number(), 0.0)}))
+MEANS.register("plane", Record({"point": Field(VEC3, [0, 0, 0]),
+                                "normal": Field(DIRECTION, [0, 1, 0]),
+                                "scale": Field(Number(gt=0), 1.0)}))
+MEANS.register("sphere", Record({"center": Field(VEC3, [0, 0, 0]),
+                                 "radius": Field(Number(gt=0), 1.0)}))
+MEANS.register("box", Record({"center": Field(VEC3, [0, 0, 0]),
+                              "half_extents": Field(POSITIVE3, 1.0)}))
+MEANS.register("rounded_box", Record({"center": Field(VEC3, [0, 0, 0]),
+                                      "half_extents": Field(POSITIVE3, 1.0),
+                                      "radius": Field(Number(gt=0), 0.1)}))
+MEANS.register("torus", Record({"center": Field(VEC3, [0, 0, 0]),
+                                "major": Field(Number(gt=0), 1.0),
+                                "minor": Field(Number(gt=0), 0.25)}))
+MEANS.register("capsule", Record({"a": Field(VEC3, [0, -0.5, 0]), "b": Field(VEC3, [0, 0.5, 0]),
+                                  "radius": Field(Number(gt=0), 0.25)}))
+for _op in ("union", "intersection", "difference"):  # k > 0: smooth blend of width k
+    MEANS.register(_op, Record({"left": Field(MEANS), "right": Field(MEANS),
+                                "k": Field(Number(ge=0), 0.0)}))
+MEANS.register("transform", Record({"child": Field(MEANS), **TRANSFORM.fields}))
+# Sampled means (mesh bakes, grids, procedural shapes) are interpolated "linear"
+# (trilinear: stays within the samples' range, gradient jumps at cell faces, which a
+# mirror micro-BSDF shows as facets) or "cubic" (the interpolating tricubic B-spline: C2,
+# no facets, O(h^4) on smooth data; each evaluation reads 64 coefficients instead of 8
+# samples, and its certified slope bound, from Bezier control points, is looser along a
+# distance's ridges: renders 1.1-1.7x slower, tools/bench_grid_interpolation.py).
+_INTERPOLATION = Field(Enum("linear", "cubic"), "linear")
+# Baked signed distance of a triangle mesh (gpiscl/host/compile/sdf_bake.py): `resolution`
+# samples along the longest axis of the mesh bounds grown by `margin` per side (null:
+# 10% of the largest extent); `band` clamps distances to [-band, band] (null: none);
+# `transform` is applied to the vertices before baking, so distances stay exact.
+MEANS.register("mesh", Record({"file": Field(File((".obj", ".ply", ".stl", ".off"),
+                                                  mesh_problem)),
+                               "resolution": Field(Int(ge=4, le=256), 128),
+                               "margin": Field(Nullable(Number(gt=0)), None),
+                               "band": Field(Nullable(Number(gt=0)), None),
+                               "transform": Field(TRANSFORM, {}),
+                               "interpolation": _INTERPOLATION}))
+# A voxel grid of mean values (.npz with values (nx, ny, nz), origin, voxel_size).
+MEANS.register("grid", Record({"file": Field(File((".npz",), problem_of(load_grid))),
+                               "interpolation": _INTERPOLATION}))
+# the authors' procedural shapes (gp/knob.py), sampled on a grid like a baked mesh
+MEANS.register("procedural", Record({
+    "function": Field(Enum("knob", "knob_inner", "knob_outer")),
+    "resolution": Field(Int(ge=16, le=512), 128),
+    "interpolation": _INTERPOLATION,
+}))
+
+# Spatially varying multipliers (function space only): sigma(x) = sigma m(x) on every
+# kernel ("sigma_field"), l(x) = l m(x) on SE and RQ ("length_scale_field", the
+# Paciorek-Schervish form, gpiscl/host/gp/kernels.py). A field is 1 where it is absent.
+#   linear  m = value + gradient . (x - origin); must stay positive over the proxy
+#   radial  m = inner + (outer - inner) (1 + tanh((|x - center|^2 - radius^2)
+#               / (2 radius width))) / 2: inner inside the sphere, outer beyond, blended
+#               over about `width`
+#   grid    trilinear in an .npz laid out like a mean grid (values (nx, ny, nz) > 0,
+#           origin, voxel_size), the border value held outside the sample box
+FIELDS = Tagged("field", {
+    "linear": Record({"value": Field(Number(gt=0), 1.0), "gradient": Field(VEC3, [0, 0, 0]),
+                      "origin": Field(VEC3, [0, 0, 0])}),
+    "radial": Record({"center": Field(VEC3, [0, 0, 0]), "radius": Field(Number(gt=0)),
+                      "width": Field(Number(gt=0)), "inner": Field(Number(gt=0)),
+                      "outer": Field(Number(gt=0))}),
+    "grid": Record({"file": Field(File((".npz",), problem_of(load_field_grid)))}),
+})
+_SIGMA_FIELD = Field(Nullable(FIELDS), None)
+_LS_FIELD = Field(Nullable(FIELDS), None)
+FIELD_KEYS = ("sigma_field", "length_scale_field")
+
+# Squared exponential: sigma^2 exp(-r^T A r / (2 l^2)), A = diag(aniso).
+_ANISO = Field(POSITIVE3, 1.0)
+KERNELS = Tagged("kernel", {
+    "squared_exponential": Record({"sigma": Field(Number(gt=0), 1.0),
+                                   "length_scale": Field(Number(gt=0), 1.0), "aniso": _ANISO,
+                                   "sigma_field": _SIGMA_FIELD,
+                                   "length_scale_field": _LS_FIELD}),
+    "rational_quadratic": Record({"sigma": Field(Number(gt=0), 1.0),
+                                  "length_scale": Field(Number(gt=0), 1.0),
+                                  "alpha": Field(Number(gt=0), 1.0), "aniso": _ANISO,
+                                  "sigma_field": _SIGMA_FIELD,
+                                  "length_scale_field": _LS_FIELD}),
+    "periodic": Record({"sigma": Field(Number(gt=0), 1.0),
+                        "length_scale": Field(Number(gt=0), 1.0),
+                        "w": Field(Number(gt=0), 6.283185307179586), "aniso": _ANISO,
+                        "sigma_field": _SIGMA_FIELD}),
+    "locally_periodic": Record({"sigma": Field(Number(gt=0), 1.0),
+                                "length_scale": Field(Number(gt=0), 1.0),
+                                "w": Field(Number(gt=0), 6.283185307179586),
+                                "se_length_scale": Field(Number(gt=0), 1.0), "aniso": _ANISO,
+                                "sigma_field": _SIGMA_FIELD}),
+    "thin_plate": Record({"sigma": Field(Number(gt=0), 1.0),
+                          "radius": Field(Number(gt=0), 1.0), "aniso": _ANISO,
+                          "sigma_field": _SIGMA_FIELD}),
+})
+
+
+def field_minimum(field: dict, proxy: dict) -> float:
+    """The smallest multiplier of a resolved field over a resolved proxy (exact for
+    linear fields over boxes and spheres, a lower bound over a mesh's bounding box;
+    min(inner, outer) for radial ones, the smallest sample of a grid)."""
+    if field["type"] == "radial":
+        return min(field["inner"], field["outer"])
+    if field["type"] == "grid":
+        return load_field_grid(field["file"]).minimum()
+    if proxy["type"] == "scene":   # checked: a linear field there has no gradient
+        return field["value"]
+    proxy = bounding_proxy(proxy)
+    g, o, v = field["gradient"], field["origin"], field["value"]
+    if proxy["type"] == "box":
+        return v + sum(min(gi * (lo - oi), gi * (hi - oi))
+                       for gi, lo, hi, oi in zip(g, proxy["min"], proxy["max"], o))
+    c, r = proxy["center"], proxy["radius"]
+    return (v + sum(gi * (ci - oi) for gi, ci, oi in zip(g, c, o))
+            - r * sum(gi * gi for gi in g) ** 0.5)
+
+# Random Fourier features per realization when "features" is null: the RQ spectrum is a
+# heavy-tailed scale mixture and needs more features to reach the same covariance error.
+DEFAULT_FEATURES = {"rational_quadratic": 1024}
+DEFAULT_FEATURES_OTHER = 256
+
+SAMPLERS = Tagged("sampler", {
+    "weight_space": Record({"features": Field(Nullable(Int(ge=1, le=65536)), None)}),
+    # Values of f sampled jointly along rays (fs_sampling.h pins the conventions):
+    # samples N per segment, the memory model, the global model's observation cap, the
+    # correlation between neighbouring samples (step rule) and crossing bisection steps.
+    "function_space": Record({
+        "samples": Field(Int(ge=2, le=FSL.MAX_SAMPLES), FSL.DEFAULT_SAMPLES),
+        "memory": Field(Enum("none", "renewal", "renewal_plus", "global"), "renewal_plus"),
+        "memory_cap": Field(Int(ge=8, le=512), FSL.DEFAULT_GLOBAL_CAP),
+        "step_corr": Field(Number(ge=0.5, le=0.999), FSL.DEFAULT_STEP_CORR),
+        "refine": Field(Int(ge=0, le=20), FSL.DEFAULT_REFINE),
+    }),
+})
+
+MICRO_BSDFS = Tagged("micro-BSDF", {
+    "diffuse": Record({"albedo": Field(ALBEDO, 0.8)}),
+    "mirror": Record({"albedo": Field(ALBEDO, 1.0)}),
+    "rough_conductor": ROUGH_CONDUCTOR,   # scene.py: Beckmann microfacets on the realization
+})
+
+
+def _weight_space_kernel(g):
+    if g["sampler"]["type"] == "weight_space":
+        for key in FIELD_KEYS:
+            if g["kernel"].get(key) is not None:
+                return f"kernel.{key}", ("a spatially varying kernel is not stationary, and "
+                                         "weight space samples stationary kernels only (random "
+                                         "Fourier features of one spectral density); use the "
+                                         "function_space sampler")
+        if g["kernel"]["type"] == "thin_plate":
+            return "kernel.type", ("thin_plate has no spectral density, so weight space "
+                                   "cannot sample it; use the function_space sampler")
+        if g["sampler"]["features"] is None:  # resolve "auto" so the written scene is explicit
+            g["sampler"]["features"] = DEFAULT_FEATURES.get(g["kernel"]["type"],
+                                                            DEFAULT_FEATURES_OTHER)
+    return None
+
+
+def _thin_plate_span(g):
+    """Thin-plate covariances are positive definite only among points within `radius`
+    (anisotropic distance); function space samples anywhere in the proxy, so the proxy's
+    diameter must fit (a conservative bound through the largest aniso weight)."""
+    k = g["kernel"]
+    if k["type"] != "thin_plate" or g["sampler"]["type"] != "function_space":
+        return None
+    if g["proxy"]["type"] == "scene":
+        return "proxy.type", ("thin_plate is a covariance only within its radius, so it "
+                              "needs a bounded proxy (box, sphere or mesh)")
+    proxy = bounding_proxy(g["proxy"])
+    if proxy["type"] == "box":
+        diameter = sum((b - a) ** 2 for a, b in zip(proxy["min"], proxy["max"])) ** 0.5
+    else:
+        diameter = 2.0 * proxy["radius"]
+    span = diameter * max(k["aniso"]) ** 0.5
+    if k["radius"] < span:
+        return "kernel.radius", (f"thin_plate is a covariance only within its radius; the "
+                                 f"proxy spans {span:.4g} (diameter x sqrt(max aniso)), so "
+                                 f"radius must be >= {span:.4g} (got {k['radius']:.4g})")
+    return None
+
+
+def _fields_positive(g):
+    """A linear field may cross zero somewhere; where rays sample it must not."""
+    for key in FIELD_KEYS:
+        f = g["kernel"].get(key)
+        if (f is not None and f["type"] == "linear" and g["proxy"]["type"] == "scene"
+                and any(f["gradient"])):
+            return f"kernel.{key}", ("a linear field with a gradient turns negative somewhere "
+                                     "in an unbounded ('scene') proxy; bound the proxy")
+        if f is not None and f["type"] == "linear":
+            m = field_minimum(f, g["proxy"])
+            if not m > 0.0:
+                return f"kernel.{key}", (f"the linear field falls to {m:.4g} inside the proxy; "
+                                         "a multiplier of sigma or l must stay positive there")
+    return None
+
+
+# Occupancy bounds (gpis_proxy.h): rays sample only between the first and last points
+# inside the proxy where P(f(x) <= 0) can reach `occupancy` (epsilon); null: the whole
+# proxy. Realizations with f < 0 only where the occupancy is below epsilon are ignored
+# (about epsilon per correlation length of clipped ray); 1e-4 (mean > 3.72 sigma) keeps
+# that far below a render's noise. On for both samplers: function space saves samples
+# (3.4x faster on scenes/knob_no_csg.json), weight space is about even (its search
+# already strides where |f| >> sigma); tools/bench_occupancy.py measures.
+BOUNDS = Record({"occupancy": Field(Nullable(Number(gt=0, lt=0.5)), 1e-4)})
+
+# Posterior GPIS (compile/posterior.py): f conditioned on points observed on the surface,
+# f = 0 with standard deviation `noise` (world units), and with "normals": true also
+# grad f = n (three derivative rows per point, deviation `normal_noise`). Function space
+# conditions exactly; weight space pathwise (SE and RQ kernels, compile/posterior.py); the
+# file holds rows "x y z [nx ny nz]" (.xyz/.txt) or an (n, 3|6) .npy.
+OBSERVATIONS = Record({
+    "file": Field(File(POINT_FILES, points_problem)),
+    "noise": Field(Number(ge=0), 1e-3),
+    "normals": Field(Bool(), False),
+    "normal_noise": Field(Number(ge=0), 1e-2),
+})
+
+GPIS = SHAPES.register("gpis", Record({
+    "proxy": Field(PROXIES),
+    "mean": Field(MEANS),
+    "kernel": Field(KERNELS),
+    "sampler": Field(SAMPLERS, {"type": "weight_space"}),
+    "bsdf": Field(MICRO_BSDFS, {"type": "diffuse"}),
+    # albedo multiplier and emitted radiance over space (scene/colour_fields.py); null: none
+    "color": Field(COLOR, None),
+    "emission": Field(EMISSION, None),
+    "bounds": Field(BOUNDS, {}),
+    "observations": Field(Nullable(OBSERVATIONS), None),
+}, checks=[mesh_proxy_problem, _weight_space_kernel, _thin_plate_span, _fields_positive,
+           observations_problem]))

@@ -1,0 +1,651 @@
+/* Function-space GPIS free flight: progressive conditioned segments along a ray.
+ * Needs gp_kernel.h built with -DGP_REAL=double, gp_mean.h, fs_linalg.h, philox (rng.h),
+ * and the declarations of function_space_records.c_declarations(); FS_MAX_ROWS and
+ * FS_SCRATCH_DOUBLES come from function_space_records.defines().
+ * gpiscl/host/gp/function_space.py is the numpy reference of everything here.
+ *
+ * Conventions (sign as everywhere: f > 0 outside; a hit is the first f >= 0 -> f < 0):
+ *  - Step rule: neighbouring samples have correlation c (FsParams.step_corr, default
+ *    0.9): dt = l sqrt(-2 ln c) / sqrt(d'Ad) for SE, l sqrt(2a (c^(-1/a) - 1) / d'Ad) for
+ *    RQ, bisection on k(t d)/k(0) = c otherwise (a kernel whose correlation never drops
+ *    to c, e.g. a periodic one with large l, gets the curvature lag sqrt(2(1-c)/lambda2)).
+ *    At c = 0.9 one down-crossing in ~55 falls between two samples together with an
+ *    up-crossing and is missed (Rice vs the grid's arccos(c)/(2 pi dt)); c = 0.99: 1 in 600.
+ *    Spatially varying kernels (gp_kernel.h): a sigma(x) field keeps the rule exact; an
+ *    l(x) field uses the smallest l on the ray's segment (fs_step), a conservative step.
+ *  - Placement: segment k starts at the previous segment's last sample t_s (the ray's t0
+ *    for the first) and samples t_i = t_s + (i + u) dt, i < N, with one fresh offset
+ *    u in (0, 1] per segment, so no gap exceeds dt and grids of different rays never
+ *    align. The last segment squeezes dt so that its final sample is exactly t1.
+ *  - Crossing: the first sample with f < 0 whose predecessor (the start point for the
+ *    first) was >= 0 brackets the hit; `refine` bisection steps sample the midpoint
+ *    conditioned on everything (an exact draw of the same realization), then t_hit is
+ *    linear in the final bracket (error O((dt 2^-refine)^2 f'')).
+ *  - Start condition (a ray entering from free space or a surface, and every segment
+ *    start under `none`): f(x(t0)) = v0 with v0 ~ N(mu, k(0)) truncated to [0, inf)
+ *    (the authors' convention: the ray starts outside; k(0) is k(x, x) under a sigma(x)
+ *    field). Exact inverse-CDF sampler, so a ray whose mean at t0 is far inside gets
+ *    v0 ~ s/|a| just above 0, not an atom at 0.
+ *  - Memory models at a new ray from a vertex / at a segment end without a hit:
+ *      none          fresh start condition at the start point (forgets everything);
+ *      renewal       f(x) = 0 (vertex) or f(end) (segment end); at a vertex the slope
+ *                    along the new direction is free, and we draw it from its prior law
+ *                    truncated to >= 0: the ray leaves to the outside. Consequence: no
+ *                    re-hit atom at t = 0+ (a free slope would send ~half the rays
+ *                    straight back inside, i.e. an immediate second scattering at the
+ *                    vertex, which is what the reference's `dori` does), and the slope is
+ *                    independent of the vertex's sampled normal;
+ *      renewal_plus  value and the slope along the new direction: g . d_new at a vertex
+ *                    (g . d_new < 0, e.g. transmission, starts the ray inside), the
+ *                    conditioned d_d f at a segment end;
+ *      global        every draw of the path so far (values along all segments up to
+ *                    each hit's first negative sample, the bisection points, and at
+ *                    each hit the three gradient components, each derivative with its
+ *                    own direction), the most recent `cap` of them; the path's
+ *                    observations live in a per-path ring of capacity cap
+ *                    (FsVertex.obs_end/obs_count). The ring holds only genuine draws,
+ *                    never the interpolated f(x_h) = 0 or the secant slope (see the hit).
+ *  - Normal at a hit (none/renewal/renewal_plus): the slope along d is the final
+ *    bracket's difference quotient (< 0 by construction); the tangential components are
+ *    drawn from their conditional law given all rows, f(x_h) = 0 and that slope.
+ *    Isotropic radial kernels (SE, RQ, thin-plate with equal aniso) have every row on the
+ *    ray, and cov(d_T f(x_h), anything on the ray) = 0, so the closed form
+ *    N(T . grad mu(x_h), -2k'(0) I_2) is used; anisotropic/product kernels take the
+ *    general conditional (four appended rows), and so do kernels with sigma(x) or l(x)
+ *    fields (grad sigma, grad l correlate d_T f(x_h) with the ray's values), and so does a
+ *    posterior (observations correlate d_T f(x_h) with everything). Global: all
+ *    three components are drawn given every row (three appended rows); the slope is then
+ *    a draw that is < 0 except at grazing hits (probability ~ the bracket's relative
+ *    width), whose normal faces away and which the integrator kills and counts.
+ *  - Posterior GPIS (FsPost, S.post; fs_posterior.h finds an object's): every mean and
+ *    covariance above is the posterior's, m + k alpha and k - v.v, so start values,
+ *    renewal slopes, segments, bisection and normals are all conditioned on the
+ *    observations exactly. Cost per conditioned row O(n^2) (a triangular solve; v is
+ *    cached per row in S.v, FS_POST_MAX n per row), so n stays at a few hundred.
+ *    The step rule keeps the prior's: the mean correction varies on the kernel's scale and
+ *    the residual's derivative variances never exceed the prior's.
+ *  - Random numbers: philox4x32, key (seed, FS_PHILOX_KEY) (rng.h uses another key
+ *    word), counter (pixel, sample, bounce, stream << 28 | segment << 12 | block): one
+ *    block = two 53-bit uniforms; fixed block numbers per draw (targets by their index in
+ *    the segment, so all memory models share a fresh ray's first segment), so results
+ *    are independent of batching and queue order. `stream` separates the rays traced
+ *    from one vertex (e.g. 0 continuation, 1 light-sample shadow, 2 BSDF-sample shadow).
+ */
+typedef char fs_gp_real_must_be_double[sizeof(GP_REAL) == 8 ? 1 : -1];
+
+#ifndef FS_MAX_ROWS
+#define FS_MAX_ROWS 107
+#endif
+#ifndef FS_POST_MAX
+#define FS_POST_MAX 0              /* observation rows of the largest posterior GPIS */
+#endif
+#ifndef FS_SCRATCH_DOUBLES
+#define FS_SCRATCH_DOUBLES (18 * FS_MAX_ROWS + FS_MAX_ROWS * (FS_MAX_ROWS + 1) / 2 \
+                            + FS_MAX_ROWS * FS_POST_MAX)
+#endif
+#ifndef FS_MAX_SEGMENTS
+#define FS_MAX_SEGMENTS 4096
+#endif
+#define FS_PHILOX_KEY 0x3c6ef372u
+#define FS_TN_TAIL 30.0            /* beyond: exact rejection tail, erfc would underflow */
+#define FS_SLOT_REFINE 512         /* normal slots: targets 0..511, then these */
+#define FS_SLOT_END 576
+#define FS_SLOT_NORMAL 578
+#define FS_U_GRID 1024             /* uniform blocks */
+#define FS_U_START 1025            /* and the 16 after it (tail rejection retries) */
+
+typedef struct { uint seed, pixel, sample, bounce, stream; } FsRng;
+typedef struct { int samples, memory, cap, refine; double step_corr; } FsParams;
+typedef struct { double3 o, d; double t0, t1; } FsRay;
+/* A posterior GPIS (gpiscl/host/gp/posterior.py; packed by compile/posterior.py): the
+ * prior conditioned on n observation rows X (values and directional derivatives, with
+ * noise). Every prior mean and covariance below becomes
+ *   m'(x) = m(x) + k(x, X) alpha,            alpha = K^-1 (y - m(X)),
+ *   k'(a, b) = k(a, b) - v_a . v_b,          v_a = L^-1 k(X, a),  K + noise = L L^T,
+ * which is exact: the observations join every segment's conditioning set, with their
+ * factor computed once on the host instead of per segment. n = 0: the prior. */
+typedef struct {
+    __global const FsObs* obs;
+    __global const double* alpha;
+    __global const double* L;      /* packed lower triangle (fs_tri) */
+    int n;
+} FsPost;
+
+typedef struct {
+    __global FsObs* rows;
+    __global double* L;
+    __global double* e;
+    __global double* mu;
+    /* A kernel with sigma(x) or l(x) fields: row i's multipliers at fields + 8 i
+     * (fs_store_fields), evaluated once when the row is factored: O(rows) field
+     * evaluations (a grid field reads 8 samples) instead of O(rows^2). */
+    __global double* fields;
+    /* The posterior rides along with the scratch because every function that needs it
+     * already takes S; v caches v_a of row i at v + i n (an O(n^2) solve per row, reused
+     * by all O(rows^2) covariance entries of the row). */
+    __global double* v;
+    FsPost post;
+} FsScratch;
+typedef struct {
+    int status, hit;
+    double t;               /* hit distance, or t1 */
+    double3 grad;           /* sampled gradient of f at the hit (outward, grad . d < 0) */
+    int segments, samples;  /* work done */
+    int new_first, new_end;  /* global: rows [new_first, new_end) join the memory */
+} FsResult;
+
+inline FsScratch fs_scratch(__global double* base, int item)
+{
+    __global double* s = base + (size_t)item * FS_SCRATCH_DOUBLES;
+    FsScratch S;
+    S.rows = (__global FsObs*)s;
+    S.L = s + 8 * FS_MAX_ROWS;
+    S.e = S.L + FS_MAX_ROWS * (FS_MAX_ROWS + 1) / 2;
+    S.mu = S.e + FS_MAX_ROWS;
+    S.fields = S.mu + FS_MAX_ROWS;
+    S.v = S.fields + 8 * FS_MAX_ROWS;
+    S.post.obs = 0;
+    S.post.alpha = S.post.L = 0;
+    S.post.n = 0;
+    return S;
+}
+
+inline double2 fs_uniform2(FsRng r, uint seg, uint block)
+{
+    philox4x32_ctr_t c = {{r.pixel, r.sample, r.bounce,
+                           (r.stream << 28) | ((seg & 0xffffu) << 12) | (block & 0xfffu)}};
+    philox4x32_key_t k = {{r.seed, FS_PHILOX_KEY}};
+    philox4x32_ctr_t x = philox4x32(c, k);
+    const double s = 1.0 / 9007199254740992.0;   /* 2^-53: uniforms in [0, 1) */
+    return (double2)((double)(((ulong)x.v[0] << 21) ^ (x.v[1] >> 11)) * s,
+                     (double)(((ulong)x.v[2] << 21) ^ (x.v[3] >> 11)) * s);
+}
+
+inline double fs_normal(FsRng r, uint seg, uint slot)
+{
+    double2 u = fs_uniform2(r, seg, slot >> 1);
+    double rad = sqrt(-2.0 * log(1.0 - u.x)), ang = 2.0 * M_PI * u.y;
+    return (slot & 1) ? rad * sin(ang) : rad * cos(ang);
+}
+
+/* Upper tail Q(x) = P(Z > x), and its inverse: Abramowitz-Stegun 26.2.23 (|err| < 5e-4)
+ * polished by two Halley steps on Q(x) = q (cubic: ~1e-15 relative, tails included). */
+inline double fs_q(double x) { return 0.5 * erfc(x * M_SQRT1_2); }
+
+inline double fs_qinv(double q)
+{
+    q = clamp(q, DBL_MIN, 1.0 - DBL_EPSILON);
+    double p = fmin(q, 1.0 - q), t = sqrt(-2.0 * log(p));
+    double x = t - (2.515517 + t * (0.802853 + t * 0.010328))
+                 / (1.0 + t * (1.432788 + t * (0.189269 + t * 0.001308)));
+    if (q > 0.5) x = -x;
+    for (int it = 0; it < 2; ++it) {
+        double u = (fs_q(x) - q) * 2.5066282746310002 * exp(0.5 * x * x);
+        x += u / (1.0 - 0.5 * x * u);
+    }
+    return x;
+}
+
+/* x ~ N(mu, s^2) conditioned on x >= 0, by inverting the truncated CDF in double. The
+ * lower tail (a < 0) inverts Phi and the upper tail Q, so both stay accurate where the
+ * truncated mass is tiny; past FS_TN_TAIL standard deviations below 0, Marsaglia's tail
+ * sampler with its acceptance test (the reference dropped the test: a Rayleigh tail). */
+inline double fs_truncnorm_pos(double mu, double s, FsRng rng, uint seg, uint block)
+{
+    if (!(s > 0.0)) return fmax(mu, 0.0);
+    double a = -mu / s, z = a;
+    if (a > FS_TN_TAIL) {
+        for (uint k = 0; k < 16; ++k) {            /* acceptance > 99.8% */
+            double2 u = fs_uniform2(rng, seg, block + 1 + k);
+            double x = sqrt(a * a - 2.0 * log(1.0 - u.x));
+            if (u.y * x <= a) { z = x; break; }
+        }
+    } else {
+        double u = fs_uniform2(rng, seg, block).x;
+        z = a < 0.0 ? -fs_qinv(fs_q(-a) + u * fs_q(a))    /* Phi(z) = Phi(a) + u Q(a) */
+                    : fs_qinv(fs_q(a) * (1.0 - u));        /* Q(z) = Q(a) (1 - u) */
+    }
+    return fmax(mu + s * fmax(z, a), 0.0);
+}
+
+inline double fs_corr(GpKernel p, double3 d, double t)
+{
+    return gp_kernel_value(p, t * d) / gp_kernel_value(p, (double3)(0.0));
+}
+
+/* The lag dt with corr(f(x), f(x + dt d)) = c (stationary kernels: independent of x). */
+inline double fs_step_stationary(GpKernel p, double3 d, double c)
+{
+    double dad = dot(gp_aniso(p) * d, d), l = p.length_scale;
+    if (p.kind == GP_KERNEL_SQUARED_EXPONENTIAL) return l * sqrt(-2.0 * log(c) / dad);
+    if (p.kind == GP_KERNEL_RATIONAL_QUADRATIC) {
+        double a = p.alpha;
+        return l * sqrt(2.0 * a * (pow(c, -1.0 / a) - 1.0) / dad);
+    }
+    double3 o = (double3)(0.0);
+    double lam = gp_cov(p, o, d, 1, o, d, 1) / gp_kernel_value(p, o);
+    double lo = 0.0, hi = sqrt(2.0 * (1.0 - c) / lam);
+    int k = 0;
+    for (; k < 40 && fs_corr(p, d, hi) > c; ++k) { lo = hi; hi *= 2.0; }
+    if (k == 40) return sqrt(2.0 * (1.0 - c) / lam);
+    for (k = 0; k < 60; ++k) {
+        double mid = 0.5 * (lo + hi);
+        if (fs_corr(p, d, mid) > c) lo = mid; else hi = mid;
+    }
+    return 0.5 * (lo + hi);
+}
+
+/* The smallest l(x) on the segment [a, b] of a ray inside the proxy: a linear field at an
+ * end; a radial one (monotone in q = |x - c|^2, which is convex along the segment) where q
+ * is smallest or largest; a grid field the proxy's smallest (ls_step). Never below
+ * ls_step, the smallest over the proxy. */
+inline double fs_ls_min_on(GpKernel p, double3 a, double3 b)
+{
+    double l = p.length_scale, m = p.ls_step / l;
+    double3 g;
+    if (p.ls_field == GP_FIELD_LINEAR) {
+        m = fmin(gp_field(p.ls_field, p.ls_p0, p.ls_p1, a, &g),
+                 gp_field(p.ls_field, p.ls_p0, p.ls_p1, b, &g));
+    } else if (p.ls_field == GP_FIELD_RADIAL) {
+        double3 c = (double3)(p.ls_p0.x, p.ls_p0.y, p.ls_p0.z), ab = b - a;
+        double w = dot(ab, ab) > 0.0 ? clamp(dot(c - a, ab) / dot(ab, ab), 0.0, 1.0) : 0.0;
+        double3 near = a + w * ab, far = dot(a - c, a - c) > dot(b - c, b - c) ? a : b;
+        /* outer >= inner: m grows with q, so its minimum is nearest the centre */
+        double3 x = p.ls_p1.y >= p.ls_p1.x ? near : far;
+        m = gp_field(p.ls_field, p.ls_p0, p.ls_p1, x, &g);
+    }
+    return fmax(l * m, (double)p.ls_step);
+}
+
+/* A variance field leaves the correlation stationary (sigma(x) sigma(y) cancels), so the
+ * stationary rule is exact for it. A length-scale field is stepped with the smallest l(x)
+ * on the ray's segment [t0, t1] (fs_ls_min_on): never coarser than the local rule
+ * anywhere on the ray, at the price of oversampling where l(x) is larger. */
+inline double fs_step(GpKernel p, FsRay ray, double c)
+{
+    if (p.ls_field)
+        p.length_scale = fs_ls_min_on(p, ray.o + ray.t0 * ray.d, ray.o + ray.t1 * ray.d);
+    p.sigma_field = p.ls_field = GP_FIELD_NONE;
+    return fs_step_stationary(p, ray.d, c);
+}
+
+inline FsObs fs_obs(double3 x, double3 u, int kind, double value)
+{
+    FsObs o = {x.x, x.y, x.z, u.x, u.y, u.z, value, kind, 0};
+    return o;
+}
+
+inline double3 fs_pos(__global const FsObs* o) { return (double3)(o->px, o->py, o->pz); }
+inline double3 fs_dir(__global const FsObs* o) { return (double3)(o->ux, o->uy, o->uz); }
+
+inline double fs_prior_mean(__global const MeanNode* mean, int mc, double3 x, double3 u,
+                            int kind)
+{
+    float3 g;
+    float v = gp_mean_eval(mean, mc, convert_float3(x), &g);
+    return kind == FS_OBS_DERIV ? dot(convert_double3(g), u) : (double)v;
+}
+
+inline __global double* fs_post_v(FsScratch S, int i) { return S.v + (size_t)i * S.post.n; }
+
+/* A grid field's multiplier and world gradient at x: grid record n maps world points to
+ * index coordinates (row0..row2); trilinear with the border held (gp_grid_trilinear). */
+inline double fs_grid_field(__global const MeanNode* n, double3 x, double3* grad)
+{
+    float3 xf = convert_float3(x), gu, out;
+    float3 u = (float3)(dot(n->row0.xyz, xf) + n->row0.w, dot(n->row1.xyz, xf) + n->row1.w,
+                        dot(n->row2.xyz, xf) + n->row2.w);
+    float m = gp_grid_trilinear(n, u, &gu, &out);
+    *grad = convert_double3(gu.x * n->row0.xyz + gu.y * n->row1.xyz + gu.z * n->row2.xyz);
+    return (double)m;
+}
+
+/* The kernel's field multipliers at x; grid fields are records at mean + p.sigma_grid /
+ * p.ls_grid, offsets from the object's mean program (compile/gpis.py puts them after
+ * every mean program). */
+inline GpFieldsAt fs_fields(GpKernel p, __global const MeanNode* mean, double3 x)
+{
+    GpFieldsAt f = gp_fields_analytic(p, x);
+    if (p.sigma_field == GP_FIELD_GRID) f.ms = fs_grid_field(mean + p.sigma_grid, x, &f.gs);
+    if (p.ls_field == GP_FIELD_GRID) f.ml = fs_grid_field(mean + p.ls_grid, x, &f.gl);
+    return f;
+}
+
+inline void fs_store_fields(FsScratch S, int i, GpFieldsAt f)
+{
+    __global double* q = S.fields + 8 * i;
+    q[0] = f.ms;
+    vstore3(f.gs, 0, q + 1);
+    q[4] = f.ml;
+    vstore3(f.gl, 0, q + 5);
+}
+
+inline GpFieldsAt fs_row_fields(FsScratch S, int i)
+{
+    __global const double* q = S.fields + 8 * i;
+    GpFieldsAt f = {q[0], q[4], vload3(0, q + 1), vload3(0, q + 5)};
+    return f;
+}
+
+/* v = L^-1 k(X, target) (forward substitution), and the mean correction k(target, X) alpha;
+ * fx: the fields at the target x. */
+inline double fs_post_solve(GpKernel p, __global const MeanNode* mean, FsPost P, double3 x,
+                            double3 u, int kind, GpFieldsAt fx, __global double* v)
+{
+    double corr = 0.0;
+    int ns = gp_kernel_nonstationary(p);
+    for (int j = 0; j < P.n; ++j) {
+        __global const FsObs* o = P.obs + j;
+        double3 xo = fs_pos(o);
+        double k = gp_cov_at(p, xo, fs_dir(o), o->kind, ns ? fs_fields(p, mean, xo) : fx,
+                             x, u, kind, fx);
+        v[j] = k;
+        corr += k * P.alpha[j];
+    }
+    for (int i = 0; i < P.n; ++i) {
+        __global const double* Li = P.L + fs_tri(i);
+        double s = v[i];
+        for (int j = 0; j < i; ++j) s -= Li[j] * v[j];
+        v[i] = s / Li[i];
+    }
+    return corr;
+}
+
+inline double fs_post_dot(__global const double* a, __global const double* b, int n)
+{
+    double s = 0.0;
+    for (int j = 0; j < n; ++j) s += a[j] * b[j];
+    return s;
+}
+
+/* Mean and variance (posterior if any) of one value or derivative at x; row slot `slot`'s
+ * v is the work space (its row is refactored before it is used again). */
+inline double fs_mean_var(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
+                          double3 x, double3 u, int kind, int slot, double* var)
+{
+    double m = fs_prior_mean(mean, mc, x, u, kind);
+    GpFieldsAt fx = fs_fields(p, mean, x);
+    double k = gp_cov_at(p, x, u, kind, fx, x, u, kind, fx);
+    if (S.post.n) {
+        __global double* v = fs_post_v(S, slot);
+        m += fs_post_solve(p, mean, S.post, x, u, kind, fx, v);
+        k -= fs_post_dot(v, v, S.post.n);
+    }
+    *var = fmax(k, 0.0);
+    return m;
+}
+
+/* Means, covariance rows and factor of rows [from, n) (posterior if S.post.n). */
+inline int fs_factor(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
+                     int from, int n)
+{
+    int np = S.post.n, ns = gp_kernel_nonstationary(p);
+    for (int i = from; i < n; ++i) {
+        __global const FsObs* ri = S.rows + i;
+        double3 xi = fs_pos(ri), ui = fs_dir(ri);
+        GpFieldsAt fi = fs_fields(p, mean, xi);   /* stationary: unit, unused */
+        if (ns) fs_store_fields(S, i, fi);
+        S.mu[i] = fs_prior_mean(mean, mc, xi, ui, ri->kind);
+        if (np) S.mu[i] += fs_post_solve(p, mean, S.post, xi, ui, ri->kind, fi,
+                                         fs_post_v(S, i));
+        __global double* Li = S.L + fs_tri(i);
+        for (int j = 0; j <= i; ++j) {
+            __global const FsObs* rj = S.rows + j;
+            Li[j] = gp_cov_at(p, fs_pos(rj), fs_dir(rj), rj->kind,
+                              ns ? fs_row_fields(S, j) : fi, xi, ui, ri->kind, fi);
+            if (np) Li[j] -= fs_post_dot(fs_post_v(S, j), fs_post_v(S, i), np);
+        }
+    }
+    return fs_cholesky(S.L, from, n, 0);
+}
+
+/* Append one row at index i, conditioned on rows [0, i): sampled (returns the draw) or,
+ * if `observed`, whitened at `value`. */
+inline double fs_append(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
+                        int i, FsObs o, int observed, double z, int* status)
+{
+    S.rows[i] = o;
+    int st = fs_factor(p, mean, mc, S, i, i + 1);
+    if (st) { *status = st; return NAN; }
+    if (observed) { fs_whiten_row(S.L, S.e, i, o.value, S.mu[i]); return o.value; }
+    double v = fs_sample_row(S.L, S.e, i, S.mu[i], z);
+    S.rows[i].value = v;
+    return v;
+}
+
+inline void fs_frame(double3 n, double3* t, double3* b)   /* Duff et al. 2017 */
+{
+    double sign = copysign(1.0, n.z), a = -1.0 / (sign + n.z), c = n.x * n.y * a;
+    *t = (double3)(1.0 + sign * n.x * n.x * a, sign * c, -sign * n.x);
+    *b = (double3)(c, sign + n.y * n.y * a, -n.y);
+}
+
+inline int fs_isotropic_radial(GpKernel p)
+{
+    /* sigma(x), l(x) correlate d_T f(x_h) with the ray's values: no closed form */
+    return !gp_kernel_nonstationary(p)
+        && (p.kind == GP_KERNEL_SQUARED_EXPONENTIAL || p.kind == GP_KERNEL_RATIONAL_QUADRATIC
+            || p.kind == GP_KERNEL_THIN_PLATE)
+        && p.aniso.x == p.aniso.y && p.aniso.y == p.aniso.z;
+}
+
+/* Conditioning rows [0, m) of a new ray from vertex v (v.valid == 0: fresh entry); sets
+ * the start value, whether the ray starts outside, and how many rows came from the ring. */
+inline int fs_begin(GpKernel p, __global const MeanNode* mean, int mc, FsParams prm,
+                    FsRay ray, FsVertex v, __global const FsObs* ring, FsRng rng,
+                    FsScratch S, double* f0, int* outside, int* n_old)
+{
+    double3 d = ray.d / length(ray.d), g = convert_double3(v.grad.xyz);
+    *n_old = 0;
+    *outside = 1;
+    if (v.valid && prm.memory == GPIS_MEMORY_GLOBAL && v.obs_count > 0 && ring) {
+        int cnt = min(v.obs_count, prm.cap);
+        for (int k = 0; k < cnt; ++k) S.rows[k] = ring[(v.obs_end - cnt + k) % prm.cap];
+        *n_old = cnt;
+        *f0 = v.pos.w;
+        *outside = dot(g, d) >= 0.0;
+        return cnt;
+    }
+    if (v.valid && (prm.memory == GPIS_MEMORY_RENEWAL
+                    || prm.memory == GPIS_MEMORY_RENEWAL_PLUS)) {
+        double3 x = convert_double3(v.pos.xyz);
+        double s = dot(g, d);
+        if (prm.memory == GPIS_MEMORY_RENEWAL) {   /* value and slope: independent at a point */
+            double vs, ms = fs_mean_var(p, mean, mc, S, x, d, FS_OBS_DERIV, 1, &vs);
+            /* ... of a stationary prior; observations correlate them, and so does a
+             * sigma(x) field: cov(f(x), d_d f(x)) = m_s(x) (d . grad m_s(x)) k0(0) */
+            if (S.post.n || gp_kernel_nonstationary(p)) {
+                double vf, mf = fs_mean_var(p, mean, mc, S, x, d, FS_OBS_VALUE, 0, &vf);
+                GpFieldsAt fx = fs_fields(p, mean, x);
+                double c = gp_cov_at(p, x, d, 0, fx, x, d, 1, fx)
+                         - fs_post_dot(fs_post_v(S, 0), fs_post_v(S, 1), S.post.n);
+                if (vf > 0.0) {
+                    ms += c / vf * (v.pos.w - mf);
+                    vs = fmax(vs - c * c / vf, 0.0);
+                }
+            }
+            s = fs_truncnorm_pos(ms, sqrt(vs), rng, 0, FS_U_START);
+        }
+        S.rows[0] = fs_obs(x, d, FS_OBS_VALUE, v.pos.w);
+        S.rows[1] = fs_obs(x, d, FS_OBS_DERIV, s);
+        *f0 = v.pos.w;
+        *outside = s >= 0.0;
+        return 2;
+    }
+    double3 x = ray.o + ray.t0 * ray.d;
+    double var, m0 = fs_mean_var(p, mean, mc, S, x, d, FS_OBS_VALUE, 0, &var);
+    *f0 = fs_truncnorm_pos(m0, sqrt(var), rng, 0, FS_U_START);
+    S.rows[0] = fs_obs(x, d, FS_OBS_VALUE, *f0);
+    return 1;
+}
+
+/* Free flight along [ray.t0, ray.t1] inside one GPIS object: the first crossing, or none.
+ * Shadow rays and continuation rays alike; only the continuation then calls
+ * fs_vertex_at_hit. ray.d need not be unit (t is the ray parameter). */
+inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc,
+                               FsParams prm, FsRay ray, FsVertex v,
+                               __global const FsObs* ring, FsRng rng, FsScratch S)
+{
+    FsResult res = {0, 0, ray.t1, (double3)(0.0), 0, 0, 0, 0};
+    if (S.post.n > FS_POST_MAX) { res.status = FS_STATUS_ROWS; return res; }   /* no v cache */
+    double f_prev;
+    int outside, n_old, factored = 0;
+    int m = fs_begin(p, mean, mc, prm, ray, v, ring, rng, S, &f_prev, &outside, &n_old);
+    double dlen = length(ray.d), dtc = fs_step(p, ray, prm.step_corr);
+    double3 dn = ray.d / dlen;
+    if (!(dtc > 0.0) || !isfinite(dtc)) { res.status = FS_STATUS_NAN; return res; }
+    double t = ray.t0, t_prev = ray.t0;
+    int seg = 0;
+    for (; seg < FS_MAX_SEGMENTS && t < ray.t1; ++seg) {
+        double rem = ray.t1 - t, u = 1.0 - fs_uniform2(rng, seg, FS_U_GRID).x, dt = dtc;
+        int n = prm.samples, last = (n - 1 + u) * dtc >= rem;
+        if (last) {
+            n = clamp((int)ceil(rem / dtc + 1.0 - u), 1, prm.samples);
+            dt = rem / (n - 1 + u);
+        }
+        if (m + n + prm.refine + 1 + FS_HIT_ROWS > FS_MAX_ROWS) {
+            res.status = FS_STATUS_ROWS;
+            return res;
+        }
+        for (int i = 0; i < n; ++i) {
+            double ti = (last && i == n - 1) ? ray.t1 : t + (i + u) * dt;
+            S.rows[m + i] = fs_obs(ray.o + ti * ray.d, dn, FS_OBS_VALUE, ti);
+        }
+        int st = fs_factor(p, mean, mc, S, factored, m + n);
+        if (st) { res.status = st; return res; }
+        for (int i = factored; i < m; ++i) fs_whiten_row(S.L, S.e, i, S.rows[i].value, S.mu[i]);
+        res.segments++;
+        int hit = -1;
+        double ta = t_prev, fa = f_prev, tb = 0.0, fb = 0.0;
+        for (int i = 0; i < n; ++i) {
+            double ti = S.rows[m + i].value;     /* t parked in value until sampled */
+            double f = fs_sample_row(S.L, S.e, m + i, S.mu[m + i], fs_normal(rng, seg, i));
+            S.rows[m + i].value = f;
+            res.samples++;
+            if (isnan(f)) { res.status = FS_STATUS_NAN; return res; }
+            if (outside && f < 0.0) { hit = i; tb = ti; fb = f; break; }
+            outside = f >= 0.0;
+            ta = ti;
+            fa = f;
+        }
+        if (hit >= 0) {
+            int row = m + hit + 1;               /* unsampled targets are overwritten */
+            for (int k = 0; k < prm.refine; ++k, ++row) {
+                double tm = 0.5 * (ta + tb);
+                double f = fs_append(p, mean, mc, S, row,
+                                     fs_obs(ray.o + tm * ray.d, dn, FS_OBS_VALUE, 0.0), 0,
+                                     fs_normal(rng, seg, FS_SLOT_REFINE + k), &res.status);
+                if (res.status) return res;
+                if (f >= 0.0) { ta = tm; fa = f; } else { tb = tm; fb = f; }
+            }
+            res.hit = 1;
+            res.t = ta + (tb - ta) * fa / (fa - fb);
+            double sd = (fb - fa) / ((tb - ta) * dlen);   /* slope per unit length */
+            double3 x = ray.o + res.t * ray.d, T, B;
+            fs_frame(dn, &T, &B);
+            double z1 = fs_normal(rng, seg, FS_SLOT_NORMAL);
+            double z2 = fs_normal(rng, seg, FS_SLOT_NORMAL + 1);
+            double q1, q2;
+            res.new_first = n_old;
+            if (prm.memory == GPIS_MEMORY_GLOBAL) {
+                /* The memory keeps only genuine joint draws: the values up to the first
+                 * negative sample, the bisection points, and all three gradient
+                 * components at x_h sampled from their conditional given those. The
+                 * interpolated root and the bracket's difference quotient are not draws
+                 * (f(x_h) = 0 is off by O(width^2 f''), the quotient is a secant whose
+                 * jitter noise grows as the bracket shrinks); kept next to the values
+                 * they were computed from, as exact observations, they contradict them,
+                 * and continued rays lost ~5% of Rice's crossings (refine 6; 20% at 12). */
+                sd = fs_append(p, mean, mc, S, row, fs_obs(x, dn, FS_OBS_DERIV, 0.0), 0,
+                               fs_normal(rng, seg, FS_SLOT_NORMAL + 2), &res.status);
+                q1 = fs_append(p, mean, mc, S, row + 1, fs_obs(x, T, FS_OBS_DERIV, 0.0), 0,
+                               z1, &res.status);
+                q2 = fs_append(p, mean, mc, S, row + 2, fs_obs(x, B, FS_OBS_DERIV, 0.0), 0,
+                               z2, &res.status);
+                res.grad = T * q1 + B * q2 + dn * sd;
+                res.new_end = row + 3;
+                return res;
+            }
+            if (fs_isotropic_radial(p) && !S.post.n) {   /* observations break isotropy */
+                q1 = fs_prior_mean(mean, mc, x, T, FS_OBS_DERIV)
+                   + sqrt(gp_cov(p, x, T, 1, x, T, 1)) * z1;
+                q2 = fs_prior_mean(mean, mc, x, B, FS_OBS_DERIV)
+                   + sqrt(gp_cov(p, x, B, 1, x, B, 1)) * z2;
+            } else {
+                fs_append(p, mean, mc, S, row, fs_obs(x, dn, FS_OBS_VALUE, 0.0), 1, 0.0,
+                          &res.status);
+                fs_append(p, mean, mc, S, row + 1, fs_obs(x, dn, FS_OBS_DERIV, sd), 1, 0.0,
+                          &res.status);
+                q1 = fs_append(p, mean, mc, S, row + 2, fs_obs(x, T, FS_OBS_DERIV, 0.0), 0,
+                               z1, &res.status);
+                q2 = fs_append(p, mean, mc, S, row + 3, fs_obs(x, B, FS_OBS_DERIV, 0.0), 0,
+                               z2, &res.status);
+            }
+            res.grad = T * q1 + B * q2 + dn * sd;
+            res.new_end = m + hit;
+            return res;
+        }
+        if (last) { t = ray.t1; break; }
+        /* no crossing: the next segment starts at this one's last sample */
+        int e = m + n - 1;
+        double3 xe = fs_pos(S.rows + e);
+        t = t_prev = t + (n - 1 + u) * dt;
+        f_prev = S.rows[e].value;
+        if (prm.memory == GPIS_MEMORY_GLOBAL) {
+            int drop = max(m + n - prm.cap, 0);
+            for (int i = drop; i < m + n; ++i) S.rows[i - drop] = S.rows[i];
+            n_old = max(n_old - drop, 0);
+            m = m + n - drop;
+            factored = drop ? 0 : m;   /* a kept prefix keeps its factor; e of a target is z */
+        } else if (prm.memory == GPIS_MEMORY_RENEWAL_PLUS) {
+            double s = fs_append(p, mean, mc, S, e + 1, fs_obs(xe, dn, FS_OBS_DERIV, 0.0), 0,
+                                 fs_normal(rng, seg, FS_SLOT_END), &res.status);
+            if (res.status) return res;
+            S.rows[0] = fs_obs(xe, dn, FS_OBS_VALUE, f_prev);
+            S.rows[1] = fs_obs(xe, dn, FS_OBS_DERIV, s);
+            m = 2;
+            factored = 0;
+        } else {
+            if (prm.memory != GPIS_MEMORY_RENEWAL) {   /* none: a fresh start condition */
+                GpFieldsAt fe = gp_kernel_nonstationary(p) ? fs_row_fields(S, e)
+                                                           : fs_fields(p, mean, xe);
+                double var = gp_cov_at(p, xe, dn, 0, fe, xe, dn, 0, fe);
+                if (S.post.n) var = fmax(var - fs_post_dot(fs_post_v(S, e), fs_post_v(S, e),
+                                                           S.post.n), 0.0);
+                f_prev = fs_truncnorm_pos(S.mu[e], sqrt(var), rng, seg + 1,
+                                          FS_U_START);
+                outside = 1;
+            }
+            S.rows[0] = fs_obs(xe, dn, FS_OBS_VALUE, f_prev);
+            m = 1;
+            factored = 0;
+        }
+    }
+    if (t < ray.t1) res.status = FS_STATUS_SEGMENTS;
+    return res;
+}
+
+/* The vertex record of a continuation ray's hit. For the global model it appends this
+ * ray's observations (values before the crossing, f(x_h) = 0, the three gradient
+ * components) to the path's ring of capacity prm.cap. Call only for the continuation
+ * ray, after the previous vertex's shadow rays were traced (they read the ring). */
+inline FsVertex fs_vertex_at_hit(FsParams prm, FsRay ray, FsResult r, FsVertex prev,
+                                 __global FsObs* ring, FsScratch S)
+{
+    FsVertex v;
+    v.pos = (float4)(convert_float3(ray.o + r.t * ray.d), 0.0f);
+    v.grad = (float4)(convert_float3(r.grad), 0.0f);
+    v.valid = 1;
+    v.obs_end = prev.valid ? prev.obs_end : 0;
+    v.obs_count = prev.valid ? prev.obs_count : 0;
+    v.pad = 0;
+    if (prm.memory == GPIS_MEMORY_GLOBAL && ring && r.hit) {
+        int k = r.new_end - r.new_first;   /* contiguous: values, bisection, gradient */
+        for (int i = 0; i < k; ++i) {
+            ring[v.obs_end % prm.cap] = S.rows[r.new_first + i];
+            v.obs_end++;
+        }
+        v.obs_count = min(v.obs_count + k, prm.cap);
+    }
+    return v;
+}

@@ -1,0 +1,381 @@
+/* GP mean functions: signed distances (positive outside) with analytic gradients.
+ * gpiscl/host/gp/means.py is the reference; gp_records.pack_mean flattens a mean tree
+ * into the postfix MeanNode program run here:
+ *   - leaves carry their composite world-to-local map and distance scale (transforms are
+ *     folded in), so value = scale * prim(M x + t), gradient = scale * M^T grad prim;
+ *   - ops pop two (value, gradient) entries and push one; GP_MEAN_STACK_DEPTH entries
+ *     (8) cover any tree of up to 128 leaves, because the host emits the child needing the
+ *     deeper stack first (flag GP_MEAN_FLAG_SWAPPED restores the operand order). The host
+ *     rejects deeper trees; a malformed program here yields NaN, never a stack overrun.
+ * A grid leaf is followed by its samples, stored inline as payload records (flags = their
+ * count; see layout/gp_records.py): the evaluator and gp_mean_lipschitz jump over them.
+ * Stack entries are float4: xyz = gradient, w = value, so blending and negation treat
+ * value and gradient alike. Means are evaluated in float: they enter covariance-free
+ * formulas (occupancy, conditioning right-hand sides) where float is ample.
+ */
+#ifndef GP_MEAN_SPACE
+#define GP_MEAN_SPACE __global
+#endif
+
+/* length and direction; direction 0 at the origin (a valid subgradient of |v|) */
+inline float gp_norm_dir3(float3 v, float3* d)
+{
+    float n = length(v);
+    *d = n > 0.0f ? v / n : (float3)(0.0f);
+    return n;
+}
+
+inline float gp_norm_dir2(float2 v, float2* d)
+{
+    float n = length(v);
+    *d = n > 0.0f ? v / n : (float2)(0.0f);
+    return n;
+}
+
+/* iq's sdBox; inside, ties between axes go to the first (x, then y), as on the host */
+inline float gp_sd_box(float3 p, float3 extent, float3* g)
+{
+    float3 q = fabs(p) - extent;
+    float3 dir;
+    float out_len = gp_norm_dir3(fmax(q, (float3)(0.0f)), &dir);
+    float qmax = fmax(q.x, fmax(q.y, q.z));
+    if (!(qmax > 0.0f)) {
+        if (q.x >= q.y && q.x >= q.z) dir = (float3)(1.0f, 0.0f, 0.0f);
+        else if (q.y >= q.z) dir = (float3)(0.0f, 1.0f, 0.0f);
+        else dir = (float3)(0.0f, 0.0f, 1.0f);
+    }
+    *g = copysign((float3)(1.0f), p) * dir;
+    return out_len + fmin(qmax, 0.0f);
+}
+
+inline float gp_grid_sample(GP_MEAN_SPACE const MeanNode* payload, int j)
+{
+    int r = j / GP_MEAN_GRID_PAYLOAD_FLOATS;
+    return ((GP_MEAN_SPACE const float*)(payload + r))[j - r * GP_MEAN_GRID_PAYLOAD_FLOATS];
+}
+
+/* The trilinear cell of index coordinates u in a grid of `dims` samples per axis (x index
+ * first): u clamped to the sample box, its cell (floor, the last cell at the far faces),
+ * the weights t inside it, the first sample's index and the x and y strides. Shared by
+ * grid means and grid colour fields so both index samples the same way. */
+typedef struct { float3 c, t; int base, sx, sy; } GpGridCell;
+
+inline GpGridCell gp_grid_cell(float3 dims, float3 u)
+{
+    float3 hi = dims - 1.0f;
+    GpGridCell r;
+    r.c = fmin(fmax(u, (float3)(0.0f)), hi);
+    float3 cell = fmin(floor(r.c), hi - 1.0f);
+    r.t = r.c - cell;
+    int ny = (int)dims.y, nz = (int)dims.z;
+    r.sx = ny * nz;
+    r.sy = nz;
+    r.base = ((int)cell.x * ny + (int)cell.y) * nz + (int)cell.z;
+    return r;
+}
+
+/* The trilinear interpolant of the single-channel samples after grid record n at index
+ * coordinates u, clamped to the sample box (the border value held outside), and its
+ * gradient in index units: that of the same interpolant inside, 0 along an axis on
+ * which u was clamped. *out = u - clamped u. Grid means and the kernel's grid fields
+ * (fs_sampling.h) share it. */
+inline float gp_grid_trilinear(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* grad,
+                               float3* out)
+{
+    GP_MEAN_SPACE const MeanNode* payload = n + 1;
+    GpGridCell q = gp_grid_cell(n->p1.xyz, u);
+    float3 t = q.t;
+    int b = q.base, sx = q.sx, nz = q.sy;
+    float c000 = gp_grid_sample(payload, b), c001 = gp_grid_sample(payload, b + 1);
+    float c010 = gp_grid_sample(payload, b + nz), c011 = gp_grid_sample(payload, b + nz + 1);
+    float c100 = gp_grid_sample(payload, b + sx), c101 = gp_grid_sample(payload, b + sx + 1);
+    float c110 = gp_grid_sample(payload, b + sx + nz);
+    float c111 = gp_grid_sample(payload, b + sx + nz + 1);
+    float x0 = mix(mix(c000, c001, t.z), mix(c010, c011, t.z), t.y);
+    float x1 = mix(mix(c100, c101, t.z), mix(c110, c111, t.z), t.y);
+    float gy = mix(mix(c010 - c000, c011 - c001, t.z), mix(c110 - c100, c111 - c101, t.z), t.x);
+    float gz = mix(mix(c001 - c000, c011 - c010, t.y), mix(c101 - c100, c111 - c110, t.y), t.x);
+    *out = u - q.c;
+    *grad = select((float3)(x1 - x0, gy, gz), (float3)(0.0f), isnotequal(*out, (float3)(0.0f)));
+    return mix(x0, x1, t.x);
+}
+
+/* A grid mean: the trilinear interpolant (one-sided gradient at faces, as
+ * means.GridMean). Outside the sample box, with g the clamped point's value and d its
+ * distance (p0.x = 1 / S converts voxels to the normalised samples' units):
+ * sqrt(g^2 + d^2) where g >= 0, g + d where g < 0 (means.GridMean says why); either
+ * keeps |gradient| <= 1 in these units (layout/gp_records.py). */
+/* Cubic B-spline weights of the four taps around fraction t of a cell, and their
+ * derivatives (means._bspline_weights). */
+inline void gp_bspline(float t, float* w, float* dw)
+{
+    float s = 1.0f - t, t2 = t * t, t3 = t2 * t;
+    w[0] = s * s * s / 6.0f;
+    w[1] = (3.0f * t3 - 6.0f * t2 + 4.0f) / 6.0f;
+    w[2] = (-3.0f * t3 + 3.0f * t2 + 3.0f * t + 1.0f) / 6.0f;
+    w[3] = t3 / 6.0f;
+    dw[0] = -0.5f * s * s;
+    dw[1] = 0.5f * (3.0f * t2 - 4.0f * t);
+    dw[2] = 0.5f * (-3.0f * t2 + 2.0f * t + 1.0f);
+    dw[3] = 0.5f * t2;
+}
+
+/* The interpolating tricubic B-spline (a cubic grid leaf: its payload holds the
+ * (n + 2)^3 coefficients, sample i at coefficient i + 1) at index coordinates u clamped
+ * to the sample box, with its gradient in index units (0 along clamped axes) and
+ * *out = u - clamped u, as gp_grid_trilinear; means.cubic_eval is the reference. */
+inline float gp_grid_cubic(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* grad,
+                           float3* out)
+{
+    GP_MEAN_SPACE const MeanNode* payload = n + 1;
+    float3 hi = n->p1.xyz - 1.0f;
+    float3 c = fmin(fmax(u, (float3)(0.0f)), hi);
+    float3 cell = fmin(floor(c), hi - 1.0f), t = c - cell;
+    float wx[4], wy[4], wz[4], dx[4], dy[4], dz[4];
+    gp_bspline(t.x, wx, dx);
+    gp_bspline(t.y, wy, dy);
+    gp_bspline(t.z, wz, dz);
+    int sy = (int)n->p1.z + 2, sx = ((int)n->p1.y + 2) * sy;
+    int base = (int)cell.x * sx + (int)cell.y * sy + (int)cell.z;
+    float v = 0.0f;
+    float3 g = (float3)(0.0f);
+    for (int a = 0; a < 4; ++a) {
+        float3 ga = (float3)(0.0f);
+        float va = 0.0f;
+        for (int b = 0; b < 4; ++b) {
+            float vb = 0.0f, db = 0.0f;
+            int row = base + a * sx + b * sy;
+            for (int e = 0; e < 4; ++e) {
+                float q = gp_grid_sample(payload, row + e);
+                vb += wz[e] * q;
+                db += dz[e] * q;
+            }
+            va += wy[b] * vb;
+            ga += (float3)(0.0f, dy[b] * vb, wy[b] * db);
+        }
+        v += wx[a] * va;
+        g += (float3)(dx[a] * va, wx[a] * ga.y, wx[a] * ga.z);
+    }
+    *out = u - c;
+    *grad = select(g, (float3)(0.0f), isnotequal(*out, (float3)(0.0f)));
+    return v;
+}
+
+inline float gp_mean_grid(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* g)
+{
+    float3 out, dir, grad;
+    float v = n->p0.y > 0.5f ? gp_grid_cubic(n, u, &grad, &out)
+                             : gp_grid_trilinear(n, u, &grad, &out);
+    float d = n->p0.x * gp_norm_dir3(out, &dir);
+    if (!(d > 0.0f)) {
+        *g = grad;
+        return v;
+    }
+    if (v < 0.0f) {
+        *g = grad + n->p0.x * dir;
+        return v + d;
+    }
+    float r = sqrt(v * v + d * d);
+    *g = (v * grad + d * n->p0.x * dir) / r;
+    return r;
+}
+
+inline float gp_mean_leaf(GP_MEAN_SPACE const MeanNode* n, float3 x, float3* grad)
+{
+    float3 r0 = n->row0.xyz, r1 = n->row1.xyz, r2 = n->row2.xyz;
+    float3 y = (float3)(dot(r0, x) + n->row0.w, dot(r1, x) + n->row1.w,
+                        dot(r2, x) + n->row2.w);
+    float4 p0 = n->p0, p1 = n->p1;
+    float3 g = (float3)(0.0f);
+    float v = 0.0f;
+    switch (n->kind) {
+    case GP_MEAN_CONSTANT:
+        v = p0.x;
+        break;
+    case GP_MEAN_PLANE:
+        v = p0.y * (dot(p1.xyz, y) - p0.x);
+        if (v < p0.z) v = p0.z;          /* clamped: flat */
+        else g = p0.y * p1.xyz;
+        break;
+    case GP_MEAN_SPHERE:
+        v = gp_norm_dir3(y, &g) - p0.x;
+        break;
+    case GP_MEAN_BOX:
+        v = gp_sd_box(y, p1.xyz, &g);
+        break;
+    case GP_MEAN_ROUNDED_BOX:
+        v = gp_sd_box(y, p1.xyz - p0.x, &g) - p0.x;
+        break;
+    case GP_MEAN_TORUS: {
+        float2 radial, qd;
+        float rho = gp_norm_dir2(y.xz, &radial);
+        v = gp_norm_dir2((float2)(rho - p0.x, y.y), &qd) - p0.y;
+        g = (float3)(qd.x * radial.x, qd.y, qd.x * radial.y);
+        break;
+    }
+    case GP_MEAN_CAPSULE: {
+        float3 pa = y - p0.xyz, ba = p1.xyz - p0.xyz;
+        /* the closest-point parameter is stationary: it adds no gradient term */
+        float bb = dot(ba, ba);      /* a == b degenerates to a sphere */
+        float h = clamp(dot(pa, ba) / (bb > 0.0f ? bb : 1.0f), 0.0f, 1.0f);
+        v = gp_norm_dir3(pa - h * ba, &g) - p0.w;
+        break;
+    }
+    case GP_MEAN_GRID:
+        v = gp_mean_grid(n, y, &g);
+        break;
+    default:
+        v = NAN;
+    }
+    *grad = n->scale * (g.x * r0 + g.y * r1 + g.z * r2);
+    return n->scale * v;
+}
+
+/* iq's polynomial smooth minimum of (gradient, value) pairs; k <= 0 is the sharp min.
+ * d/dh of the blend vanishes where h is unclamped, so blending gradients is exact. */
+inline float4 gp_smooth_min(float4 a, float4 b, float k)
+{
+    if (!(k > 0.0f)) return a.w <= b.w ? a : b;
+    float h = clamp(0.5f + 0.5f * (b.w - a.w) / k, 0.0f, 1.0f);
+    float4 r = h * a + (1.0f - h) * b;
+    r.w -= k * h * (1.0f - h);
+    return r;
+}
+
+inline float gp_mean_eval(GP_MEAN_SPACE const MeanNode* nodes, int count, float3 x,
+                          float3* grad)
+{
+    float4 stack[GP_MEAN_STACK_DEPTH];
+    int top = 0;
+    for (int i = 0; i < count; ++i) {
+        GP_MEAN_SPACE const MeanNode* n = nodes + i;
+        if (n->kind < GP_MEAN_FIRST_OP) {
+            if (top >= GP_MEAN_STACK_DEPTH) { top = -1; break; }
+            float3 g;
+            float v = gp_mean_leaf(n, x, &g);
+            stack[top++] = (float4)(g, v);
+            if (n->kind == GP_MEAN_GRID) i += n->flags;
+            continue;
+        }
+        if (top < 2 || n->kind == GP_MEAN_PAYLOAD) { top = -1; break; }
+        float4 b = stack[--top], a = stack[top - 1];
+        if (n->flags & GP_MEAN_FLAG_SWAPPED) { float4 t = a; a = b; b = t; }
+        float4 r;
+        if (n->kind == GP_MEAN_UNION) r = gp_smooth_min(a, b, n->k);
+        else if (n->kind == GP_MEAN_INTERSECTION) r = -gp_smooth_min(-a, -b, n->k);
+        else r = -gp_smooth_min(-a, b, n->k);      /* difference: smax(a, -b) */
+        stack[top - 1] = r;
+    }
+    if (top != 1) {
+        *grad = (float3)(NAN);
+        return NAN;
+    }
+    *grad = stack[0].xyz;
+    return stack[0].w;
+}
+
+inline float gp_mean_value(GP_MEAN_SPACE const MeanNode* nodes, int count, float3 x)
+{
+    float3 g;
+    return gp_mean_eval(nodes, count, x, &g);
+}
+
+/* A grid leaf's slope bound over the index-space box [lo, hi], in the leaf's sample units
+ * (<= 1; gp_mean_lipschitz's 1 is the whole grid): the largest brick bound over the
+ * bricks holding the cells any point of the box evaluates in (cell = floor of the clamped
+ * point, the last cell at the far faces, as gp_grid_cell), and where the box leaves the
+ * sample box, the outside continuation's slope sqrt(a^2 + (1/S)^2) (GridMean: at most
+ * sqrt(a^2 + 1) in world units, a the face cells' bound). More than 27 bricks (a long
+ * stretch, where the global bound costs little): 1. */
+inline float gp_grid_slope_on(GP_MEAN_SPACE const MeanNode* n, float3 lo, float3 hi)
+{
+    int B = (int)n->p0.z;
+    if (B <= 0) return 1.0f;
+    float3 dims = n->p1.xyz, top = dims - 1.0f;
+    float3 cl = fmin(fmax(lo, (float3)(0.0f)), top), ch = fmin(fmax(hi, (float3)(0.0f)), top);
+    int3 c0 = convert_int3(fmin(floor(cl), top - 1.0f));
+    int3 c1 = convert_int3(fmin(floor(ch), top - 1.0f));
+    int3 b0 = c0 / B, b1 = c1 / B;
+    int3 nb = (convert_int3(dims) - 2) / B + 1;          /* ceil((n - 1) / B) */
+    int3 span = b1 - b0 + 1;
+    if (span.x * span.y * span.z > 27) return 1.0f;
+    int3 nd = convert_int3(dims) + (n->p0.y > 0.5f ? 2 : 0);   /* samples or coefficients */
+    int first = nd.x * nd.y * nd.z;
+    GP_MEAN_SPACE const MeanNode* payload = n + 1;
+    float m = 0.0f;
+    for (int i = b0.x; i <= b1.x; ++i)
+        for (int j = b0.y; j <= b1.y; ++j)
+            for (int k = b0.z; k <= b1.z; ++k)
+                m = fmax(m, gp_grid_sample(payload, first + (i * nb.y + j) * nb.z + k));
+    if (any(lo < (float3)(0.0f)) || any(hi > top)) m = sqrt(m * m + n->p0.x * n->p0.x);
+    return fmin(m, 1.0f);
+}
+
+/* Lipschitz constant of a packed mean program in world units: max over leaves of
+ * |scale| ||M||_2 Lip(primitive) (smooth/sharp unions, intersections and differences never
+ * exceed their children's). Distance primitives are 1-Lipschitz, a plane |scale|, a
+ * constant 0; pack_mean's transform scale 1/||M^-1|| keeps scale ||M|| ~ 1 for rigid and
+ * uniformly scaled transforms. ||M||_2^2 <= max row sum of |M M^T| (Gershgorin), exact for
+ * scaled rotations. Used by the weight-space search and the occupancy bounds (per ray:
+ * grid payloads are jumped over, so the cost is the number of leaves and ops). */
+inline float gp_leaf_lipschitz(GP_MEAN_SPACE const MeanNode* n, float prim)
+{
+    float3 r0 = n->row0.xyz, r1 = n->row1.xyz, r2 = n->row2.xyz;
+    float g01 = fabs(dot(r0, r1)), g02 = fabs(dot(r0, r2)), g12 = fabs(dot(r1, r2));
+    float s2 = fmax(dot(r0, r0) + g01 + g02,
+                    fmax(dot(r1, r1) + g01 + g12, dot(r2, r2) + g02 + g12));
+    return fabs(n->scale) * sqrt(s2) * prim;
+}
+
+inline float gp_leaf_prim_lipschitz(GP_MEAN_SPACE const MeanNode* n)
+{
+    return n->kind == GP_MEAN_CONSTANT ? 0.0f : n->kind == GP_MEAN_PLANE ? fabs(n->p0.y) : 1.0f;
+}
+
+inline float gp_mean_lipschitz(GP_MEAN_SPACE const MeanNode* nodes, int count)
+{
+    float lip = 0.0f;
+    for (int i = 0; i < count; ++i) {
+        GP_MEAN_SPACE const MeanNode* n = nodes + i;
+        if (n->kind >= GP_MEAN_FIRST_OP) continue;
+        if (n->kind == GP_MEAN_GRID) i += n->flags;   /* payload: not leaves, same result */
+        lip = fmax(lip, gp_leaf_lipschitz(n, gp_leaf_prim_lipschitz(n)));
+    }
+    return lip;
+}
+
+/* Whether a mean program has grid leaves (gp_mean_lipschitz_on then pays). */
+inline int gp_mean_has_grid(GP_MEAN_SPACE const MeanNode* nodes, int count)
+{
+    for (int i = 0; i < count; ++i) {
+        if (nodes[i].kind == GP_MEAN_GRID) return 1;   /* the first leaf before any payload */
+    }
+    return 0;
+}
+
+/* gp_mean_lipschitz over the segment [p, q] only: grid leaves contribute their bound
+ * over the segment's cells (gp_grid_slope_on; an affine map takes the segment to a
+ * segment, so the end points' index box holds it, padded for rounding). Any interval
+ * of a ray may use it in place of the global bound. */
+inline float gp_mean_lipschitz_on(GP_MEAN_SPACE const MeanNode* nodes, int count, float3 p,
+                                  float3 q)
+{
+    float lip = 0.0f;
+    for (int i = 0; i < count; ++i) {
+        GP_MEAN_SPACE const MeanNode* n = nodes + i;
+        if (n->kind >= GP_MEAN_FIRST_OP) continue;
+        float prim = gp_leaf_prim_lipschitz(n);
+        if (n->kind == GP_MEAN_GRID) {
+            float3 up = (float3)(dot(n->row0.xyz, p) + n->row0.w, dot(n->row1.xyz, p) + n->row1.w,
+                                 dot(n->row2.xyz, p) + n->row2.w);
+            float3 uq = (float3)(dot(n->row0.xyz, q) + n->row0.w, dot(n->row1.xyz, q) + n->row1.w,
+                                 dot(n->row2.xyz, q) + n->row2.w);
+            float3 pad = 1e-3f + 4.0f * FLT_EPSILON * fmax(fabs(up), fabs(uq));
+            prim = gp_grid_slope_on(n, fmin(up, uq) - pad, fmax(up, uq) + pad);
+            i += n->flags;
+        }
+        lip = fmax(lip, gp_leaf_lipschitz(n, prim));
+    }
+    return lip;
+}
+

@@ -1,0 +1,71 @@
+/* Colour and emission fields of GPIS objects, evaluated at hit points by scatter.cl and
+ * emission.cl. gpiscl/host/scene/colour_fields.py is the reference and packs each field into one
+ * MeanNode record after the mean programs (kinds below, tested to match FIELD_KINDS):
+ * row0..row2 map world points to the field's coordinates y, p0 / p1 hold colours a / b;
+ *   constant  p0.xyz
+ *   checker   y = (x + offset) / scale; a where floor(y) has an even component sum, else b
+ *   gradient  t = clamp(y.x, 0, 1); (1 - t) a + t b
+ *   grid      y = index coordinates; p1.xyz = sample counts; flags payload records of
+ *             interleaved RGB samples follow; trilinear, clamped to the sample box
+ * Index 0 means "no field": fields follow every mean program, so none is at index 0. */
+#define GPIS_FIELD_CONSTANT 64
+#define GPIS_FIELD_CHECKER 65
+#define GPIS_FIELD_GRADIENT 66
+#define GPIS_FIELD_GRID 67
+
+/* float q of a grid payload: GP_MEAN_GRID_PAYLOAD_FLOATS per record (row0..p1), past
+ * which each record's int tail lies, as in gp_grid_sample */
+inline float gpis_payload_float(__global const MeanNode* payload, int q)
+{
+    int r = q / GP_MEAN_GRID_PAYLOAD_FLOATS;
+    return ((__global const float*)(payload + r))[q - r * GP_MEAN_GRID_PAYLOAD_FLOATS];
+}
+
+inline float3 gpis_field_sample(__global const MeanNode* payload, int j)
+{
+    return (float3)(gpis_payload_float(payload, 3 * j), gpis_payload_float(payload, 3 * j + 1),
+                    gpis_payload_float(payload, 3 * j + 2));
+}
+
+inline float3 gpis_field_grid(__global const MeanNode* n, float3 u)
+{
+    __global const MeanNode* payload = n + 1;
+    GpGridCell q = gp_grid_cell(n->p1.xyz, u);
+    float3 t = q.t;
+    int b = q.base, sx = q.sx, nz = q.sy;
+    float3 c000 = gpis_field_sample(payload, b), c001 = gpis_field_sample(payload, b + 1);
+    float3 c010 = gpis_field_sample(payload, b + nz);
+    float3 c011 = gpis_field_sample(payload, b + nz + 1);
+    float3 c100 = gpis_field_sample(payload, b + sx);
+    float3 c101 = gpis_field_sample(payload, b + sx + 1);
+    float3 c110 = gpis_field_sample(payload, b + sx + nz);
+    float3 c111 = gpis_field_sample(payload, b + sx + nz + 1);
+    float3 x0 = mix(mix(c000, c001, t.z), mix(c010, c011, t.z), t.y);
+    float3 x1 = mix(mix(c100, c101, t.z), mix(c110, c111, t.z), t.y);
+    return mix(x0, x1, t.x);
+}
+
+/* RGB of field record f at world point x; `none` when f == 0 (no field) */
+inline float3 gpis_field_eval(__global const MeanNode* nodes, int f, float3 x, float none)
+{
+    if (f <= 0) return (float3)(none);
+    __global const MeanNode* n = nodes + f;
+    float3 y = (float3)(dot(n->row0.xyz, x) + n->row0.w, dot(n->row1.xyz, x) + n->row1.w,
+                        dot(n->row2.xyz, x) + n->row2.w);
+    switch (n->kind) {
+    case GPIS_FIELD_CONSTANT:
+        return n->p0.xyz;
+    case GPIS_FIELD_CHECKER: {
+        float3 c = floor(y);
+        /* the parity of a sum of integers held exactly in float (|c| < 2^24) */
+        float s = c.x + c.y + c.z;
+        return (fabs(s - 2.0f * floor(0.5f * s)) > 0.5f) ? n->p1.xyz : n->p0.xyz;
+    }
+    case GPIS_FIELD_GRADIENT:
+        return mix(n->p0.xyz, n->p1.xyz, clamp(y.x, 0.0f, 1.0f));
+    case GPIS_FIELD_GRID:
+        return gpis_field_grid(n, y);
+    default:
+        return (float3)(NAN);
+    }
+}

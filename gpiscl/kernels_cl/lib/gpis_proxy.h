@@ -1,0 +1,116 @@
+/* GPIS proxies (box, sphere, convex mesh) are clipped here, not traced in the BVH: a GPIS
+ * stage needs the interval a ray spends inside, not a surface to shade. */
+
+/* Clip [t0, t1] to the part of the ray inside the proxy; false if empty. A mesh proxy's
+ * face planes (n, w: inside where n.x <= w) are float4s stored from mean-node record
+ * g->proxy_first on (scene/proxies.py). */
+inline int gpis_proxy_clip(__global const GpisObject* g, __global const MeanNode* means,
+                           float3 o, float3 d, float* t0, float* t1)
+{
+    float enter, leave;
+    if (g->proxy_kind == GPIS_PROXY_MESH) {
+        __global const float4* planes = (__global const float4*)(means + g->proxy_first);
+        enter = -T_INFINITY;
+        leave = T_INFINITY;
+        for (int j = 0; j < g->proxy_count; ++j) {
+            float4 p = planes[j];
+            float dn = dot(p.xyz, d), gap = p.w - dot(p.xyz, o);
+            if (dn > 0.0f) leave = fmin(leave, gap / dn);
+            else if (dn < 0.0f) enter = fmax(enter, gap / dn);
+            else if (gap < 0.0f) return 0;     /* parallel to a face, outside it */
+        }
+    } else if (g->proxy_kind == GPIS_PROXY_BOX) {
+        float3 inv = 1.0f / d;
+        float3 a = (g->proxy_p0.xyz - o) * inv, b = (g->proxy_p1.xyz - o) * inv;
+        float3 lo = fmin(a, b), hi = fmax(a, b);
+        enter = max3(lo);
+        leave = fmin(hi.x, fmin(hi.y, hi.z));
+    } else {
+        float3 oc = o - g->proxy_p0.xyz;
+        float r = g->proxy_p0.w;
+        float b = dot(oc, d), c = dot(oc, oc) - r * r;
+        float disc = b * b - c;
+        if (disc < 0.0f) return 0;
+        float s = sqrt(disc);
+        enter = -b - s;
+        leave = -b + s;
+    }
+    *t0 = fmax(*t0, enter);
+    *t1 = fmin(*t1, leave);
+    return *t0 < *t1;
+}
+
+/* Occupancy bounds: P(f(x) <= 0) = Phi(-mu(x) / sigma(x)) < eps wherever
+ * mu(x) > z sigma_max (z = Phi^-1(1 - eps), sigma_max = the largest sigma(x) over the proxy),
+ * so only the stretch between the first and last points of [t0, t1] with
+ * mu <= g->occupancy_level (= z sigma_max, host) needs sampling. Each end is sphere traced
+ * towards the other on g(t) = mu(x(t)) - level: mu is L-Lipschitz (gp_mean_lipschitz), so
+ * g stays >= 0 over a step of g / (L |d|), and no point with occupancy >= eps is ever
+ * skipped; rounding of the float mean is taken off each step (allowance as ws_tents).
+ * A march stops at a step below g->occupancy_step (world length, a fraction of the
+ * length scale: clipping finer saves less sampling than the march costs) or after
+ * OCC_MAX_STEPS steps: clipping less is always allowed.
+ * Bias: a realization with f < 0 only where the occupancy is < eps (a skipped end) is not
+ * seen. Per length l of skipped ray (SE) Rice's rate of crossings below z sigma bounds
+ * that probability by about z eps / sqrt(2 pi) = 1.5 eps at the default eps = 1e-4
+ * (scene/gpis.py), plus eps at a clipped start.
+ * clip_start = 0 keeps t0: a function-space ray leaving a vertex of this object is
+ * conditioned there (memory models) and must start at it. A clipped start is a fresh
+ * start like the proxy boundary (function space: its truncated-normal start condition;
+ * weight space: a ray starting inside must first come out), but where the occupancy is
+ * < eps, so the truncation changes the law by < eps there, unlike at the proxy. */
+#define OCC_MAX_STEPS 32
+
+inline float gpis_occupancy_march(__global const MeanNode* mean, int count, float3 o, float3 d,
+                                  float t, float t_stop, float level, float lt, float min_step)
+{
+    float dir = t_stop >= t ? 1.0f : -1.0f, dl = length(d), lip = lt / dl;
+    int local_lip = gp_mean_has_grid(mean, count);
+    for (int s = 0; s < OCC_MAX_STEPS; ++s) {
+        float3 x = o + t * d;
+        float mu = gp_mean_value(mean, count, x);
+        float round = 8.0f * FLT_EPSILON * (fabs(mu) + lip * (fabs(x.x) + fabs(x.y) + fabs(x.z)));
+        float g = mu - level - round;
+        if (!(g > 0.0f)) break;              /* also NaN: stop, clip nothing more */
+        if (!(lt > 0.0f)) return t_stop;     /* constant mean above the level everywhere */
+        float step = g / lt;
+        if (local_lip) {
+            /* the bound over the cells of a 4x longer step: if it certifies that step,
+             * take it; otherwise g / (its bound) certifies a step inside that stretch,
+             * never shorter than the global one */
+            float far = fmin(4.0f * step, fabs(t_stop - t));
+            float l4 = gp_mean_lipschitz_on(mean, count, x, o + (t + dir * far) * d) * dl;
+            step = l4 > 0.0f ? fmin(far, fmax(step, g / l4)) : far;
+        }
+        if (step < min_step) break;
+        t += dir * step;
+        if (dir * (t - t_stop) >= 0.0f) return t_stop;
+    }
+    return t;
+}
+
+/* Clip [t0, t1] (inside the proxy) to the stretch where the occupancy can reach eps;
+ * false if none. */
+inline int gpis_occupancy_clip(__global const GpisObject* g, __global const MeanNode* means,
+                               float3 o, float3 d, float* t0, float* t1, int clip_start)
+{
+    if (!(g->occupancy_level > 0.0f)) return 1;
+    __global const MeanNode* mean = means + g->mean_first;
+    float dl = length(d), lt = gp_mean_lipschitz(mean, g->mean_count) * dl;
+    float level = g->occupancy_level, min_step = g->occupancy_step / dl;
+    if (clip_start) {
+        *t0 = gpis_occupancy_march(mean, g->mean_count, o, d, *t0, *t1, level, lt, min_step);
+        if (!(*t0 < *t1)) return 0;
+    }
+    *t1 = gpis_occupancy_march(mean, g->mean_count, o, d, *t1, *t0, level, lt, min_step);
+    return *t0 < *t1;
+}
+
+/* The realization a path sees: its own (pixel, sample) mixed with the seed, or one fixed
+ * realization R for every path. The top bit stays clear for path keys, so they never
+ * equal the fixed key (R, 0xffffffff). */
+inline uint2 gpis_realization_key(__constant RenderParams* params, int pixel, int sample)
+{
+    if (params->realization >= 0) return (uint2)((uint)params->realization, 0xffffffffu);
+    return (uint2)((uint)pixel, ((uint)sample ^ (params->seed * 0x9e3779b9u)) & 0x7fffffffu);
+}

@@ -1,0 +1,275 @@
+/* Weight-space posterior GPIS by pathwise conditioning (Matheron's rule; Wilson et al.
+ * 2020). Needs ws_features.h. For the path's prior realization f (mean + random features,
+ * ws_eval) and the object's observation rows y_j (values f(x_j), or derivatives
+ * u_j . grad f(x_j)) with noise covariance N,
+ *   f_post(x) = f(x) + sum_j v_j c_j(x),   v = (K + N)^-1 (y - f(X) - e),  e ~ N(0, N),
+ * c_j(x) = cov(f(x), row j). Mean and covariance of f_post are the exact posterior's
+ * whenever f has the prior's (random features do, averaged over the features), so the
+ * realization needs no approximation beyond the prior's.
+ *
+ * Data: the function-space posterior block (fs_posterior.h; compile/posterior.py packs it
+ * before the mean program), read as raw doubles: n rows of 8 (x, u, y, kind in the low
+ * int of the eighth), alpha (unused here), the packed row-major factor L of K + N, then
+ * the n noise deviations.
+ * Noise: e_j = sd_j z_j, z_j from Philox call WS_CALL_NOISE with the features' counter
+ * (key, object, j): the realization stays a pure function of the path's key.
+ * Cost per ray: n prior evaluations at the rows (n M features) and two triangular solves
+ * (n^2) in double, once per search; then every point evaluation and every bound adds n
+ * kernel terms. v lives in private memory: WS_POST_MAX rows (scene/observations.WS_MAX_ROWS).
+ *
+ * Bounds: along the ray x(t) = o + t d the correction is smooth but not affine; over
+ * [a, b] (half width h, middle tm) ws_tents_post takes the narrower of two rigorous forms
+ * (ws_post_bound): its values at both ends with a Lipschitz cone of slope L_c (joins the
+ * mean's cone), or c(tm) + c'(tm) (t - tm) +- C h^2 / 2 (joins the features' affine form),
+ *   L_c = sqrt(dAd) sum_j |v_j| B1_j,   C = dAd sum_j |v_j| B2_j,
+ * B1_j, B2_j bounding |d . grad c_j| / sqrt(dAd) and |d^T Hess c_j d| / dAd over [a, b].
+ * With s = r^T A r, r = x - x_j, k(s) radial, primes in s, p = d.Ar, w = u.Ar
+ * (Cauchy-Schwarz in A's metric: |p| <= sqrt(dAd s), |w| <= sqrt(uAu s)):
+ *   value row:  c' = 2k' p,                  B1 = |2k'| sqrt(s)
+ *               c'' = 2k' dAd + 4k'' p^2,     B2 = |2k'| + |4k''| s
+ *   deriv row:  c = -2k' w,  c' = -4k'' p w - 2k' d.Au,
+ *                                             B1 = sqrt(uAu) (|2k'| + |4k''| s)
+ *               c'' = -8k''' p^2 w - 4k'' dAd w - 8k'' p d.Au,
+ *                                             B2 = sqrt(uAu) sqrt(s) (3 |4k''| + |8k'''| s)
+ * |2k'|, |4k''|, |8k'''| fall with s for SE and RQ, so over the interval's range
+ * [s_min, s_max] of s each is at most its value at s_min, and s at most s_max; global
+ * maxima cap the products on wide intervals:
+ *   SE: |2k'| sqrt(s) <= sigma^2 e^-1/2 / l,  |2k'| + |4k''| s <= 2 e^-1/2 sigma^2 / l^2,
+ *       sqrt(s) (3 |4k''| + |8k'''| s) <= 2.62 sigma^2 / l^3;
+ *   RQ: |2k'| sqrt(s) peaks at s = a l^2 / (a + 1/2); s / base <= 2 a l^2 gives
+ *       |4k''| s <= 2 (a + 1) |2k'| and |8k'''| s <= 2 (a + 2) |4k''|.
+ * The cone's slack grows like L_c h, the form's like C h^2: the form decides the short
+ * intervals around roots, the cone long ones near observations.
+ * Other kernels are rejected by the scene schema (scene/observations.observations_problem).
+ */
+#define WS_POSTERIOR_KIND 48       /* FS_POSTERIOR_KIND, compile/posterior.POSTERIOR_KIND */
+#define WS_CALL_NOISE 26u          /* after the WS_GAMMA_CALLS calls from WS_CALL_GAMMA */
+#ifndef WS_POST_MAX
+#define WS_POST_MAX 512            /* scene/observations.WS_MAX_ROWS */
+#endif
+
+typedef struct {
+    __global const double* rows;
+    __global const double* L;
+    __global const double* sd;
+    int n;
+} WsPostBlock;
+
+/* One ray's conditioned correction: the block, v = (K + N)^-1 (y - f(X) - e), and rho,
+ * a bound on the correction's norm in the kernel's RKHS (ws_post_prepare). */
+typedef struct {
+    __global const double* rows;
+    const double* v;
+    int n;
+    double rho;
+} WsPost;
+
+/* The posterior block before the program at mean_first (n = 0: none, the prior). */
+inline WsPostBlock ws_posterior_block(__global const MeanNode* means, int mean_first)
+{
+    WsPostBlock B;
+    B.rows = B.L = B.sd = 0;
+    B.n = 0;
+    if (mean_first <= 0) return B;
+    __global const MeanNode* h = means + mean_first - 1;
+    if (h->kind != WS_POSTERIOR_KIND) return B;
+    B.n = (int)h->p0.x;
+    B.rows = (__global const double*)(h - h->flags);
+    B.L = B.rows + 9 * B.n;
+    B.sd = B.L + B.n * (B.n + 1) / 2;
+    return B;
+}
+
+inline double3 ws_post_x(__global const double* row) { return vload3(0, row); }
+inline double3 ws_post_u(__global const double* row) { return vload3(1, row); }
+inline int ws_post_is_deriv(__global const double* row)
+{
+    return ((__global const int*)(row + 7))[0] != 0;
+}
+
+inline double3 ws_post_aniso(GpKernel k)
+{
+    return (double3)((double)k.aniso.x, (double)k.aniso.y, (double)k.aniso.z);
+}
+
+/* k(s), 2 k'(s), 4 k''(s) in double (gp_radial's SE and RQ) */
+inline double ws_post_radial(GpKernel k, double s, double* dk2, double* ddk4)
+{
+    double v = (double)k.sigma2, l2 = (double)k.length_scale * (double)k.length_scale;
+    if (k.kind == GP_KERNEL_RATIONAL_QUADRATIC) {
+        double a = (double)k.alpha, base = 1.0 + s / (2.0 * a * l2);
+        double kv = v * exp(-a * log1p(s / (2.0 * a * l2)));
+        *dk2 = -kv / (l2 * base);
+        *ddk4 = kv * (a + 1.0) / (a * l2 * l2 * base * base);
+        return kv;
+    }
+    double kv = v * exp(-s / (2.0 * l2));
+    *dk2 = -kv / l2;
+    *ddk4 = kv / (l2 * l2);
+    return kv;
+}
+
+/* c_j at r = x - x_j, and its gradient */
+inline double ws_post_cross(GpKernel k, double3 A, __global const double* row, double3 r,
+                            double3* grad)
+{
+    double3 ar = A * r;
+    double dk2, ddk4, kv = ws_post_radial(k, dot(ar, r), &dk2, &ddk4);
+    if (!ws_post_is_deriv(row)) {
+        *grad = dk2 * ar;
+        return kv;
+    }
+    double3 au = A * ws_post_u(row);
+    double uar = dot(au, r);
+    *grad = -dk2 * au - (ddk4 * uar) * ar;
+    return -dk2 * uar;
+}
+
+/* The correction sum_j v_j c_j(x) and its gradient. */
+inline double ws_post_eval(GpKernel k, const WsPost* P, double3 x, double3* grad)
+{
+    double3 A = ws_post_aniso(k), g = (double3)(0.0);
+    double c = 0.0;
+    for (int j = 0; j < P->n; ++j) {
+        __global const double* row = P->rows + 8 * j;
+        double3 gj;
+        double cj = ws_post_cross(k, A, row, x - ws_post_x(row), &gj);
+        c += P->v[j] * cj;
+        g += P->v[j] * gj;
+    }
+    *grad = g;
+    return c;
+}
+
+/* v = (K + N)^-1 (y - f(X) - e) for the realization (key, object): the prior at the rows
+ * (features from `cache` if given), the path's noise draws, two triangular solves.
+ * Returns rho >= ||c||_H, the correction c = sum_j v_j c_j's norm in the kernel's RKHS:
+ * ||c||^2 = v^T K v = |z|^2 - v^T N v with z = L^-1 (y - f(X) - e) (L L^T = K + N; a jitter
+ * the host added stays in, which only raises the bound), plus 1e-6 n max_j (K+N)_jj |v|^2
+ * for the device kernel's float parameters, which differ from the host's K by ~1e-7. */
+inline double ws_post_prepare(const float* cache, GpKernel k, __global const MeanNode* mean,
+                            int mean_count, __global const float* order_cdf, int order_count,
+                            int M, uint2 key, int object, WsPostBlock B, double* v)
+{
+    for (int j0 = 0; j0 < B.n; j0 += WS_LANES) {
+        wsu r0, r1, r2, r3;
+        ws_draw(key, object, j0 + WS_IOTA, WS_CALL_NOISE, &r0, &r1, &r2, &r3);
+        wsf unused, z = ws_normal2(r0, r1, &unused);
+        float zs[WS_LANES];
+        ws_vstore(z, 0, zs);
+        for (int l = 0; l < WS_LANES && j0 + l < B.n; ++l) {
+            int j = j0 + l;
+            __global const double* row = B.rows + 8 * j;
+            float3 g;
+            float f = ws_eval_cached(cache, k, mean, mean_count, order_cdf, order_count, M,
+                                     key, object, convert_float3(ws_post_x(row)), &g);
+            double fo = ws_post_is_deriv(row) ? dot(convert_double3(g), ws_post_u(row))
+                                              : (double)f;
+            v[j] = row[6] - fo - B.sd[j] * (double)zs[l];
+        }
+    }
+    double zz = 0.0, diag = 0.0, vv = 0.0, nv = 0.0;
+    for (int i = 0; i < B.n; ++i) {          /* L z = r */
+        __global const double* Li = B.L + i * (i + 1) / 2;
+        double s = v[i], row = Li[i] * Li[i];
+        for (int j = 0; j < i; ++j) {
+            s -= Li[j] * v[j];
+            row += Li[j] * Li[j];
+        }
+        v[i] = s / Li[i];
+        zz += v[i] * v[i];
+        diag = fmax(diag, row);              /* (K + N)_ii */
+    }
+    for (int i = B.n - 1; i >= 0; --i) {     /* L^T v = z, by rows of L */
+        __global const double* Li = B.L + i * (i + 1) / 2;
+        v[i] /= Li[i];
+        for (int j = 0; j < i; ++j) v[j] -= Li[j] * v[i];
+    }
+    for (int j = 0; j < B.n; ++j) {
+        vv += v[j] * v[j];
+        nv += B.sd[j] * B.sd[j] * v[j] * v[j];
+    }
+    return sqrt(fmax(zz - nv, 0.0) * (1.0 + 1e-9) + 1e-6 * B.n * diag * vv);
+}
+
+/* The correction along o + t d over [a, b], for ws_tents_post: values at a, b and the
+ * middle tm, the slope there, bounds of |slope| (per unit t; per unit length in any
+ * direction, for rounded points) and of |curvature| per unit t^2 over [a, b] (header
+ * comment), and sum |v_j c_j| at the three points (the double sums' rounding scale). */
+typedef struct {
+    double ca, cb, cm, dm;
+    double slope, slope_any, curv, mag;
+} WsPostBound;
+
+inline WsPostBound ws_post_bound(GpKernel k, const WsPost* P, float3 o, float3 d, float a,
+                                 float b)
+{
+    double3 A = ws_post_aniso(k), od = convert_double3(o), dd = convert_double3(d);
+    double ad = dot(A * dd, dd), amax = fmax(A.x, fmax(A.y, A.z));
+    double ta = (double)a, tb = (double)b, tm = 0.5 * (ta + tb);
+    double v2 = (double)k.sigma2, l = (double)k.length_scale, l2 = l * l;
+    int rq = k.kind == GP_KERNEL_RATIONAL_QUADRATIC;
+    double al = (double)k.alpha, cap_v, dk2, ddk4;
+    if (rq) {
+        double s_peak = al * l2 / (al + 0.5);
+        ws_post_radial(k, s_peak, &dk2, &ddk4);
+        cap_v = fabs(dk2) * sqrt(s_peak);
+    } else {
+        cap_v = v2 * exp(-0.5) / l;
+    }
+    WsPostBound R = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+    double sum1 = 0.0, sum2 = 0.0;
+    for (int j = 0; j < P->n; ++j) {
+        __global const double* row = P->rows + 8 * j;
+        double3 r0 = od - ws_post_x(row), g;
+        double3 ra = r0 + ta * dd, rb = r0 + tb * dd, rm = r0 + tm * dd;
+        double vj = P->v[j];
+        double xa = ws_post_cross(k, A, row, ra, &g), xb = ws_post_cross(k, A, row, rb, &g);
+        double xm = ws_post_cross(k, A, row, rm, &g);
+        R.ca += vj * xa;
+        R.cb += vj * xb;
+        R.cm += vj * xm;
+        R.dm += vj * dot(g, dd);
+        R.mag += fabs(vj) * (fabs(xa) + fabs(xb) + fabs(xm));
+        /* the range of s over the interval: s(t) is a convex quadratic in t */
+        double tc = ad > 0.0 ? clamp(-dot(A * dd, r0) / ad, ta, tb) : ta;
+        double3 rc = r0 + tc * dd;
+        double s_a = dot(A * ra, ra), s_b = dot(A * rb, rb);
+        double s_max = fmax(s_a, s_b), s_min = fmin(dot(A * rc, rc), fmin(s_a, s_b));
+        ws_post_radial(k, s_min, &dk2, &ddk4);
+        /* |8 k'''(s_min)|: SE k / l^6, RQ k (a+1)(a+2) / (a^2 l^6 base^3) */
+        double base = rq ? 1.0 + s_min / (2.0 * al * l2) : 1.0;
+        double dk3 = rq ? fabs(ddk4) * (al + 2.0) / (al * l2 * base) : fabs(ddk4) / l2;
+        /* |2k'| + |4k''| s, with its cap (header comment) */
+        double h1 = fmin(fabs(dk2) + fabs(ddk4) * s_max,
+                         rq ? (2.0 * al + 3.0) * fabs(dk2) : 2.0 * exp(-0.5) * v2 / l2);
+        double b1, b2;
+        if (!ws_post_is_deriv(row)) {
+            b1 = fmin(fabs(dk2) * sqrt(s_max), cap_v);
+            b2 = h1;
+        } else {
+            double3 u = ws_post_u(row);
+            double su = sqrt(dot(A * u, u));
+            b1 = su * h1;
+            /* sqrt(s) (3 |4k''| + |8k'''| s): SE's peaks at s = sqrt(3) l^2 at 2.62
+             * sigma^2 / l^3; RQ's bracket is <= (2a + 7) |4k''| */
+            double h2 = fmin(3.0 * fabs(ddk4) + dk3 * s_max,
+                             rq ? (2.0 * al + 7.0) * fabs(ddk4) : INFINITY);
+            b2 = su * fmin(sqrt(s_max) * h2, rq ? INFINITY : 2.62 * v2 / (l2 * l));
+        }
+        sum1 += fabs(vj) * b1;
+        sum2 += fabs(vj) * b2;
+    }
+    /* The reproducing property caps both sums whatever the signs of v: for a unit d (in
+     * A's metric), |d . grad c| <= rho sqrt(Var d_d f) = rho sigma / l and
+     * |d^2 c| <= rho sqrt(Var d_d^2 f) = rho sqrt(12 k''(0)) (12 k''(0) = 3 sigma^2 / l^4
+     * for SE, times (a + 1) / a for RQ). Termwise sums decay away from the observations;
+     * the RKHS caps win where large v of both signs cancel (near the observed surface). */
+    double rk1 = P->rho * sqrt(v2) / l;
+    double rk2 = P->rho * sqrt(3.0 * v2 * (rq ? (al + 1.0) / al : 1.0)) / l2;
+    sum1 = fmin(sum1, rk1);
+    R.slope = sqrt(ad) * sum1;
+    R.slope_any = sqrt(amax) * sum1;
+    R.curv = ad * fmin(sum2, rk2);
+    return R;
+}

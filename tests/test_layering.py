@@ -1,0 +1,109 @@
+"""The host's packages import only downwards, in the order data flows, with no circles
+and no private names borrowed across modules (gpiscl/host/__init__.py lists the order)."""
+import ast
+from pathlib import Path
+
+import gpiscl
+
+ROOT = Path(gpiscl.__file__).resolve().parent
+# A package may import packages of a lower rank (and itself), never a higher or equal one.
+RANK = {"errors": 0, "gp": 1, "io": 2, "layout": 2, "scene": 3, "compile": 4, "render": 5,
+        "commands": 6}
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _imports(path: Path):
+    """(imported module, names) of every import in the file, function-level ones too."""
+    name = _module_name(path)
+    package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                yield a.name, []
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[: len(base) - (node.level - 1)]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module
+            yield target, [a.name for a in node.names]
+
+
+def _graph():
+    modules = {_module_name(p): p for p in ROOT.rglob("*.py")}
+    edges = {}
+    for mod, path in modules.items():
+        out = set()
+        for target, names in _imports(path):
+            if not target.startswith("gpiscl"):
+                continue
+            subs = [f"{target}.{n}" for n in names if f"{target}.{n}" in modules]
+            out.update(subs or [target])
+        edges[mod] = out - {mod}
+    return modules, edges
+
+
+def _layer(mod: str):
+    parts = mod.split(".")
+    if len(parts) >= 3 and parts[1] == "host":
+        return parts[2]
+    return None  # gpiscl, gpiscl.api, gpiscl.__main__, gpiscl.host: the top
+
+
+def test_packages_import_only_lower_layers():
+    _, edges = _graph()
+    upward = []
+    for mod, targets in edges.items():
+        src = _layer(mod)
+        for t in targets:
+            dst = _layer(t)
+            if t in ("gpiscl", "gpiscl.host") or dst is None:
+                if src is not None and t != "gpiscl.host":
+                    upward.append(f"{mod} -> {t}")
+                continue
+            if src is not None and src != dst and not RANK[dst] < RANK[src]:
+                upward.append(f"{mod} -> {t}")
+    assert not upward, "imports that go up or sideways:\n" + "\n".join(sorted(upward))
+
+
+def test_no_import_circles():
+    _, edges = _graph()
+    state, cycles = {}, []
+
+    def visit(m, stack):
+        state[m] = 1
+        stack.append(m)
+        for t in sorted(edges.get(m, ())):
+            if state.get(t) == 1:
+                cycles.append(" -> ".join(stack[stack.index(t):] + [t]))
+            elif t in edges and t not in state:
+                visit(t, stack)
+        stack.pop()
+        state[m] = 2
+
+    for m in sorted(edges):
+        if m not in state:
+            visit(m, [])
+    assert not cycles, "import circles:\n" + "\n".join(cycles)
+
+
+def test_no_private_names_borrowed_across_modules():
+    modules, _ = _graph()
+    borrowed = [f"{mod}: {target}.{n}" for mod, path in modules.items()
+                for target, names in _imports(path) if target.startswith("gpiscl")
+                for n in names if n.startswith("_") and not n.startswith("__")]
+    assert not borrowed, "private names imported:\n" + "\n".join(borrowed)
+
+
+def test_every_package_says_what_it_owns_and_may_import():
+    for pkg in RANK:
+        init = ROOT / "host" / pkg / "__init__.py"
+        if pkg == "errors":
+            init = ROOT / "host" / "errors.py"
+        doc = ast.get_docstring(ast.parse(init.read_text()))
+        assert doc and "import" in doc.lower(), pkg
