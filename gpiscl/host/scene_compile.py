@@ -13,7 +13,7 @@ from .conductors import eta_k
 from .envmap import build_envmap_tables
 from .gpis_compile import CompiledGpis, compile_gpis
 from .mesh_proxy import bounding_proxy
-from .imageio import read_exr_rgb
+from .radiance_hdr import read_environment_rgb
 
 PRIM = layouts.PRIM_KINDS
 LIGHT = layouts.LIGHT_KINDS
@@ -142,7 +142,7 @@ def _add_light(b: _Builder, lt: dict, env: dict):
     if kind == "environment":
         b.light(kind, lt["radiance"])
     elif kind == "environment_map":
-        rgb = read_exr_rgb(lt["file"]).astype(np.float32)
+        rgb = read_environment_rgb(lt["file"]).astype(np.float32)
         env["rgb"] = rgb
         b.light(kind, [lt["scale"]] * 3, p0=(math.radians(lt["rotation"]),))
     elif kind == "point":
