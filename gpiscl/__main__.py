@@ -6,8 +6,10 @@ import copy
 import sys
 from pathlib import Path
 
-from .host.device import Device, DeviceError, list_devices
-from .host.scene import Scene, SceneError, load_scene
+# Only what every command needs: each command imports the rest, so that convert-vdb runs
+# under a Python that has numpy and an OpenVDB binding but no pyopencl or OpenEXR (the
+# system Python with Debian's python3-openvdb).
+from .host.scene_schema import SceneError
 
 
 def _resolution(text: str):
@@ -99,6 +101,7 @@ def _add_uq_parser(sub):
 
 
 def _load(args) -> Scene:
+    from .host.scene import load_scene
     if args.scene is None:
         from .scenes import default_scene
         return load_scene(default_scene())
@@ -107,7 +110,9 @@ def _load(args) -> Scene:
 
 def cmd_render(args) -> int:
     from .api import render_result
+    from .host.device import Device
     from .host.output import write_outputs
+    from .host.scene import Scene
 
     scene = _load(args)
     data = copy.deepcopy(scene.data)
@@ -155,6 +160,7 @@ def _progress_bar(total):
 
 
 def cmd_devices(_args) -> int:
+    from .host.device import Device, DeviceError, list_devices
     default = None
     try:
         default = Device().device
@@ -174,6 +180,8 @@ def cmd_devices(_args) -> int:
 
 
 def cmd_uq(args) -> int:
+    from .host.device import Device
+    from .host.scene import Scene
     from .host.uq import UqSums, check_uq_scene, render_realizations, write_uq_outputs
 
     if args.merge:
@@ -305,7 +313,10 @@ def main(argv=None) -> int:
         commands = {"render": cmd_render, "devices": cmd_devices, "uq": cmd_uq,
                     "sample": cmd_sample, "convert-vdb": cmd_convert_vdb}
         return commands[args.command](args)
-    except (SceneError, DeviceError) as exc:
+    except (SceneError, RuntimeError) as exc:
+        device = sys.modules.get(f"{__package__}.host.device")  # loaded by commands using it
+        if not isinstance(exc, SceneError) and not (device and isinstance(exc, device.DeviceError)):
+            raise
         print(f"error: {exc}", file=sys.stderr)
         return 2
 
