@@ -290,12 +290,10 @@ class _Converter:
     def mean(self, m, key: str) -> dict:
         m = self.table(m, key)
         kind = m.get("type")
-        if "color" in m or "emission" in m:
-            for name in ("color", "emission"):
-                if name in m:
-                    self.notes.append(f"{key}.{name}: their procedural {name} field on the "
-                                      f"mean is dropped; give the gpis shape a `{name}` "
-                                      "field by hand")
+        for name in ("color", "emission"):
+            if name in m:
+                self.notes.append(f"{key}.{name}: their procedural {name} field on the mean "
+                                  f"is dropped; give the gpis shape a `{name}` field by hand")
         if kind == "homogeneous":
             return {"type": "constant", "value": self.number(m, "offset", key, 0.0)}
         if kind == "spherical":
@@ -355,8 +353,7 @@ class _Converter:
         to (g + offset) scale (after g <- -log(max(1e-4, g)) when volume)."""
         from . import vdb
         from .sdf_bake import load_grid, save_grid
-        if isinstance(spec, str):  # a name in the top-level "grids" list
-            spec, key = self.named(spec, "grids", key)
+        spec, key = self.grid_ref(spec, key)
         if not isinstance(spec, dict) or spec.get("type") != "vdb":
             self.fail(f"{key}.type", "only VDB grids ({type: vdb, file, density_name}) are "
                       "supported")
@@ -391,10 +388,14 @@ class _Converter:
         save_grid(out, type(g)((values + offset) * scale, g.origin, g.voxel_size))
         return str(out), spec.get("transform", {})
 
-    def tabulated_mean(self, m: dict, key: str) -> dict:
-        spec, gkey = m.get("grid"), f"{key}.grid"
+    def grid_ref(self, spec, key: str):
+        """A grid object given inline or by name from the top-level "grids" list."""
         if isinstance(spec, str):
-            spec, gkey = self.named(spec, "grids", gkey)
+            return self.named(spec, "grids", key)
+        return spec, key
+
+    def tabulated_mean(self, m: dict, key: str) -> dict:
+        spec, gkey = self.grid_ref(m.get("grid"), f"{key}.grid")
         path, t = self.vdb_grid(spec, gkey, self.number(m, "offset", key, 0.0),
                                 self.number(m, "scale", key, 1.0), bool(m.get("volume", False)))
         interp = spec.get("interpolate", "linear")
