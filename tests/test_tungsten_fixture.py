@@ -220,3 +220,27 @@ def test_hdr_environment_map_is_read_as_written(fixture_dir):
     rgb, sky = read_hdr_rgb(fixture_dir / "sky.hdr"), sky_image()
     assert rgb.shape == (8, 16, 3)
     assert np.all(np.abs(rgb - sky) <= sky.max(axis=2, keepdims=True) / 128)
+
+
+def test_unmapped_keys_are_noted_when_they_matter(fixture_dir):
+    """Their medium, integrator and light keys that gpiscl does not map print a note when
+    the scene's value makes their renderer behave unlike ours, and none at the values
+    their example scenes use; sigma_a is mapped (the scattering chance scales the
+    micro-BSDF)."""
+    keys = ("media[0].normal_method", "media[0].intersect_method", "media[0].skip_space",
+            "media[0].step_size", "media[0].sigma_a", "integrator.min_bounces",
+            "integrator.enable_volume_light_sampling", "integrator.include_surfaces",
+            "primitives[2].sample")
+    doc = read_lenient_json(fixture_dir / "knob.json")
+    _, quiet = convert_tungsten(doc, str(fixture_dir / "knob.json"))
+    assert not any(n.startswith(key + ":") for n in quiet for key in keys)
+    med, integ = doc["media"][0], doc["integrator"]
+    med.update(normal_method="beckmann", intersect_method="mean", skip_space=0.5,
+               step_size=0.1, sigma_a=1.0)
+    integ.update(min_bounces=3, enable_volume_light_sampling=False, include_surfaces=False)
+    doc["primitives"][2]["sample"] = False
+    scene, notes = convert_tungsten(doc, str(fixture_dir / "knob.json"))
+    for key in keys:
+        assert any(n.startswith(key + ":") for n in notes), key
+    mirror = [s for s in scene["shapes"] if s["type"] == "gpis"][0]["bsdf"]
+    assert mirror["albedo"] == pytest.approx([0.35 / 2, 0.3 / 2, 0.9 / 2])

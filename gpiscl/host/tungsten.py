@@ -587,6 +587,9 @@ class _Converter:
     def primitive(self, p: dict, key: str, render: dict, shapes: list, lights: list):
         kind = p.get("type")
         t = p.get("transform", {})
+        if p.get("sample", True) is False:
+            self.notes.append(f"{key}.sample: false keeps their light sampling away from this "
+                              "emitter; gpiscl samples every light")
         if kind == "quad":
             pos, scale, rot = self.transform(t, f"{key}.transform")
             u, v = rot @ [scale[0], 0, 0], rot @ [0, 0, -scale[2]]
