@@ -6,9 +6,10 @@ import copy
 import sys
 from pathlib import Path
 
-from .host.render.device import Device, DeviceError, list_devices
-from .host.errors import SceneError
-from .host.scene.loading import Scene, load_scene
+# Only what every command needs: each command imports the rest, so that convert-vdb runs
+# under a Python that has numpy and an OpenVDB binding but no pyopencl or OpenEXR (the
+# system Python with Debian's python3-openvdb).
+from .host.errors import DeviceError, SceneError
 
 
 def _resolution(text: str):
@@ -99,7 +100,8 @@ def _add_uq_parser(sub):
     u.add_argument("--exposure", type=float, default=0.0, help="PNG preview exposure (stops)")
 
 
-def _load(args) -> Scene:
+def _load(args):  # -> scene.loading.Scene (imported per command)
+    from .host.scene.loading import load_scene
     if args.scene is None:
         from .scenes import default_scene
         return load_scene(default_scene())
@@ -108,7 +110,9 @@ def _load(args) -> Scene:
 
 def cmd_render(args) -> int:
     from .api import render_result
+    from .host.render.device import Device
     from .host.render.output import write_outputs
+    from .host.scene.loading import Scene
 
     scene = _load(args)
     data = copy.deepcopy(scene.data)
@@ -156,6 +160,7 @@ def _progress_bar(total):
 
 
 def cmd_devices(_args) -> int:
+    from .host.render.device import Device, list_devices
     default = None
     try:
         default = Device().device
@@ -175,6 +180,8 @@ def cmd_devices(_args) -> int:
 
 
 def cmd_uq(args) -> int:
+    from .host.render.device import Device
+    from .host.scene.loading import Scene
     from .host.commands.uq import UqSums, check_uq_scene, render_realizations, write_uq_outputs
 
     if args.merge:

@@ -3,6 +3,7 @@ cannot import is an error naming the key path."""
 import copy
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -71,10 +72,12 @@ def _with(path, value):
 
 GP = ["media", 0, "gaussian_process"]
 BAD = [
-    (_with(GP + ["left", "mean"], {"type": "procedural", "func": "knob"}),
+    (_with(GP + ["left", "mean"], {"type": "neural", "network": "net.bin"}),
      "media[0].gaussian_process.left.mean.type", "not supported"),
-    (_with(GP + ["right", "covariance", "roughness"], 0.01),
-     "media[0].gaussian_process.right.covariance.roughness", "the reference ignores it"),
+    (_with(GP + ["left", "mean"], {"type": "procedural", "f": {"type": "noise"}}),
+     "media[0].gaussian_process.left.mean.f", "procedural scalar means are not supported"),
+    (_with(GP + ["right", "covariance", "smoothness"], 0.01),
+     "media[0].gaussian_process.right.covariance.smoothness", "the reference ignores it"),
     (_with(GP + ["left", "covariance"], {"type": "periodic", "w": 1.0}),
      "media[0].gaussian_process.left.covariance.type", "radial"),
     (_with(["media", 0, "correlation_context"], "parrot"),
@@ -90,6 +93,19 @@ BAD = [
      "primitives[1].int_medium", 'no entry named "fog"'),
     (_with(["primitives", 0, "type"], "curves"), "primitives[0].type", "not supported"),
     (_with(["camera", "type"], "thinlens"), "camera.type", "pinhole only"),
+    # malformed values (../shared/bad-input-cases/D12): one line at the input's key path
+    (_with(["primitives", 2, "cap_angle"], 0), "primitives[2].cap_angle", "must be > 0"),
+    (_with(["camera"], 5), "camera", "expected an object"),
+    (_with(["camera", "resolution"], "abc"), "camera.resolution", "expected an integer"),
+    (_with(["camera", "resolution"], [512, 0]), "camera.resolution[1]", "must be >= 1"),
+    (_with(["media", 0, "sample_points"], 1.5), "media[0].sample_points",
+     "expected an integer"),
+    (_with(GP + ["left", "id"], -1), "media[0].gaussian_process.left.id", "must be >= 0"),
+    (_with(GP + ["left", "mean", "radius"], float("nan")),
+     "media[0].gaussian_process.left.mean.radius", "must be finite"),
+    (_with(["primitives", 1, "transform", "position"], [0, "1", 0]),
+     "primitives[1].transform.position[1]", "expected a number"),
+    (_with(["media", 0, "sigma_s"], 0), "media[0].sigma_s", "must be > 0"),
 ]
 
 
@@ -100,26 +116,46 @@ def test_unsupported_input_names_the_key(doc, key, reason):
     assert info.value.key == key and reason in info.value.reason
 
 
+def run_tool(*args):
+    """tools/convert_tungsten.py on this checkout's gpiscl (a script's sys.path starts at
+    tools/, so an installed gpiscl elsewhere would otherwise win)."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run([sys.executable, str(ROOT / "tools" / "convert_tungsten.py"),
+                           *map(str, args)], capture_output=True, text=True, env=env)
+
+
 def test_missing_environment_map_is_an_error_unless_substituted(tmp_path):
-    tool = [sys.executable, str(ROOT / "tools" / "convert_tungsten.py"), str(CSG)]
     out = tmp_path / "scene.json"
-    r = subprocess.run(tool + [str(out)], capture_output=True, text=True)
+    r = run_tool(CSG, out)
     assert r.returncode == 2 and r.stderr.count("\n") == 1
-    assert "primitives[4].emission" in r.stderr and ".exr" in r.stderr
-    r = subprocess.run(tool + [str(out), "--environment", "0.3"], capture_output=True, text=True)
+    assert "primitives[4].emission" in r.stderr and "substitute environment" in r.stderr
+    r = run_tool(CSG, out, "--environment", "0.3")
     assert r.returncode == 0, r.stderr
     assert load_scene(out).data["lights"][-1] == {"type": "environment",
                                                  "radiance": [0.3, 0.3, 0.3]}
 
 
 def _tungsten_rotation(degrees):
-    """The reference's Mat4f::rotYXZ: R = Ry Rx Rz, written out independently."""
-    ax, ay, az = np.radians(degrees)
-    c, s = np.cos, np.sin
-    rx = np.array([[1, 0, 0], [0, c(ax), -s(ax)], [0, s(ax), c(ax)]])
-    ry = np.array([[c(ay), 0, s(ay)], [0, 1, 0], [-s(ay), 0, c(ay)]])
-    rz = np.array([[c(az), -s(az), 0], [s(az), c(az), 0], [0, 0, 1]])
-    return ry @ rx @ rz
+    """The reference's Mat4f::rotYXZ, entry by entry as their Mat4f.cpp writes it (not
+    as a product of textbook rotations, which is how the Y sign went wrong before)."""
+    c = np.cos(np.radians(degrees))
+    s = np.sin(np.radians(degrees))
+    return np.array([
+        [c[1] * c[2] - s[1] * s[0] * s[2], -c[1] * s[2] - s[1] * s[0] * c[2], -s[1] * c[0]],
+        [c[0] * s[2], c[0] * c[2], -s[0]],
+        [s[1] * c[2] + c[1] * s[0] * s[2], -s[1] * s[2] + c[1] * s[0] * c[2], c[1] * c[0]]])
+
+
+def test_y_rotation_turns_as_theirs():
+    """A sun cap tilted by x = 90 degrees (to +z) and turned by y = 90 degrees: their
+    rotYXZ points it along -x; a right-handed Ry (the old reading) gave +x."""
+    doc = _with(["primitives", 2, "transform"], {"rotation": [90, 90, 0]})
+    scene, _ = convert_tungsten(doc, str(CSG), SKY)
+    sun = scene["lights"][0]
+    assert sun["type"] == "directional"
+    np.testing.assert_allclose(sun["direction"], _tungsten_rotation([90, 90, 0]) @ [0, 1, 0],
+                               atol=1e-12)
+    np.testing.assert_allclose(sun["direction"], [-1, 0, 0], atol=1e-12)
 
 
 def _mesh_doc(tmp_path, mean):
@@ -224,7 +260,7 @@ def test_vdb_grids_map_to_grid_means_and_sigma_fields(tmp_path, monkeypatch, dev
     scene, notes = convert_tungsten(_baked_doc(), str(tmp_path / "scene.json"), SKY)
     g = [s for s in load_scene(scene).data["shapes"] if s["type"] == "gpis"][0]
     assert g["mean"]["type"] == "transform" and g["mean"]["translate"] == [0, 0.8, 0]
-    assert g["mean"]["child"]["interpolation"] == "cubic"
+    assert g["mean"]["child"]["interpolation"] == "linear"
     assert any("quadratic" in n for n in notes)
     field = load_field_grid(g["kernel"]["sigma_field"]["file"])
     np.testing.assert_allclose(field.values, 2.0 * sd.values, rtol=1e-6)

@@ -67,3 +67,25 @@ def test_copy_keeps_values_origin_and_voxel_size(tmp_path, monkeypatch):
     with pytest.raises(SceneError) as info:
         vdb.convert_vdb("x.vdb", str(out), grid_name="density")
     assert info.value.key == "density" and "has: mean" in info.value.reason
+
+
+def test_convert_vdb_runs_without_pyopencl_or_openexr(tmp_path):
+    """Debian's python3-openvdb serves the system Python, which has numpy but neither
+    pyopencl nor OpenEXR: the command must not import them, and without a binding it
+    names the Debian package."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+    root = Path(__file__).resolve().parent.parent
+    code = ("import sys\n"
+            "for name in ('pyopencl', 'OpenEXR', 'trimesh', 'igl'):\n"
+            "    sys.modules[name] = None  # importing it now raises ImportError\n"
+            "from gpiscl.__main__ import main\n"
+            f"sys.exit(main(['convert-vdb', {str(tmp_path / 'a.vdb')!r}, "
+            f"{str(tmp_path / 'a.npz')!r}]))\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       env={**os.environ, "PYTHONPATH": str(root)})
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    if "no OpenVDB Python binding" in r.stderr:
+        assert "apt install python3-openvdb" in r.stderr

@@ -120,3 +120,29 @@ def test_importance_sampled_integral_matches_pixel_sum():
     f = envmap_lookup(rgb, d) / pdf[:, None]
     mean, se = f.mean(axis=0), f.std(axis=0, ddof=1) / math.sqrt(n)
     assert np.all(np.abs(mean - exact) < 4 * se), (mean, exact, se)
+
+
+def test_hdr_and_exr_maps_render_alike(tmp_path, device):
+    """An environment_map file may be Radiance .hdr (the authors' scenes) or OpenEXR: the
+    same radiance (values RGBE holds exactly) renders the same image from either."""
+    from gpiscl import render_result
+    from gpiscl.host.io.images import write_exr
+    from gpiscl.host.io.radiance_hdr import write_hdr
+    rng = np.random.default_rng(5)
+    rgb = (rng.integers(128, 256, (8, 16, 3)) * 2.0 ** rng.integers(-9, -5, (8, 16, 1)))
+    rgb[..., 1:] = np.minimum(rgb[..., 1:], rgb[..., :1])  # channel 0 holds the exponent
+    rgb = rgb.astype(np.float32)
+    write_hdr(tmp_path / "sky.hdr", rgb)
+    write_exr(tmp_path / "sky.exr", rgb)
+    images = []
+    for name in ("sky.hdr", "sky.exr"):
+        scene = {"camera": {"position": [0, 0, 0], "look_at": [0, 0.3, 1], "fov": 90,
+                            "resolution": [8, 8]},
+                 "render": {"spp": 2, "seed": 3},
+                 "shapes": [{"type": "sphere", "center": [0, 0, 3], "radius": 1,
+                             "bsdf": {"type": "diffuse", "albedo": 0.5}}],
+                 "lights": [{"type": "environment_map", "file": str(tmp_path / name),
+                             "rotation": 30}]}
+        images.append(render_result(scene, device=device).image.mean)
+    assert images[0].max() > 0
+    np.testing.assert_array_equal(images[0], images[1])

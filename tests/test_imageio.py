@@ -83,3 +83,66 @@ def test_filmic_tonemap():
     assert np.all(np.diff(ramp) >= 0) and ramp[-1] == 255
     assert tonemap_srgb8(np.full((1, 1, 3), 4.0), curve="filmic")[0, 0, 0] < 255
     np.testing.assert_array_equal(tonemap_srgb8(x / 2, 1.0, "filmic"), out)
+
+
+# ---- Radiance .hdr (RGBE), the authors' environment-map format ---------------------------
+
+def _rgbe_file(width, pixels, flat=True) -> bytes:
+    """A Radiance file written by hand: header, resolution line, then flat (not
+    run-length encoded) RGBE quadruples, top row first."""
+    height = len(pixels) // width
+    head = f"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y {height} +X {width}\n".encode()
+    return head + bytes(b for quad in pixels for b in quad)
+
+
+def test_hdr_reads_a_known_image(tmp_path):
+    """Each channel is mantissa * 2^(exponent - 136) (Radiance's RGBE; exponent 0 is
+    black), rows top first."""
+    from gpiscl.host.io.radiance_hdr import read_hdr_rgb
+    quads = [(128, 64, 32, 129), (255, 0, 1, 128), (0, 0, 0, 0),
+             (10, 20, 30, 140), (200, 100, 50, 120), (1, 1, 1, 136)]
+    path = tmp_path / "known.hdr"
+    path.write_bytes(_rgbe_file(3, quads))
+    expected = np.array([[0.0 if e == 0 else m * 2.0 ** (e - 136) for m in (r, g, b)]
+                         for r, g, b, e in quads])
+    rgb = read_hdr_rgb(path)
+    assert rgb.shape == (2, 3, 3) and rgb.dtype == np.float32
+    np.testing.assert_array_equal(rgb.reshape(-1, 3), expected.astype(np.float32))
+    assert rgb[0, 0].tolist() == [1.0, 0.5, 0.25]  # 128 * 2^-7
+
+
+def test_hdr_round_trip_keeps_representable_values(tmp_path):
+    """write_hdr then read_hdr_rgb returns values RGBE holds exactly (a mantissa 128..255
+    for the largest channel) bit for bit, including a run-length encoded wide image."""
+    from gpiscl.host.io.radiance_hdr import read_hdr_rgb, write_hdr
+    rng = np.random.default_rng(3)
+    h, w = 5, 40  # 8 <= width < 32768: the writer run-length encodes the scanlines
+    e = rng.integers(-6, 6, (h, w, 1))
+    top = rng.integers(128, 256, (h, w, 1))
+    rest = rng.integers(0, 256, (h, w, 2)) * (top > 0)
+    mant = np.concatenate([top, np.minimum(rest, top)], axis=2)
+    mant = np.take_along_axis(mant, rng.permuted(np.tile([0, 1, 2], (h, w, 1)), axis=2),
+                              axis=2)
+    rgb = (mant * 2.0 ** (e - 8)).astype(np.float32)
+    rgb[1, 2] = 0.0
+    path = tmp_path / "a.hdr"
+    write_hdr(path, rgb)
+    assert path.read_bytes().startswith(b"#?RADIANCE")
+    back = read_hdr_rgb(path)
+    assert back.tobytes() == rgb.tobytes()
+
+
+@pytest.mark.parametrize("content,reason", [(b"", "empty file"),
+                                            (b"P6\n2 2\n255\n" + bytes(12), "cannot read")])
+def test_unreadable_hdr_is_a_one_line_reason(tmp_path, content, reason):
+    from gpiscl.host.io.radiance_hdr import hdr_problem
+    path = tmp_path / "bad.hdr"
+    path.write_bytes(content)
+    problem = hdr_problem(str(path))
+    assert reason in problem and "\n" not in problem
+
+
+def test_write_hdr_refuses_what_rgbe_cannot_hold(tmp_path):
+    from gpiscl.host.io.radiance_hdr import write_hdr
+    with pytest.raises(ValueError, match="non-negative"):
+        write_hdr(tmp_path / "n.hdr", np.full((2, 2, 3), -1.0, np.float32))

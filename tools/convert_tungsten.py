@@ -1,11 +1,12 @@
 """Convert the GPIS subset of an authors' Tungsten scene to a gpiscl scene file.
 
-    python tools/convert_tungsten.py scene.json out.json [--environment 0.8 | sky.exr]
+    python tools/convert_tungsten.py scene.json out.json [--environment 0.8 | sky.exr | sky.hdr]
                                      [--grid-dir DIR]
 
-The mapping and what is unsupported are documented in gpiscl/host/tungsten.py. The result
-is validated by the strict scene loader before it is written; errors are one line naming
-the input file, the key path and the reason (exit code 2).
+The scene file is read as their renderer reads it (trailing commas, comments, NaN and
+Infinity). The mapping and what is unsupported are documented in gpiscl/host/tungsten.py.
+The result is validated by the strict scene loader before it is written; errors are one
+line naming the input file, the key path and the reason (exit code 2).
 """
 import argparse
 import json
@@ -13,6 +14,7 @@ import sys
 from pathlib import Path
 
 from gpiscl.host.errors import SceneError
+from gpiscl.host.io.lenient_json import read_lenient_json
 from gpiscl.host.scene.loading import load_scene
 from gpiscl.host.scene.tungsten import convert_tungsten
 
@@ -30,18 +32,22 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scene", help="Tungsten scene JSON")
     ap.add_argument("output", help="gpiscl scene JSON to write")
-    ap.add_argument("--environment", help="substitute environment: a radiance or an .exr map")
+    ap.add_argument("--environment", help="substitute environment: a radiance, or an .exr "
+                    "or .hdr map")
     ap.add_argument("--grid-dir", help="where .npz grids converted from .vdb grids go "
                     "(default: beside the .vdb)")
     args = ap.parse_args(argv)
     try:
-        try:
-            doc = json.loads(Path(args.scene).read_text())
-        except (OSError, json.JSONDecodeError) as exc:
-            raise SceneError(args.scene, "", f"cannot read JSON: {exc}") from None
+        doc = read_lenient_json(args.scene)
         scene, notes = convert_tungsten(doc, args.scene, _environment(args.environment),
                                         args.grid_dir)
-        load_scene(scene)  # strict validation before anything is written
+        try:
+            load_scene(scene)  # strict validation before anything is written
+        except SceneError as exc:
+            # a value the importer passed on unchecked: name the input file, and the
+            # converted scene's key (the input's key maps to it as tungsten.py describes)
+            raise SceneError(args.scene, "", f"the converted scene is invalid at "
+                             f"{exc.key or 'its top level'}: {exc.reason}") from None
     except SceneError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -2,7 +2,10 @@
 procedural mesh, and a colour grid.
 
 The authors' bunny (gp-spsr/bunny.json) reads its mean and variance grids from bunny.vdb,
-a stochastic Poisson reconstruction that is not public. This stand-in follows the same
+a stochastic Poisson reconstruction in data/example-scenes/gp-spsr of their public
+repository (github.com/daseyb/gpis-light-transport), which gpiscl cannot ship (convert
+theirs with `python -m gpiscl convert-vdb` and tools/convert_tungsten.py). This stand-in
+follows the same
 path from a surface to grids: a blobby rabbit (a smooth union of spheres and capsules) is
 meshed by surface nets, the mesh's signed distance is baked with gpiscl's own mesh bake
 (libigl, gpiscl/host/compile/sdf_bake.py), and the grid is stored like the authors' (about 45^3

@@ -1,6 +1,7 @@
 """Writes scenes/assets/sky.exr: the substitute environment map of the example scenes.
 
-The authors' scenes light their objects with "FlowCheck.hdr", which is not public. This is
+The authors' scenes light their objects with "FlowCheck.hdr", whose content is missing from
+their public repository (the file is listed there, but its data is not). This is
 a procedural stand-in with the same role: a bright sky gradient over a darker ground, a
 warm patch around the sun direction and a few soft "windows", so mirror micro-facets show
 structured reflections. Lat-long layout of gpiscl/host/envmap.py (row 0 = +y).

@@ -1,6 +1,8 @@
 """Writes scenes/assets/wedge.obj: the triangular prism of the authors' wedge scenes.
 
-Their wedge.obj (gp-medium-wedge) is not public; this stand-in is a right-triangle prism,
+Their wedge.obj is in data/example-scenes/gp-medium-wedge of their public repository
+(github.com/daseyb/gpis-light-transport), but gpiscl cannot ship it; this stand-in is a
+right-triangle prism,
 the triangle (-1, -1), (1, -1), (-1, 1) in the xy plane extruded over z in [-1, 1], so the
 scenes' transform (scale 0.5, centre (0, 1, -0.49)) puts it on y in [0.5, 1.5] just in
 front of a back wall at z = -1. Faces are wound counter-clockwise seen from outside.

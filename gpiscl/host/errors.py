@@ -1,5 +1,5 @@
-"""The user-facing error of every layer: a mistake in a scene or an input file.
-Imports nothing of gpiscl: every package may import it."""
+"""The user-facing errors of every layer: a mistake in a scene or an input file, and no
+usable OpenCL device. Imports nothing of gpiscl: every package may import it."""
 from __future__ import annotations
 
 
@@ -13,3 +13,7 @@ class SceneError(Exception):
 
     def __reduce__(self):  # keep it picklable despite the 3-argument constructor
         return type(self), (self.file, self.key, self.reason)
+
+
+class DeviceError(RuntimeError):
+    """No usable OpenCL device, or a device-side build failure (a user-facing error)."""

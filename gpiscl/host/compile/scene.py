@@ -14,7 +14,7 @@ from .envmap import build_envmap_tables
 from .gpis import CompiledGpis, compile_gpis
 from ..scene.proxies import bounding_proxy
 from ..scene.transforms import mesh_triangles
-from ..io.images import read_exr_rgb
+from ..io.radiance_hdr import read_environment_rgb
 
 PRIM = layouts.PRIM_KINDS
 LIGHT = layouts.LIGHT_KINDS
@@ -122,7 +122,7 @@ def _add_light(b: _Builder, lt: dict, env: dict):
     if kind == "environment":
         b.light(kind, lt["radiance"])
     elif kind == "environment_map":
-        rgb = read_exr_rgb(lt["file"]).astype(np.float32)
+        rgb = read_environment_rgb(lt["file"]).astype(np.float32)
         env["rgb"] = rgb
         b.light(kind, [lt["scale"]] * 3, p0=(math.radians(lt["rotation"]),))
     elif kind == "point":
@@ -141,10 +141,13 @@ def _add_light(b: _Builder, lt: dict, env: dict):
         theta = math.radians(lt["angular_radius"])
         E = np.asarray(lt["irradiance"], dtype=np.float64)
         if theta == 0.0:
-            b.light(kind, E, p0=lt["direction"], cos_max=1.0)
+            b.light(kind, E, p0=(*lt["direction"], 0.0), cos_max=1.0)
         else:
-            # uniform radiance L over the cone delivers E = L * pi * sin^2(theta) on axis
-            b.light(kind, E / (math.pi * math.sin(theta) ** 2), p0=lt["direction"],
+            # uniform radiance L over the cone delivers E = L * pi * sin^2(theta) on axis;
+            # the device samples the cone by 1 - cos(theta) (p0.w, lights.h), computed as
+            # 2 sin^2(theta / 2) so that float32 keeps its digits for a small sun
+            b.light(kind, E / (math.pi * math.sin(theta) ** 2),
+                    p0=(*lt["direction"], 2.0 * math.sin(theta / 2) ** 2),
                     cos_max=math.cos(theta))
     else:
         raise AssertionError(kind)

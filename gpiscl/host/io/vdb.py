@@ -1,9 +1,11 @@
 """OpenVDB grids -> the .npz grids gpiscl reads (io/grids.load_grid's layout).
 
 No PyPI package reads .vdb files correctly today, so this needs OpenVDB's own Python
-binding (module `openvdb`, or `pyopenvdb` in releases before 10): conda-forge's `openvdb`
-package ships it, as do builds of OpenVDB with OPENVDB_BUILD_PYTHON_MODULE=ON. Without it
-the command says so instead of guessing at the file format.
+binding (module `openvdb`, or `pyopenvdb` in releases up to 10): Debian's and Ubuntu's
+python3-openvdb package ships it for the system Python (which is why this module and the
+convert-vdb command import nothing beyond numpy and gpiscl's own grid code), as do
+conda-forge's `openvdb` package and builds of OpenVDB with OPENVDB_BUILD_PYTHON_MODULE=ON.
+Without it the command says so instead of guessing at the file format.
 
 The active bounding box of one float grid is copied to a dense array (x index first);
 voxels outside the active set take the grid's background value, as the authors' renderer
@@ -21,9 +23,11 @@ from ..gp.means import GridMean
 from ..errors import SceneError
 
 HOW_TO_GET = ("no OpenVDB Python binding could be imported (modules 'openvdb' or "
-              "'pyopenvdb'); install one, e.g. `conda install -c conda-forge openvdb`, or "
-              "build OpenVDB with -DOPENVDB_BUILD_PYTHON_MODULE=ON (no PyPI package reads "
-              ".vdb files correctly)")
+              "'pyopenvdb'); install one: on Debian or Ubuntu `apt install python3-openvdb` "
+              "and run this under the system Python (/usr/bin/python3 -m gpiscl convert-vdb "
+              "..., with gpiscl on PYTHONPATH: it needs only numpy there), or "
+              "`conda install -c conda-forge openvdb`, or build OpenVDB with "
+              "-DOPENVDB_BUILD_PYTHON_MODULE=ON (no PyPI package reads .vdb files correctly)")
 
 
 def import_openvdb():

@@ -51,7 +51,7 @@ LIGHT = Struct("Light", (
     ("int", "kind"),
     ("int", "primitive"),    # area lights: the primitive that carries the emission
     ("float", "area"),
-    ("float", "cos_max"),    # sun: cosine of the angular radius
+    ("float", "cos_max"),    # sun: cos of the angular radius (the device samples by p0.w = 1 - cos)
 ))
 
 BVH_NODE = Struct("BvhNode", (

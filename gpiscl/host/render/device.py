@@ -11,11 +11,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyopencl as cl
 
+from ..errors import DeviceError
 from .program_sources import PYOPENCL_CL_DIR, join_sources
-
-class DeviceError(RuntimeError):
-    """No usable OpenCL device, or a device-side build failure (a user-facing error)."""
-
 
 def list_devices():
     """(platform index, device index, platform, device) for every OpenCL device."""

@@ -62,6 +62,14 @@ def _exr_problem(path):
     return None
 
 
+def _envmap_problem(path):
+    """OpenEXR, or Radiance .hdr (the authors' scenes use it)."""
+    if path.lower().endswith(".hdr"):
+        from ..io.radiance_hdr import hdr_problem
+        return hdr_problem(path)
+    return _exr_problem(path)
+
+
 # ---- cross-field rules: each returns None or (key, reason)
 
 def _camera_frame(c):
@@ -166,7 +174,7 @@ SHAPES.register("mesh", shape({"file": Field(File((".obj", ".ply", ".stl"), mesh
 LIGHTS = Tagged("light")
 LIGHTS.register("environment", Record({"radiance": Field(RGB, 1.0)}))
 LIGHTS.register("environment_map", Record({
-    "file": Field(File((".exr",), _exr_problem)),
+    "file": Field(File((".exr", ".hdr"), _envmap_problem)),
     "scale": Field(Number(ge=0), 1.0),
     "rotation": Field(Number(), 0.0),  # degrees about +y
 }))

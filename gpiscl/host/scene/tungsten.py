@@ -2,6 +2,9 @@
 
 Mapping (../shared/design/REFERENCE-ALGORITHMS.md section 8 describes their format):
 
+  files   read as Tungsten reads them (lenient_json.py): trailing commas, comments, NaN
+  transforms {position, scale, rotation}: T R S with their Mat4f::rotYXZ rotation, whose Y
+          turn is the opposite of a right-handed one (R = Ry(-y) Rx(x) Rz(z))
   camera  pinhole {transform {position, look_at, up}, fov (horizontal degrees), resolution}
           -> camera (fov made vertical for the image's aspect)
   renderer.spp -> render.spp;  integrator.max_bounces -> render.max_depth;
@@ -14,20 +17,33 @@ Mapping (../shared/design/REFERENCE-ALGORITHMS.md section 8 describes their form
             or a rectangle light when it has emission/power
           cube (unit cube [-0.5, 0.5]^3, unrotated) -> box, or the proxy box of its
             int_medium; sphere (radius, or position/scale) -> sphere, or a sphere proxy
-          infinite_sphere {emission: colour | .exr file} -> environment / environment_map
+          infinite_sphere {emission: colour | .exr or .hdr file, transform rotation about y}
+            -> environment / environment_map (their u = atan2(z, x) / 2 pi + 1/2: half a
+            turn from ours, added to the rotation)
           infinite_sphere_cap {cap_angle, power, transform} -> directional light towards
             the rotated +y axis with radiance power / (2 pi (1 - cos cap)) inside the cap
+            (1 - cos cap computed as 2 sin^2(cap / 2), which keeps its digits for a 0.1
+            degree sun)
   media   function_space_gaussian_process / gaussian_process -> sampler function_space
             {samples: sample_points, memory: elephant -> global, goldfish -> renewal_plus,
              dori -> renewal, none -> none; step_corr: step_size_cov when > 0}
           weight_space_gaussian_process -> weight_space {features: basis_functions};
             single_realization -> render.realization 0 (a fixed realization; the authors'
             seed is not reproducible)
+          sigma_s / (sigma_s + sigma_a) (their only use of the coefficients: the chance an
+            event scatters) multiplies the micro-BSDF's albedo; their other medium keys
+            (normal_method, intersect_method, skip_space, step_size, max_bounces) and the
+            integrator's and camera's unmapped keys are listed in tungsten_keys.py, with a
+            note whenever the scene's value makes their renderer differ from ours
           phase_function / additional_phase_functions {type: brdf, bsdf} -> micro-BSDF by id
           gaussian_process: standard {mean, covariance, id}; csg {left, right} -> one gpis
             object per leaf in the same proxy: first hits over independent objects are the
             union min(f_L, f_R), which is what the reference's csg computes
   means   homogeneous {offset} -> constant; spherical {center, radius} -> sphere;
+          procedural {func: knob | knob_inner | knob_outer | two_spheres, transform} ->
+            procedural (the knobs) or a union of two spheres, inside a transform mean (their
+            renderer ignores that transform, a bug: the knob sinks into the floor; noted);
+            a mean's `color` field is dropped with a note;
           linear {reference_point, direction, scale} -> plane;
           mesh {file (.obj/.ply/.stl/.off, relative to the scene file), transform} -> mesh
             (the transform goes to the vertices before the bake, as the reference applies
@@ -35,10 +51,16 @@ Mapping (../shared/design/REFERENCE-ALGORITHMS.md section 8 describes their form
             angles of the same matrix; `signed` is ignored, as by the reference; the exact
             distance becomes a 128^3 baked grid, listed in the notes)
           tabulated {grid, offset, scale, volume} -> grid (values (g + offset) scale, with
-            g <- -log(max(1e-4, g)) first when volume; interpolate "quadratic" -> cubic, as
-            gpiscl has no quadratic spline; the grid's transform -> a transform mean)
+            g <- -log(max(1e-4, g)) first when volume; interpolate "quadratic" -> linear:
+            trilinear stays between neighbouring samples, so it makes no zero crossing the
+            samples lack, like their quadratic B-spline and unlike an interpolating cubic,
+            which overshoots the bunny's far-field 100 to -34 and shows a box-shaped shell;
+            the grid's transform -> a transform mean)
   kernels squared_exponential, rational_quadratic (a -> alpha), thin_plate (R -> radius),
           with sigma, lengthScale and aniso; the reference's kernels and ours agree there;
+          their knob's `roughness` (which their renderer ignores, keeping l = 1) is read as
+          intended, the Beckmann alpha = sqrt(2) sigma / l, so l = sqrt(2) sigma / roughness
+          when no lengthScale is given (as scenes/knob.json does; noted);
           nonstationary {cov, grid | variance, offset, scale} -> cov with a sigma_field grid
             of (g + offset) scale (their grid holds a deviation multiplier, the name
             notwithstanding; a translation in the grid's transform moves the grid's origin)
@@ -47,19 +69,22 @@ Mapping (../shared/design/REFERENCE-ALGORITHMS.md section 8 describes their form
           present (made elsewhere with `python -m gpiscl convert-vdb`); written .npz files
           go to `grid_dir` (default: next to the .vdb)
 
-Everything else (procedural means, a mesh mean's `min` clamp, their radial periodic kernel,
-GGX microfacets, .hdr environment maps, rotated cubes) is an error naming the key path and
-the reason, never silently dropped. Pass `environment` to substitute a
-missing environment map.
+Everything else (procedural scalar means `f`, a mean's `min` clamp, their radial periodic
+kernel, GGX microfacets, rotated cubes) is an error naming the key path and the reason,
+never silently dropped; so is a value of the wrong type or range. Pass `environment` to
+substitute a missing environment map.
 """
 from __future__ import annotations
 
+import copy
 import math
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import SceneError
+from .schema import kind_of
+from .tungsten_keys import CAMERA, INTEGRATOR, MEDIUM, notes_for
 
 MEMORIES = {"elephant": "global", "goldfish": "renewal_plus", "dori": "renewal", "none": "none"}
 FS_MEDIA = ("function_space_gaussian_process", "gaussian_process")
@@ -73,6 +98,10 @@ KERNEL_KEYS = {
 
 
 MESH_MEAN_KEYS = ("type", "file", "transform", "signed", "min")
+# their procedural SDFs (SdfFunctions.cpp); two_spheres is exact as a union of spheres
+KNOBS = ("knob", "knob_inner", "knob_outer")
+TWO_SPHERES = {"type": "union", "left": {"type": "sphere", "center": [0, 10, 0], "radius": 9.5},
+               "right": {"type": "sphere", "center": [0, -10, 0], "radius": 9.5}}
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off")
 
 
@@ -89,6 +118,18 @@ def euler_xyz(rot) -> list:
     return [math.degrees(a) for a in (ax, ay, az)]
 
 
+def tungsten_rotation(degrees) -> np.ndarray:
+    """Their Mat4f::rotYXZ(x, y, z) as a matrix: Ry(-y) Rx(x) Rz(z) in right-handed terms.
+    Its Y turn goes the other way from Rx's and Rz's (their matrix has -sin y above the
+    diagonal); reading it as Ry(+y) mirrored their sun and sky caps."""
+    ax, ay, az = np.radians(np.asarray(degrees, float))
+    c, s = math.cos, math.sin
+    rx = np.array([[1, 0, 0], [0, c(ax), -s(ax)], [0, s(ax), c(ax)]])
+    ry = np.array([[c(ay), 0, -s(ay)], [0, 1, 0], [s(ay), 0, c(ay)]])
+    rz = np.array([[c(az), -s(az), 0], [s(az), c(az), 0], [0, 0, 1]])
+    return ry @ rx @ rz
+
+
 class _Converter:
     def __init__(self, doc: dict, source: str, environment=None, grid_dir=None):
         self.doc, self.source, self.environment = doc, source, environment
@@ -99,13 +140,45 @@ class _Converter:
     def fail(self, key: str, reason: str):
         raise SceneError(self.source, key, reason)
 
+    # Every value read from their file goes through one of these, so a wrong type or a
+    # non-finite number is an error at its key path, not a traceback or a bad scene.
+
+    def table(self, value, key: str) -> dict:
+        if not isinstance(value, dict):
+            self.fail(key, f"expected an object (got {kind_of(value)})")
+        return value
+
+    def check_number(self, value, key: str, *, integer=False, gt=None, ge=None, lt=None,
+                     le=None) -> float:
+        what = "an integer" if integer else "a number"
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            self.fail(key, f"expected {what} (got {kind_of(value)})")
+        if not math.isfinite(value):
+            self.fail(key, f"must be finite (got {value})")
+        if integer and not float(value).is_integer():
+            self.fail(key, f"expected {what} (got {value!r})")
+        for bound, sign, ok in ((gt, ">", float.__gt__), (ge, ">=", float.__ge__),
+                                (lt, "<", float.__lt__), (le, "<=", float.__le__)):
+            if bound is not None and not ok(float(value), float(bound)):
+                self.fail(key, f"must be {sign} {bound:g} (got {value:g})")
+        return int(value) if integer else float(value)
+
+    def number(self, block: dict, name: str, key: str, default, **bounds) -> float:
+        return self.check_number(block.get(name, default), f"{key}.{name}", **bounds)
+
+    def vector(self, block: dict, name: str, key: str, default) -> list:
+        value = block.get(name, default)
+        if not isinstance(value, list) or len(value) != 3:
+            self.fail(f"{key}.{name}", f"expected a list of 3 numbers (got {kind_of(value)})")
+        return [self.check_number(v, f"{key}.{name}[{i}]") for i, v in enumerate(value)]
+
     # --- small pieces -----------------------------------------------------------------
 
     def colour(self, value, key):
         if isinstance(value, (int, float)) and not isinstance(value, bool):
-            return [float(value)] * 3
+            return [self.check_number(value, key)] * 3
         if isinstance(value, list) and len(value) == 3:
-            return [float(v) for v in value]
+            return [self.check_number(v, f"{key}[{i}]") for i, v in enumerate(value)]
         if isinstance(value, dict) and value.get("type") == "checker":
             on = self.colour(value.get("on_color", 0.8), f"{key}.on_color")
             off = self.colour(value.get("off_color", 0.2), f"{key}.off_color")
@@ -117,14 +190,17 @@ class _Converter:
         """An inline object, or the entry of doc[table] with that name."""
         if isinstance(ref, dict):
             return ref, key
-        for i, entry in enumerate(self.doc.get(table, [])):
-            if entry.get("name") == ref:
+        entries = self.doc.get(table, [])
+        if not isinstance(entries, list):
+            self.fail(table, f"expected a list (got {kind_of(entries)})")
+        for i, entry in enumerate(entries):
+            if self.table(entry, f"{table}[{i}]").get("name") == ref:
                 return entry, f"{table}[{i}]"
         self.fail(key, f'no entry named "{ref}" in "{table}"')
 
     def bsdf(self, ref, key, micro=False) -> dict:
         b, key = self.named(ref, "bsdfs", key)
-        kind = b.get("type", "lambert")
+        kind = self.table(b, key).get("type", "lambert")
         albedo = self.colour(b.get("albedo", 1.0 if kind == "mirror" else 0.5), f"{key}.albedo")
         if kind == "lambert":
             return {"type": "diffuse", "albedo": albedo}
@@ -149,67 +225,128 @@ class _Converter:
                       f'{", ".join(CONDUCTORS)}); give eta and k in the converted scene')
         albedo = self.colour(b.get("albedo", 1.0), f"{key}.albedo")
         return {"type": "rough_conductor", "material": material,
-                "roughness": float(b.get("roughness", 0.1)), "albedo": albedo}
+                "roughness": self.number(b, "roughness", key, 0.1, gt=0), "albedo": albedo}
 
-    def transform(self, t: dict, key: str, allow_rotation=True):
-        pos = np.asarray(t.get("position", [0, 0, 0]), float)
-        scale = t.get("scale", 1.0)
-        scale = np.full(3, float(scale)) if np.ndim(scale) == 0 else np.asarray(scale, float)
-        rot = np.asarray(t.get("rotation", [0, 0, 0]), float)
+    def transform(self, t, key: str, allow_rotation=True):
+        t = self.table(t, key)
+        pos = np.asarray(self.vector(t, "position", key, [0, 0, 0]))
+        if isinstance(t.get("scale", 1.0), list):
+            scale = np.asarray(self.vector(t, "scale", key, None))
+        else:
+            scale = np.full(3, self.number(t, "scale", key, 1.0))
+        rot = np.asarray(self.vector(t, "rotation", key, [0, 0, 0]))
         if np.any(rot != 0) and not allow_rotation:
             self.fail(f"{key}.rotation", "rotated boxes are not supported (axis-aligned only)")
-        # Tungsten's Mat4f::rotYXZ: R = Ry Rx Rz (degrees)
-        ax, ay, az = np.radians(rot)
-        rx = np.array([[1, 0, 0], [0, math.cos(ax), -math.sin(ax)], [0, math.sin(ax), math.cos(ax)]])
-        ry = np.array([[math.cos(ay), 0, math.sin(ay)], [0, 1, 0], [-math.sin(ay), 0, math.cos(ay)]])
-        rz = np.array([[math.cos(az), -math.sin(az), 0], [math.sin(az), math.cos(az), 0], [0, 0, 1]])
-        return pos, scale, ry @ rx @ rz
+        return pos, scale, tungsten_rotation(rot)
 
     # --- blocks -----------------------------------------------------------------------
 
     def camera(self) -> dict:
-        cam = self.doc.get("camera", {})
+        cam = self.table(self.doc.get("camera", {}), "camera")
         if cam.get("type", "pinhole") != "pinhole":
             self.fail("camera.type", f'camera "{cam.get("type")}" is not supported (pinhole only)')
-        t = cam.get("transform", {})
+        t = self.table(cam.get("transform", {}), "camera.transform")
         res = cam.get("resolution", 512)
-        w, h = (res, res) if isinstance(res, int) else res
-        hfov = math.radians(float(cam.get("fov", 60.0)))
+        if isinstance(res, list):
+            if len(res) != 2:
+                self.fail("camera.resolution", f"expected 2 numbers (got {len(res)})")
+            w, h = (self.check_number(v, f"camera.resolution[{i}]", integer=True, ge=1)
+                    for i, v in enumerate(res))
+        else:
+            w = h = self.check_number(res, "camera.resolution", integer=True, ge=1)
+        hfov = math.radians(self.number(cam, "fov", "camera", 60.0, gt=0, lt=180))
         vfov = math.degrees(2 * math.atan(math.tan(hfov / 2) * h / w))
-        return {"position": t.get("position", [0, 0, 0]), "look_at": t.get("look_at", [0, 0, 1]),
-                "up": t.get("up", [0, 1, 0]), "fov": vfov, "resolution": [w, h]}
+        self.notes += notes_for(CAMERA, cam, "camera")
+        if cam.get("tonemap", "filmic") != "filmic":
+            self.notes.append(f'camera.tonemap: "{cam["tonemap"]}" becomes gpiscl\'s default '
+                              "clamp curve (filmic is the only curve mapped)")
+        return {"position": self.vector(t, "position", "camera.transform", [0, 0, 0]),
+                "look_at": self.vector(t, "look_at", "camera.transform", [0, 0, 1]),
+                "up": self.vector(t, "up", "camera.transform", [0, 1, 0]),
+                "fov": vfov, "resolution": [w, h]}
 
     def render(self) -> dict:
         out = {}
-        if "spp" in self.doc.get("renderer", {}):
-            out["spp"] = self.doc["renderer"]["spp"]
-        integ = self.doc.get("integrator", {})
+        renderer = self.table(self.doc.get("renderer", {}), "renderer")
+        if "spp" in renderer:
+            out["spp"] = self.number(renderer, "spp", "renderer", None, integer=True, ge=1)
+        integ = self.table(self.doc.get("integrator", {}), "integrator")
+        if integ.get("type", "path_tracer") not in ("path_tracer", "gp_path_tracer"):
+            self.fail("integrator.type", f'integrator "{integ["type"]}" is not supported '
+                      "(path_tracer, gp_path_tracer)")
         if "max_bounces" in integ:
-            out["max_depth"] = integ["max_bounces"]
-        if "enable_light_sampling" in integ:
-            out["nee"] = bool(integ["enable_light_sampling"])
+            out["max_depth"] = self.number(integ, "max_bounces", "integrator", None,
+                                           integer=True, ge=1)
+        nee = bool(integ.get("enable_light_sampling", True))
+        out["nee"] = nee
+        if bool(integ.get("enable_volume_light_sampling", True)) != nee:
+            self.notes.append("integrator.enable_volume_light_sampling: differs from "
+                              "enable_light_sampling; gpiscl's render.nee switches both "
+                              f"(set to {str(nee).lower()})")
+        self.notes += notes_for(INTEGRATOR, integ, "integrator")
         if self.doc.get("camera", {}).get("tonemap") == "filmic":
             out["tonemap"] = "filmic"
         return out
 
-    def mean(self, m: dict, key: str) -> dict:
+    def mean(self, m, key: str) -> dict:
+        m = self.table(m, key)
         kind = m.get("type")
+        for name in ("color", "emission"):
+            if name in m:
+                self.notes.append(f"{key}.{name}: their procedural {name} field on the mean "
+                                  f"is dropped; give the gpis shape a `{name}` field by hand")
         if kind == "homogeneous":
-            return {"type": "constant", "value": m.get("offset", 0.0)}
+            return {"type": "constant", "value": self.number(m, "offset", key, 0.0)}
         if kind == "spherical":
-            return {"type": "sphere", "center": m.get("center", [0, 0, 0]),
-                    "radius": m.get("radius", 1.0)}
+            return {"type": "sphere", "center": self.vector(m, "center", key, [0, 0, 0]),
+                    "radius": self.number(m, "radius", key, 1.0, gt=0)}
         if kind == "linear":
             if "min" in m:
                 self.fail(f"{key}.min", "a clamped linear mean is not supported")
-            return {"type": "plane", "point": m.get("reference_point", [0, 0, 0]),
-                    "normal": m.get("direction", [1, 0, 0]), "scale": m.get("scale", 1.0)}
+            return {"type": "plane", "point": self.vector(m, "reference_point", key, [0, 0, 0]),
+                    "normal": self.vector(m, "direction", key, [1, 0, 0]),
+                    "scale": self.number(m, "scale", key, 1.0, gt=0)}
+        if kind == "procedural":
+            return self.procedural_mean(m, key)
         if kind == "mesh":
             return self.mesh_mean(m, key)
         if kind == "tabulated":
             return self.tabulated_mean(m, key)
         self.fail(f"{key}.type", f'mean "{kind}" is not supported (homogeneous, spherical, '
-                  'linear, mesh, tabulated)')
+                  'linear, procedural, mesh, tabulated)')
+
+    def procedural_mean(self, m: dict, key: str) -> dict:
+        """Their knob SDFs and two_spheres; the transform that their renderer drops (it
+        evaluates F at the untransformed point) is applied, as their scenes intend."""
+        func = m.get("func")
+        if "f" in m and func is None:
+            self.fail(f"{key}.f", "procedural scalar means are not supported (func: "
+                      f"{', '.join(KNOBS)}, two_spheres)")
+        if func not in KNOBS + ("two_spheres",):
+            self.fail(f"{key}.func", f'procedural function "{func}" is not supported (one of: '
+                      f'{", ".join(KNOBS)}, two_spheres)')
+        for name, same in (("scale", 1.0), ("offset", 0.0)):
+            if self.number(m, name, key, same) != same:
+                self.fail(f"{key}.{name}", f"a procedural mean's {name} is not supported "
+                          f"({same:g} only)")
+        if "min" in m:
+            self.fail(f"{key}.min", "a clamped procedural mean is not supported")
+        child = ({"type": "procedural", "function": func} if func in KNOBS
+                 else copy.deepcopy(TWO_SPHERES))
+        if "transform" not in m:
+            return child
+        pos, scale, rot = self.transform(m["transform"], f"{key}.transform")
+        if np.any(pos != 0) or np.any(scale != 1) or np.any(rot != np.eye(3)):
+            self.notes.append(f"{key}.transform: applied; their renderer ignores it (the "
+                              "mean is evaluated at the untransformed point), so their "
+                              "images differ here")
+        out = {"type": "transform", "child": child}
+        if np.any(scale != 1):
+            out["scale"] = scale.tolist()
+        if np.any(rot != np.eye(3)):
+            out["rotate"] = euler_xyz(rot)
+        out["translate"] = pos.tolist()
+        return out
 
     def vdb_grid(self, spec, key: str, offset=0.0, scale=1.0, volume=False,
                  kind="mean") -> tuple[str, dict]:
@@ -217,6 +354,7 @@ class _Converter:
         to (g + offset) scale (after g <- -log(max(1e-4, g)) when volume)."""
         from ..io import vdb
         from ..io.grids import load_grid, save_grid
+        spec, key = self.grid_ref(spec, key)
         if not isinstance(spec, dict) or spec.get("type") != "vdb":
             self.fail(f"{key}.type", "only VDB grids ({type: vdb, file, density_name}) are "
                       "supported")
@@ -251,21 +389,31 @@ class _Converter:
         save_grid(out, type(g)((values + offset) * scale, g.origin, g.voxel_size))
         return str(out), spec.get("transform", {})
 
+    def grid_ref(self, spec, key: str):
+        """A grid object given inline or by name from the top-level "grids" list."""
+        if isinstance(spec, str):
+            return self.named(spec, "grids", key)
+        return spec, key
+
     def tabulated_mean(self, m: dict, key: str) -> dict:
-        path, t = self.vdb_grid(m.get("grid"), f"{key}.grid", float(m.get("offset", 0.0)),
-                                float(m.get("scale", 1.0)), bool(m.get("volume", False)))
-        interp = m["grid"].get("interpolate", "linear")
+        spec, gkey = self.grid_ref(m.get("grid"), f"{key}.grid")
+        path, t = self.vdb_grid(spec, gkey, self.number(m, "offset", key, 0.0),
+                                self.number(m, "scale", key, 1.0), bool(m.get("volume", False)))
+        interp = spec.get("interpolate", "linear")
         if interp not in ("linear", "quadratic"):
-            self.fail(f"{key}.grid.interpolate", f'"{interp}" is not supported (linear, '
-                      'quadratic)')
+            self.fail(f"{gkey}.interpolate", f'"{interp}" is not supported (linear, quadratic)')
         if interp == "quadratic":
-            self.notes.append(f"{key}.grid.interpolate: quadratic becomes gpiscl's cubic "
-                              "spline (also smooth, through the same samples)")
-        grid = {"type": "grid", "file": path,
-                "interpolation": "cubic" if interp == "quadratic" else "linear"}
+            # Their quadratic B-spline blends samples with non-negative weights, so it
+            # cannot cross zero where the samples do not; gpiscl's interpolating cubic can
+            # (it overshoots the bunny's far-field 100 to -34). Trilinear keeps that
+            # property, at the cost of facets in a mirror's reflections.
+            self.notes.append(f"{gkey}.interpolate: their quadratic B-spline becomes "
+                              "trilinear (also never crosses zero where the samples do not; "
+                              "gradients are piecewise constant instead of smooth)")
+        grid = {"type": "grid", "file": path, "interpolation": "linear"}
         if not t:
             return grid
-        pos, scale, rot = self.transform(t, f"{key}.grid.transform")
+        pos, scale, rot = self.transform(t, f"{gkey}.transform")
         return {"type": "transform", "child": grid, "scale": scale.tolist(),
                 "rotate": euler_xyz(rot), "translate": pos.tolist()}
 
@@ -277,8 +425,8 @@ class _Converter:
         gkey = "grid" if "grid" in k else "variance"
         if gkey not in k:
             self.fail(key, "a nonstationary kernel needs a grid (or variance) VDB grid")
-        path, t = self.vdb_grid(k[gkey], f"{key}.{gkey}", float(k.get("offset", 0.0)),
-                                float(k.get("scale", 1.0)), kind="sigma")
+        path, t = self.vdb_grid(k[gkey], f"{key}.{gkey}", self.number(k, "offset", key, 0.0),
+                                self.number(k, "scale", key, 1.0), kind="sigma")
         if t:
             pos, scale, rot = self.transform(t, f"{key}.{gkey}.transform")
             if np.any(scale != 1.0) or np.any(rot != np.eye(3)):
@@ -323,7 +471,8 @@ class _Converter:
                 "transform": {"scale": scale.tolist(), "rotate": euler_xyz(rot),
                               "translate": pos.tolist()}}
 
-    def kernel(self, k: dict, key: str) -> dict:
+    def kernel(self, k, key: str) -> dict:
+        k = self.table(k, key)
         kind = k.get("type")
         if kind == "nonstationary":
             return self.nonstationary_kernel(k, key)
@@ -333,17 +482,35 @@ class _Converter:
             self.fail(f"{key}.type", f'covariance "{kind}" is not supported{why}')
         out = {"type": kind}
         for name, value in k.items():
-            if name == "type":
+            if name in ("type", "roughness"):
                 continue
             if name not in KERNEL_KEYS[kind]:
                 self.fail(f"{key}.{name}", f'unknown {kind} key (the reference ignores it; '
                           f'expected one of: {", ".join(KERNEL_KEYS[kind])})')
-            out[KERNEL_KEYS[kind][name]] = value
+            out[KERNEL_KEYS[kind][name]] = (self.vector(k, name, key, None) if name == "aniso"
+                                            else self.number(k, name, key, None, gt=0))
+        if "roughness" in k:
+            out.update(self.roughness_length(k, key, out))
         return out
 
-    def leaves(self, gp: dict, key: str):
+    def roughness_length(self, k: dict, key: str, out: dict) -> dict:
+        """Their knob scenes give `roughness` (a Beckmann alpha) instead of lengthScale.
+        Their renderer ignores the key (l stays 1); what it meant is alpha = sqrt(2) sigma
+        / l for an SE surface, so l = sqrt(2) sigma / roughness (scenes/knob.json)."""
+        alpha = self.number(k, "roughness", key, None, gt=0)
+        if k.get("type") != "squared_exponential" or "lengthScale" in k:
+            self.notes.append(f"{key}.roughness: ignored, as by their renderer (it only "
+                              "stands in for lengthScale on a squared_exponential kernel)")
+            return {}
+        length = math.sqrt(2) * out.get("sigma", 1.0) / alpha
+        self.notes.append(f"{key}.roughness: read as the Beckmann alpha sqrt(2) sigma / l, "
+                          f"so length_scale = {length:.6g}; their renderer ignores the key "
+                          "and uses l = 1")
+        return {"length_scale": length}
+
+    def leaves(self, gp, key: str):
         """(mean, kernel, id, key) of each standard GP under a csg tree."""
-        kind = gp.get("type", "standard")
+        kind = self.table(gp, key).get("type", "standard")
         if kind == "csg":
             return self.leaves(gp["left"], f"{key}.left") + self.leaves(gp["right"], f"{key}.right")
         if kind != "standard":
@@ -352,28 +519,54 @@ class _Converter:
             self.fail(f"{key}.conditioning_data", "conditioning on a mesh is not supported")
         return [(self.mean(gp.get("mean", {"type": "spherical"}), f"{key}.mean"),
                  self.kernel(gp.get("covariance", {"type": "squared_exponential"}),
-                             f"{key}.covariance"), int(gp.get("id", 0)), key)]
+                             f"{key}.covariance"),
+                 self.number(gp, "id", key, 0, integer=True, ge=0), key)]
 
     def sampler(self, med: dict, key: str) -> dict:
         kind = med.get("type")
         if kind in FS_MEDIA:
-            s = {"type": "function_space", "samples": med.get("sample_points", 32),
+            s = {"type": "function_space",
+                 "samples": self.number(med, "sample_points", key, 32, integer=True, ge=2),
                  "memory": MEMORIES.get(med.get("correlation_context", "goldfish"))}
             if s["memory"] is None:
                 self.fail(f"{key}.correlation_context",
                           f"unknown memory model (expected one of: {', '.join(MEMORIES)})")
-            if med.get("step_size_cov", 0) > 0:
-                s["step_corr"] = med["step_size_cov"]
+            step_cov = self.number(med, "step_size_cov", key, 0.0, ge=0, lt=1)
+            if step_cov > 0:
+                s["step_corr"] = step_cov
+            else:
+                self.notes.append(f"{key}.step_size_cov: 0 lets their {s['samples']} samples "
+                                  "spread over the whole chord; gpiscl caps the step at its "
+                                  "default correlation (sampler.step_corr), which is finer")
             return s
         if kind in WS_MEDIA:
-            return {"type": "weight_space", "features": med.get("basis_functions", 300)}
+            return {"type": "weight_space",
+                    "features": self.number(med, "basis_functions", key, 300, integer=True,
+                                            ge=1)}
         self.fail(f"{key}.type", f'medium "{kind}" is not a Gaussian-process medium')
 
     def gpis(self, medium_ref, proxy: dict, key: str, render: dict) -> list:
         med, mkey = self.named(medium_ref, "media", key)
+        med = self.table(med, mkey)
         phases = [med.get("phase_function", {"type": "brdf", "bsdf": {"type": "lambert"}})]
-        phases += med.get("additional_phase_functions", [])
+        extra = med.get("additional_phase_functions", [])
+        if not isinstance(extra, list):
+            self.fail(f"{mkey}.additional_phase_functions",
+                      f"expected a list (got {kind_of(extra)})")
+        phases += extra
         sampler = self.sampler(med, mkey)
+        self.notes += notes_for(MEDIUM, med, mkey)
+        # their only use of the coefficients: an event scatters with sigma_s / sigma_t
+        # (density cancels), else the path is absorbed: a factor on the micro-BSDF
+        sigma_s = self.number(med, "sigma_s", mkey, 0.0, ge=0)
+        sigma_a = self.number(med, "sigma_a", mkey, 0.0, ge=0)
+        if sigma_s == 0:
+            self.fail(f"{mkey}.sigma_s", "must be > 0: their renderer absorbs every event "
+                      "of a medium without scattering")
+        scatter = sigma_s / (sigma_s + sigma_a)
+        if scatter < 1:
+            self.notes.append(f"{mkey}.sigma_a: the scattering chance sigma_s / (sigma_s + "
+                              f"sigma_a) = {scatter:.4g} multiplies the micro-BSDF albedo")
         if med.get("single_realization"):
             render["realization"] = 0
         shapes = []
@@ -381,19 +574,23 @@ class _Converter:
                                                     f"{mkey}.gaussian_process"):
             if gp_id >= len(phases):
                 self.fail(f"{gkey}.id", f"no phase function for GP id {gp_id}")
-            phase = phases[gp_id]
             pkey = (f"{mkey}.phase_function" if gp_id == 0
                     else f"{mkey}.additional_phase_functions[{gp_id - 1}]")
+            phase = self.table(phases[gp_id], pkey)
             if phase.get("type") != "brdf":
                 self.fail(f"{pkey}.type", "only brdf phase functions (micro-BSDFs) are supported")
+            bsdf = self.bsdf(phase.get("bsdf", {}), f"{pkey}.bsdf", micro=True)
+            bsdf["albedo"] = [a * scatter for a in bsdf["albedo"]]
             shapes.append({"type": "gpis", "proxy": proxy, "mean": mean, "kernel": kernel,
-                           "sampler": dict(sampler),
-                           "bsdf": self.bsdf(phase.get("bsdf", {}), f"{pkey}.bsdf", micro=True)})
+                           "sampler": dict(sampler), "bsdf": bsdf})
         return shapes
 
     def primitive(self, p: dict, key: str, render: dict, shapes: list, lights: list):
         kind = p.get("type")
         t = p.get("transform", {})
+        if p.get("sample", True) is False:
+            self.notes.append(f"{key}.sample: false keeps their light sampling away from this "
+                              "emitter; gpiscl samples every light")
         if kind == "quad":
             pos, scale, rot = self.transform(t, f"{key}.transform")
             u, v = rot @ [scale[0], 0, 0], rot @ [0, 0, -scale[2]]
@@ -419,14 +616,18 @@ class _Converter:
                 shapes.append({"type": "box" if kind == "cube" else "sphere", **geo,
                                "bsdf": self.bsdf(p.get("bsdf", {}), f"{key}.bsdf")})
         elif kind == "infinite_sphere":
-            lights.append(self.environment_light(p.get("emission", 1.0), f"{key}.emission"))
+            lights.append(self.environment_light(p.get("emission", 1.0), t, key))
         elif kind == "infinite_sphere_cap":
-            theta = math.radians(float(p.get("cap_angle", 10.0)))
+            cap = self.number(p, "cap_angle", key, 10.0, gt=0, lt=90)
+            theta = math.radians(cap)
             _, _, rot = self.transform(t, f"{key}.transform")
             power = self.colour(p.get("power", 1.0), f"{key}.power")
-            radiance = [c / (2 * math.pi * (1 - math.cos(theta))) for c in power]
+            # their radiance power / (2 pi (1 - cos cap)); 1 - cos as 2 sin^2(cap / 2),
+            # which keeps its digits for their 0.1 degree sun
+            one_minus_cos = 2 * math.sin(theta / 2) ** 2
+            radiance = [c / (2 * math.pi * one_minus_cos) for c in power]
             lights.append({"type": "directional", "direction": (rot @ [0, 1, 0]).tolist(),
-                           "angular_radius": math.degrees(theta),
+                           "angular_radius": cap,
                            "irradiance": [L * math.pi * math.sin(theta) ** 2 for L in radiance]})
         elif kind == "mesh" and "int_medium" in p:
             # a (convex, closed) mesh proxy: the file and transform map as for a mesh mean
@@ -440,25 +641,46 @@ class _Converter:
         else:
             self.fail(f"{key}.type", f'primitive "{kind}" is not supported')
 
-    def environment_light(self, emission, key) -> dict:
+    def environment_light(self, emission, t, key) -> dict:
+        ekey = f"{key}.emission"
         if self.environment is not None:
-            self.notes.append(f"{key}: replaced by the given environment")
+            self.notes.append(f"{ekey}: replaced by the given environment")
             return self.environment
-        if isinstance(emission, str):
-            path = (self.base / emission).resolve()
-            if path.suffix.lower() != ".exr":
-                self.fail(key, f'environment map "{emission}" is not an .exr; convert it or '
-                          "pass a substitute environment")
-            return {"type": "environment_map", "file": str(path)}
-        return {"type": "environment", "radiance": self.colour(emission, key)}
+        if not isinstance(emission, str):
+            return {"type": "environment", "radiance": self.colour(emission, ekey)}
+        from ..io.radiance_hdr import read_environment_rgb
+        path = (self.base / emission).resolve()
+        if path.suffix.lower() not in (".exr", ".hdr"):
+            self.fail(ekey, f'environment map "{emission}" is neither .exr nor .hdr; convert '
+                      "it or pass a substitute environment")
+        if not path.is_file():
+            self.fail(ekey, f"file not found: {path}; pass a substitute environment")
+        try:
+            read_environment_rgb(path)
+        except (OSError, ValueError) as exc:
+            self.fail(ekey, f"{exc}; pass a substitute environment")
+        # their u = atan2(z, x) / 2 pi + 1/2 in the map's frame, whose rotation
+        # (Ry(-y)) turns it by y; ours is phi = atan2(z, x) turned by `rotation`
+        _, _, rot = self.transform(t, f"{key}.transform")
+        spin = math.degrees(math.atan2(-rot[0, 2], rot[0, 0]))
+        if not np.allclose(rot @ [0, 1, 0], [0, 1, 0], atol=1e-9):
+            self.fail(f"{key}.transform.rotation", "an environment map turns about y only")
+        return {"type": "environment_map", "file": str(path),
+                "rotation": (spin + 180.0) % 360.0}
 
     def convert(self) -> dict:
+        self.table(self.doc, "")
+        camera = self.camera()  # first: render() reads the camera's tonemap
         render = self.render()
         shapes, lights = [], []
-        for i, p in enumerate(self.doc.get("primitives", [])):
-            self.primitive(p, f"primitives[{i}]", render, shapes, lights)
+        primitives = self.doc.get("primitives", [])
+        if not isinstance(primitives, list):
+            self.fail("primitives", f"expected a list (got {kind_of(primitives)})")
+        for i, p in enumerate(primitives):
+            self.primitive(self.table(p, f"primitives[{i}]"), f"primitives[{i}]", render,
+                           shapes, lights)
         return {"description": f"converted from {Path(self.source).name}",
-                "camera": self.camera(), "render": render, "shapes": shapes, "lights": lights}
+                "camera": camera, "render": render, "shapes": shapes, "lights": lights}
 
 
 def convert_tungsten(doc: dict, source: str = "<dict>", environment: dict | None = None,

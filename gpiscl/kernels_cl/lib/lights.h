@@ -7,8 +7,12 @@
  *   point            radiance = intensity, p0 = position
  *   sphere           radiance, p0 = (centre, radius)
  *   rectangle        radiance, p0 = corner, p1/p2 = edges, p2.w = 1 if two-sided; area
- *   directional      radiance (in-cone radiance, or irradiance if delta), p0 = unit
- *                    direction towards the light, cos_max */
+ *   directional      radiance (in-cone radiance, or irradiance if delta), p0.xyz = unit
+ *                    direction towards the light, p0.w = 1 - cos(angular radius), 0 if
+ *                    delta (given as 2 sin^2(radius / 2): a float32 cos of a 0.1 degree
+ *                    sun keeps one digit of 1 - cos, which made it 1.75 % too bright)
+ *
+ * Cones are described by 1 - cos(half-angle) throughout, for the same reason. */
 
 typedef struct {
     __global const float4* texels;   /* H*W radiance */
@@ -25,18 +29,37 @@ inline float3 uniform_sphere(float2 u)
     return (float3)(r * cos(phi), r * sin(phi), z);
 }
 
-/* Direction in a cone of half-angle acos(cos_max) around axis, uniform in solid angle. */
-inline float3 uniform_cone(float2 u, float3 axis, float cos_max)
+/* Direction in a cone around axis with 1 - cos(half-angle) = omc, uniform in solid angle.
+ * h = 1 - cos(t) is uniform in [0, omc]; sin(t) = sqrt(h (2 - h)) keeps its digits where
+ * sqrt(1 - cos^2) would not. */
+inline float3 uniform_cone(float2 u, float3 axis, float omc)
 {
-    float cos_t = 1.0f - u.x * (1.0f - cos_max);
-    float sin_t = sqrt(fmax(0.0f, 1.0f - cos_t * cos_t));
+    float h = u.x * omc;
+    float cos_t = 1.0f - h;
+    float sin_t = sqrt(fmax(0.0f, h * (2.0f - h)));
     float phi = 2.0f * PI_F * u.y;
     float3 t, b;
     make_frame(axis, &t, &b);
     return normalize(sin_t * cos(phi) * t + sin_t * sin(phi) * b + cos_t * axis);
 }
 
-inline float cone_pdf(float cos_max) { return 1.0f / (2.0f * PI_F * (1.0f - cos_max)); }
+inline float cone_pdf(float omc) { return 1.0f / (2.0f * PI_F * omc); }
+
+/* 1 - cos of the half-angle of the cone a sphere of radius r subtends at distance^2 d2
+ * (> r^2): 1 - sqrt(1 - s) = s / (1 + sqrt(1 - s)) with s = r^2 / d2, no cancellation. */
+inline float sphere_cone_omc(float r, float d2)
+{
+    float s = fmin(r * r / d2, 1.0f);
+    return s / (1.0f + sqrt(1.0f - s));
+}
+
+/* Is unit d inside the cone around unit axis with 1 - cos(half-angle) = omc?
+ * |d - axis|^2 = 2 (1 - cos), which float32 resolves for tiny cones; a dot does not. */
+inline bool in_cone(float3 d, float3 axis, float omc)
+{
+    float3 e = d - axis;
+    return dot(e, e) <= 2.0f * omc;
+}
 
 /* --- environment map: lat-long, theta from +y, phi = atan2(z, x) (gpiscl/host/envmap.py) */
 
@@ -115,9 +138,9 @@ inline float3 infinite_light_radiance(__global const Light* l, EnvMap m, float3 
         *pdf = env_pdf(m, dm);
         return l->radiance.xyz * m.texels[idx].xyz;
     }
-    if (l->kind == LIGHT_DIRECTIONAL && l->cos_max < 1.0f) {
-        if (dot(d, l->p0.xyz) >= l->cos_max) {
-            *pdf = cone_pdf(l->cos_max);
+    if (l->kind == LIGHT_DIRECTIONAL && l->p0.w > 0.0f) {
+        if (in_cone(d, l->p0.xyz, l->p0.w)) {
+            *pdf = cone_pdf(l->p0.w);
             return l->radiance.xyz;
         }
     }
@@ -134,7 +157,7 @@ inline float3 area_light_radiance(__global const Light* l, float3 from, float3 x
     if (l->kind == LIGHT_SPHERE) {
         float3 oc = l->p0.xyz - from;
         float d2 = dot(oc, oc), r = l->p0.w;
-        if (d2 > r * r) *pdf = cone_pdf(sqrt(fmax(0.0f, 1.0f - r * r / d2)));
+        if (d2 > r * r) *pdf = cone_pdf(sphere_cone_omc(r, d2));
         return (cos_l > 0.0f) ? l->radiance.xyz : (float3)(0.0f);
     }
     if (l->kind == LIGHT_RECTANGLE) {
@@ -173,25 +196,25 @@ inline float3 sample_light(__global const Light* l, EnvMap m, float3 x, float2 u
         return l->radiance.xyz / d2;
     }
     if (l->kind == LIGHT_DIRECTIONAL) {
-        if (l->cos_max >= 1.0f) {
+        if (l->p0.w <= 0.0f) {
             *wi = l->p0.xyz;
             return l->radiance.xyz;
         }
-        *wi = uniform_cone(u, l->p0.xyz, l->cos_max);
-        *pdf = cone_pdf(l->cos_max);
+        *wi = uniform_cone(u, l->p0.xyz, l->p0.w);
+        *pdf = cone_pdf(l->p0.w);
         return l->radiance.xyz;
     }
     if (l->kind == LIGHT_SPHERE) {
         float3 oc = l->p0.xyz - x;
         float d2 = dot(oc, oc), r = l->p0.w;
         if (d2 <= r * r) return (float3)(0.0f);  /* inside the light: no sample */
-        float cos_max = sqrt(fmax(0.0f, 1.0f - r * r / d2));
+        float omc = sphere_cone_omc(r, d2);
         float3 axis = oc / sqrt(d2);
-        *wi = uniform_cone(u, axis, cos_max);
+        *wi = uniform_cone(u, axis, omc);
         /* distance to the near intersection with the sphere */
         float b = dot(oc, *wi);
         *dist = b - sqrt(fmax(0.0f, b * b - d2 + r * r));
-        *pdf = cone_pdf(cos_max);
+        *pdf = cone_pdf(omc);
         return l->radiance.xyz;
     }
     /* rectangle */

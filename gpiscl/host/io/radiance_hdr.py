@@ -1,0 +1,63 @@
+"""Radiance RGBE (.hdr) images, the environment-map format of the authors' scenes, read
+and written through imagecodecs (a maintained codec library; its rgbe codec is Bruce
+Walter's reference rgbe.c), and the one reader for environment-map files of either kind.
+
+RGBE stores an 8-bit mantissa per channel and one shared exponent per pixel: a channel
+decodes to m 2^(e - 136), so a channel much dimmer than its pixel's brightest keeps few
+digits. Rows are stored top first ("-Y H +X W"), the orientation gpiscl's lat-long maps
+use (row 0 is +y).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .images import read_exr_rgb
+
+
+def _codecs():
+    import imagecodecs
+    return imagecodecs
+
+
+def read_hdr_rgb(path) -> np.ndarray:
+    """(H, W, 3) float32 radiance of a Radiance .hdr file; ValueError naming the problem."""
+    data = Path(path).read_bytes()
+    if not data:
+        raise ValueError(f"{path}: empty file (not a Radiance .hdr image)")
+    try:
+        rgb = _codecs().rgbe_decode(data)
+    except Exception as exc:  # imagecodecs raises RgbeError or ValueError on bad data
+        raise ValueError(f"{path}: cannot read as a Radiance .hdr image ({exc})") from None
+    rgb = np.asarray(rgb, np.float32)
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError(f"{path}: expected an RGB image, got shape {rgb.shape}")
+    return rgb
+
+
+def write_hdr(path, rgb) -> None:
+    """Write (H, W, 3) non-negative radiance as a run-length encoded Radiance .hdr file."""
+    rgb = np.ascontiguousarray(rgb, np.float32)
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError(f"write_hdr: rgb must have shape (H, W, 3), got {rgb.shape}")
+    if not np.all(np.isfinite(rgb)) or rgb.min() < 0:
+        raise ValueError("write_hdr: RGBE stores finite, non-negative values only")
+    Path(path).write_bytes(_codecs().rgbe_encode(rgb))
+
+
+def read_environment_rgb(path) -> np.ndarray:
+    """An environment map's (H, W, 3) float32 radiance, from .hdr or OpenEXR."""
+    if str(path).lower().endswith(".hdr"):
+        return read_hdr_rgb(path)
+    return read_exr_rgb(path)
+
+
+def hdr_problem(path) -> str | None:
+    """Why a .hdr file cannot serve as an environment map, or None (for the scene
+    loader's File checks)."""
+    try:
+        read_hdr_rgb(path)
+    except (OSError, ValueError) as exc:
+        return str(exc).removeprefix(f"{path}: ")
+    return None
