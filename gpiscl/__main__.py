@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import math
 import sys
 from pathlib import Path
 
@@ -42,6 +43,24 @@ def _positive_int(text: str) -> int:
     return v
 
 
+def _seconds(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"expected a number of seconds > 0 (got {text!r})")
+    return v
+
+
+def _batch_size(text: str) -> int:
+    from .host.batching import MAX_BATCH
+    v = _positive_int(text)
+    if v > MAX_BATCH:
+        raise argparse.ArgumentTypeError(f"expected at most {MAX_BATCH} paths (got {text!r})")
+    return v
+
+
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m gpiscl",
                                  description="Render Gaussian Process Implicit Surfaces.")
@@ -55,9 +74,13 @@ def _parser() -> argparse.ArgumentParser:
                    help="render one fixed GPIS realization R for every pixel (weight space); "
                    "'none' averages over realizations whatever the scene says")
     r.add_argument("--resolution", type=_resolution, help="WIDTHxHEIGHT")
-    r.add_argument("--time-limit", type=float, help="stop after this many seconds")
+    r.add_argument("--time-limit", type=_seconds, metavar="SECONDS",
+                   help="stop after this many seconds of rendering (to within one batch, "
+                   "~0.5 s)")
     r.add_argument("--device", help="OpenCL device: 'P:D' indices or a name fragment")
-    r.add_argument("--batch-size", type=_positive_int, help="paths in flight per batch")
+    r.add_argument("--batch-size", type=_batch_size, metavar="N",
+                   help="the most paths in flight per batch (batches are sized to take "
+                   "~0.5 s each below it; default 262144)")
     r.add_argument("--exposure", type=float, default=0.0, help="PNG preview exposure (stops)")
     r.add_argument("--tonemap", choices=("clamp", "filmic"),
                    help="PNG preview curve (default: the scene's render.tonemap)")
@@ -94,7 +117,8 @@ def _add_uq_parser(sub):
                    help="merge these .uq.npz partial sums (and render nothing)")
     u.add_argument("--resolution", type=_resolution, help="WIDTHxHEIGHT")
     u.add_argument("--device", help="OpenCL device: 'P:D' indices or a name fragment")
-    u.add_argument("--batch-size", type=_positive_int, help="paths in flight per batch")
+    u.add_argument("--batch-size", type=_batch_size, metavar="N",
+                   help="the most paths in flight per batch")
     u.add_argument("--exposure", type=float, default=0.0, help="PNG preview exposure (stops)")
 
 
@@ -108,6 +132,7 @@ def _load(args) -> Scene:
 def cmd_render(args) -> int:
     from .api import render_result
     from .host.output import write_outputs
+    from .host.progress import SppBar
 
     scene = _load(args)
     data = copy.deepcopy(scene.data)
@@ -127,16 +152,17 @@ def cmd_render(args) -> int:
     spp = data["render"]["spp"]
     w, h = data["camera"]["resolution"]
     print(f"rendering {scene.source} at {w}x{h}, {spp} spp on {device.name}", file=sys.stderr)
-    bar = _progress_bar(w * h * spp)
+    bar = SppBar(spp, w * h, file=sys.stderr) if sys.stderr.isatty() else None
     try:
         result = render_result(scene, device=device, batch_size=args.batch_size,
-                               time_limit=args.time_limit,
-                               progress=bar.update if bar else None)
+                               time_limit=args.time_limit, progress=bar)
     finally:
         if bar:
             bar.close()
     paths = write_outputs(result.image, scene, args.output, args.exposure)
     st = result.stats
+    if st.time_limited:
+        print(f"time limit: stopped at {st.spp_reached:.4g} of {spp} spp", file=sys.stderr)
     if st.interrupted:
         print("interrupted: wrote the samples rendered so far", file=sys.stderr)
     print(st.summary(), file=sys.stderr)
@@ -144,14 +170,6 @@ def cmd_render(args) -> int:
         print(st.kernel_table, file=sys.stderr)
     print(f"wrote {paths['exr']}, {paths['png']}, {paths['scene']}", file=sys.stderr)
     return 0
-
-
-def _progress_bar(total):
-    if not sys.stderr.isatty():
-        return None
-    from tqdm import tqdm
-    return tqdm(total=total, unit="path", unit_scale=True, file=sys.stderr,
-                desc="paths", smoothing=0.1)
 
 
 def cmd_devices(_args) -> int:
