@@ -1,6 +1,12 @@
 """Command line: python -m gpiscl render|uq|sample|devices ..."""
 from __future__ import annotations
 
+if __name__ == "__main__":
+    # first, so that a signal during the imports below (pyopencl, numpy: ~1 s) already
+    # finds the handlers: one line and exit code 130/143/129, not a traceback
+    from .host import signals as _signals
+    _signals.install()
+
 import argparse
 import copy
 import math
@@ -130,7 +136,8 @@ def _load(args) -> Scene:
 
 
 def cmd_render(args) -> int:
-    from .api import render_result
+    from .api import _prepare
+    from .host import signals
     from .host.output import write_outputs
     from .host.progress import SppBar
 
@@ -152,24 +159,40 @@ def cmd_render(args) -> int:
     spp = data["render"]["spp"]
     w, h = data["camera"]["resolution"]
     print(f"rendering {scene.source} at {w}x{h}, {spp} spp on {device.name}", file=sys.stderr)
-    bar = SppBar(spp, w * h, file=sys.stderr) if sys.stderr.isatty() else None
-    try:
-        result = render_result(scene, device=device, batch_size=args.batch_size,
-                               time_limit=args.time_limit, progress=bar)
-    finally:
-        if bar:
-            bar.close()
-    paths = write_outputs(result.image, scene, args.output, args.exposure)
-    st = result.stats
-    if st.time_limited:
-        print(f"time limit: stopped at {st.spp_reached:.4g} of {spp} spp", file=sys.stderr)
-    if st.interrupted:
-        print("interrupted: wrote the samples rendered so far", file=sys.stderr)
+    integrator, _ = _prepare(scene, device=device, batch_size=args.batch_size)
+    # from here on a stop signal ends the render and the samples so far are written
+    with signals.noting():
+        bar = SppBar(spp, w * h, file=sys.stderr) if sys.stderr.isatty() else None
+        try:
+            result = integrator.render(spp, time_limit=args.time_limit, progress=bar,
+                                       stop=signals.requested)
+        finally:
+            if bar:
+                bar.close()
+        st = result.stats
+        stopped_by = signals.received()
+        reached = f"{st.spp_reached:.4g} of {spp} spp"
+        if st.paths == 0:
+            print(f"interrupted by {signals.name(stopped_by)} before the first samples: "
+                  f"nothing written", file=sys.stderr)
+            return signals.exit_code(stopped_by)
+        with signals.writing():
+            paths = write_outputs(result.image, scene, args.output, args.exposure, st)
+    if stopped_by is not None:
+        print(f"interrupted by {signals.name(stopped_by)} at {reached}", file=sys.stderr)
+    elif st.time_limited:
+        print(f"time limit: stopped at {reached}", file=sys.stderr)
+    elif st.interrupted:
+        print(f"interrupted at {reached}", file=sys.stderr)
+    uncovered = int((result.image.count == 0).sum())
+    if uncovered:
+        print(f"{uncovered} of {w * h} pixels have no sample yet: 0 in the EXR's 'samples' "
+              f"channel, magenta in the PNG preview", file=sys.stderr)
     print(st.summary(), file=sys.stderr)
     if args.stats:
         print(st.kernel_table, file=sys.stderr)
     print(f"wrote {paths['exr']}, {paths['png']}, {paths['scene']}", file=sys.stderr)
-    return 0
+    return 0 if stopped_by is None else signals.exit_code(stopped_by)
 
 
 def cmd_devices(_args) -> int:
@@ -192,7 +215,8 @@ def cmd_devices(_args) -> int:
 
 
 def cmd_uq(args) -> int:
-    from .host.uq import UqSums, check_uq_scene, render_realizations, write_uq_outputs
+    from .host import signals
+    from .host.uq import UqSums, check_uq_scene, write_uq_outputs
 
     if args.merge:
         sums = UqSums.empty(())
@@ -220,6 +244,13 @@ def cmd_uq(args) -> int:
     n, k = args.realizations, args.spp
     print(f"uq: {n} realizations x {k} spp of {scene.source} on {device.name}",
           file=sys.stderr)
+    with signals.noting():
+        return _uq_run(args, scene, device, n, k)
+
+
+def _uq_run(args, scene, device, n, k) -> int:
+    from .host import signals
+    from .host.uq import render_realizations, write_uq_outputs
     bar = None
     if sys.stderr.isatty():
         from tqdm import tqdm
@@ -228,32 +259,39 @@ def cmd_uq(args) -> int:
         run = render_realizations(scene, n, k, seed=args.seed, first=args.first,
                                   resolution=args.resolution, device=device,
                                   batch_size=args.batch_size,
-                                  progress=bar.update if bar else None)
+                                  progress=bar.update if bar else None,
+                                  stop=signals.requested)
     finally:
         if bar:
             bar.close()
     n = run.sums.n
+    stopped_by = signals.received()
+    code = 0 if stopped_by is None else signals.exit_code(stopped_by)
     if run.interrupted:
         print(f"interrupted: keeping the {n} completed realizations", file=sys.stderr)
     if n == 0:
-        return 1
+        if stopped_by is not None:
+            print("no realization completed: nothing written", file=sys.stderr)
+        return code or 1
     print(f"{n} realizations in {run.seconds:.2f} s ({n / run.seconds:.3g} realizations/s, "
           f"{run.paths / run.seconds:.4g} paths/s)", file=sys.stderr)
     if n < 2:   # a batch to merge later: no variance yet
         path = Path(args.output).with_suffix(".uq.npz")
         path.parent.mkdir(parents=True, exist_ok=True)
-        run.sums.save(path)
+        with signals.writing():
+            run.sums.save(path)
         print(f"one realization has no variance; wrote its partial sums {path} "
               f"(combine with: uq --merge)", file=sys.stderr)
-        return 0
+        return code
     data = copy.deepcopy(scene.data)
     if args.resolution:
         data["camera"]["resolution"] = list(args.resolution)
-    paths = write_uq_outputs(run.sums, Scene(data, scene.source, scene.base_dir),
-                             args.output, args.exposure)
+    with signals.writing():
+        paths = write_uq_outputs(run.sums, Scene(data, scene.source, scene.base_dir),
+                                 args.output, args.exposure)
     print(f"wrote {paths['exr']}, {paths['png']}, {paths['std_png']}, {paths['sums']}",
           file=sys.stderr)
-    return 0
+    return code
 
 
 def _add_sample_parser(sub):
@@ -318,14 +356,23 @@ def cmd_convert_vdb(args) -> int:
 
 
 def main(argv=None) -> int:
-    args = _parser().parse_args(argv)
+    from .host import signals
     try:
+        args = _parser().parse_args(argv)
         commands = {"render": cmd_render, "devices": cmd_devices, "uq": cmd_uq,
                     "sample": cmd_sample, "convert-vdb": cmd_convert_vdb}
         return commands[args.command](args)
     except (SceneError, DeviceError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except BaseException:
+        # a stop signal during start-up: Interrupted itself, or what it became on the way
+        # out of a C extension (an ImportError, a pyopencl error)
+        stopped_by = signals.received()
+        if stopped_by is None:
+            raise
+        print(signals.startup_message(stopped_by), file=sys.stderr)
+        return signals.exit_code(stopped_by)
 
 
 if __name__ == "__main__":

@@ -16,6 +16,16 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
                   batch_size: int | None = None, time_limit: float | None = None,
                   progress=None, realization: int | None = None) -> RenderResult:
     """Render a scene (path, dict or Scene); arguments override its render block."""
+    integrator, settings = _prepare(scene, spp=spp, seed=seed, resolution=resolution,
+                                   device=device, batch_size=batch_size,
+                                   realization=realization)
+    return integrator.render(settings["spp"], time_limit=time_limit, progress=progress)
+
+
+def _prepare(scene, spp=None, seed=None, resolution=None, device=None, batch_size=None,
+            realization=None):
+    """The compiled integrator for a render and its resolved render settings: the part
+    of render_result before any sample is traced (the command line renders in between)."""
     scene = load_scene(scene)
     data = copy.deepcopy(scene.data)
     settings = data["render"]
@@ -32,7 +42,7 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
         device = shared_device(device)
     integrator = WavefrontIntegrator(device, compile_scene(data, scene.source), settings,
                                      batch_size)
-    return integrator.render(settings["spp"], time_limit=time_limit, progress=progress)
+    return integrator, settings
 
 
 def _check_realization(data: dict, source: str):

@@ -216,8 +216,9 @@ class UqRun:
 
 def render_realizations(scene, realizations: int, spp: int, seed: int | None = None,
                         first: int = 0, resolution=None, device=None, batch_size=None,
-                        progress=None) -> UqRun:
-    """Render realizations first .. first+realizations-1 with spp samples each."""
+                        progress=None, stop=None) -> UqRun:
+    """Render realizations first .. first+realizations-1 with spp samples each; stop()
+    (asked between bounces) or Ctrl-C ends it, keeping the completed realizations."""
     from .device import Device, shared_device
     from .integrator import WavefrontIntegrator
     from .scene import load_scene
@@ -246,7 +247,7 @@ def render_realizations(scene, realizations: int, spp: int, seed: int | None = N
         for rid, rseed in zip(ids, seeds):
             settings = dict(data["render"], spp=int(spp), seed=rseed, realization=rid)
             integ = WavefrontIntegrator(device, compiled, settings, batch_size)
-            result = integ.render(int(spp))
+            result = integ.render(int(spp), stop=stop)
             if result.stats.interrupted:   # Ctrl-C: fewer than K samples, so not used
                 interrupted = True
                 break
