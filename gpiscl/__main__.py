@@ -11,7 +11,6 @@ import argparse
 import copy
 import math
 import sys
-from pathlib import Path
 
 from .host.device import Device, DeviceError, list_devices
 from .host.scene import Scene, SceneError, load_scene
@@ -73,7 +72,9 @@ def _parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render a scene to EXR + PNG")
     r.add_argument("scene", nargs="?", help="scene JSON file (default: the built-in scene)")
-    r.add_argument("-o", "--output", default="out.exr", help="output EXR (default out.exr)")
+    r.add_argument("-o", "--output", default="out.exr",
+                   help="NAME.exr: EXR + PNG preview + NAME.scene.json; NAME.png: the PNG "
+                   "preview + NAME.scene.json (default out.exr)")
     r.add_argument("--spp", type=_positive_int, help="samples per pixel")
     r.add_argument("--seed", type=int, help="random seed")
     r.add_argument("--realization", type=_realization, metavar="R",
@@ -138,7 +139,8 @@ def _load(args) -> Scene:
 def cmd_render(args) -> int:
     from .api import _prepare
     from .host import signals
-    from .host.output import write_outputs
+    from .host.output import output_paths, write_outputs
+    from .host.output_files import check_writable, scene_inputs
     from .host.progress import SppBar
 
     scene = _load(args)
@@ -155,6 +157,8 @@ def cmd_render(args) -> int:
     if isinstance(args.realization, int) and not 0 <= args.realization < 2**31:
         raise SceneError("<command line>", "--realization", "must be in [0, 2**31)")
     scene = Scene(data, scene.source, scene.base_dir)
+    # before any work: a render must not end in 'cannot write' (output_files)
+    check_writable(output_paths(args.output).values(), inputs=scene_inputs(scene))
     device = Device(args.device)
     spp = data["render"]["spp"]
     w, h = data["camera"]["resolution"]
@@ -191,7 +195,8 @@ def cmd_render(args) -> int:
     print(st.summary(), file=sys.stderr)
     if args.stats:
         print(st.kernel_table, file=sys.stderr)
-    print(f"wrote {paths['exr']}, {paths['png']}, {paths['scene']}", file=sys.stderr)
+    print("wrote " + ", ".join(str(p) for p in paths.values() if p is not None),
+          file=sys.stderr)
     return 0 if stopped_by is None else signals.exit_code(stopped_by)
 
 
@@ -216,7 +221,8 @@ def cmd_devices(_args) -> int:
 
 def cmd_uq(args) -> int:
     from .host import signals
-    from .host.uq import UqSums, check_uq_scene, write_uq_outputs
+    from .host.output_files import check_writable, scene_inputs
+    from .host.uq import UqSums, check_uq_scene, uq_output_paths, write_uq_outputs
 
     if args.merge:
         sums = UqSums.empty(())
@@ -228,6 +234,7 @@ def cmd_uq(args) -> int:
                                  f"({exc})") from None
         if sums.n < 2:
             raise SceneError("<command line>", "--merge", "needs >= 2 realizations in all")
+        check_writable(uq_output_paths(args.output).values(), inputs=args.merge)
         paths = write_uq_outputs(sums, None, args.output, args.exposure)
         print(f"merged {sums.n} realizations; wrote {paths['exr']}", file=sys.stderr)
         return 0
@@ -240,6 +247,7 @@ def cmd_uq(args) -> int:
         raise SceneError("<command line>", "--first", "must be >= 0")
     scene = _load(args)
     check_uq_scene(scene.data, scene.source)
+    check_writable(uq_output_paths(args.output).values(), inputs=scene_inputs(scene))
     device = Device(args.device)
     n, k = args.realizations, args.spp
     print(f"uq: {n} realizations x {k} spp of {scene.source} on {device.name}",
@@ -250,7 +258,7 @@ def cmd_uq(args) -> int:
 
 def _uq_run(args, scene, device, n, k) -> int:
     from .host import signals
-    from .host.uq import render_realizations, write_uq_outputs
+    from .host.uq import render_realizations, uq_output_paths, write_uq_outputs
     bar = None
     if sys.stderr.isatty():
         from tqdm import tqdm
@@ -276,10 +284,10 @@ def _uq_run(args, scene, device, n, k) -> int:
     print(f"{n} realizations in {run.seconds:.2f} s ({n / run.seconds:.3g} realizations/s, "
           f"{run.paths / run.seconds:.4g} paths/s)", file=sys.stderr)
     if n < 2:   # a batch to merge later: no variance yet
-        path = Path(args.output).with_suffix(".uq.npz")
-        path.parent.mkdir(parents=True, exist_ok=True)
+        from .host.output_files import write_atomically
+        path = uq_output_paths(args.output)["sums"]
         with signals.writing():
-            run.sums.save(path)
+            write_atomically(path, run.sums.save)
         print(f"one realization has no variance; wrote its partial sums {path} "
               f"(combine with: uq --merge)", file=sys.stderr)
         return code

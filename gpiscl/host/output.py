@@ -1,5 +1,5 @@
-"""Writes a render: EXR (RGB, per-channel standard error, per-pixel sample count), PNG
-preview, resolved scene.
+"""Writes a render: EXR (RGB, per-channel standard error, per-pixel sample count, how it
+was made in the header), PNG preview, resolved scene; output_files says which, from -o.
 
 A render stopped early (a signal, a time limit) can leave pixels with no sample. They are
 never silent black: the EXR's `samples` channel is 0 there and the PNG preview paints them
@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import copy
 import math
-from pathlib import Path
 
 import numpy as np
 
+from . import output_files
 from .film import FilmImage
 from .imageio import tonemap_srgb8, write_exr, write_png
 from .scene import Scene, write_resolved
@@ -20,25 +20,45 @@ from .scene import Scene, write_resolved
 UNCOVERED = (255, 0, 255)
 
 
-def output_paths(exr_path) -> dict:
-    exr = Path(exr_path)
-    stem = exr.with_suffix("")
-    return {"exr": exr, "png": stem.with_suffix(".png"),
-            "scene": stem.with_name(stem.name + ".scene.json")}
+def output_paths(path) -> dict:
+    """{"exr", "png", "scene"} paths for -o path (output_files.plan: the extension picks
+    the format; "exr" is None for a .png)."""
+    return output_files.plan(path)
 
 
-def write_outputs(image: FilmImage, scene: Scene, exr_path, exposure: float = 0.0,
+def write_outputs(image: FilmImage, scene: Scene, path, exposure: float = 0.0,
                   stats=None) -> dict:
-    """stats (RenderStats) of a render stopped early: the resolved scene then records the
-    samples per pixel that every pixel has, not the spp asked for."""
-    paths = output_paths(exr_path)
-    paths["exr"].parent.mkdir(parents=True, exist_ok=True)
-    extra = {f"stderr.{c}": image.stderr[..., i] for i, c in enumerate("RGB")}
-    extra["samples"] = image.count
-    write_exr(paths["exr"], image.mean, extra)
-    write_png(paths["png"], preview(image, exposure, scene.data["render"]["tonemap"]))
-    write_resolved(resolved_as_rendered(scene, stats), paths["scene"])
+    """Write the files the extension of path asks for (see output_files), each whole or
+    not at all. stats (RenderStats), when given, go into the EXR header (gpiscl:* attributes:
+    spp reached and requested, paths, seed, render seconds, version, scene file), and for a
+    render stopped early the resolved scene records the spp every pixel has."""
+    paths = output_paths(path)
+    if paths["exr"] is not None:
+        extra = {f"stderr.{c}": image.stderr[..., i] for i, c in enumerate("RGB")}
+        extra["samples"] = image.count
+        attributes = exr_attributes(scene, stats)
+        output_files.write_atomically(
+            paths["exr"], lambda tmp: write_exr(tmp, image.mean, extra, attributes))
+    rgb8 = preview(image, exposure, scene.data["render"]["tonemap"])
+    output_files.write_atomically(paths["png"], lambda tmp: write_png(tmp, rgb8))
+    resolved = resolved_as_rendered(scene, stats)
+    output_files.write_atomically(paths["scene"], lambda tmp: write_resolved(resolved, tmp))
     return paths
+
+
+def exr_attributes(scene: Scene, stats=None) -> dict:
+    """What an EXR says about how it was made. The seed is a string: EXR ints are 32-bit
+    signed and seeds go to 2**32 - 1."""
+    from .. import __version__
+    attrs = {"gpiscl:version": __version__, "gpiscl:scene": str(scene.source),
+             "gpiscl:seed": str(scene.data["render"]["seed"]),
+             "gpiscl:spp_requested": int(scene.data["render"]["spp"])}
+    if stats is not None:
+        attrs.update({"gpiscl:spp": float(stats.spp_reached), "gpiscl:paths": str(stats.paths),
+                      "gpiscl:render_seconds": float(stats.seconds),
+                      "gpiscl:stopped": ("signal" if stats.interrupted else
+                                         "time limit" if stats.time_limited else "no")})
+    return attrs
 
 
 def preview(image: FilmImage, exposure: float, curve: str) -> np.ndarray:

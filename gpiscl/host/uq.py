@@ -270,14 +270,10 @@ def write_uq_outputs(sums: UqSums, scene, exr_path, exposure: float = 0.0) -> di
     (PATH.uq.npz, to merge with other batches) and the resolved scene.
     """
     from .imageio import tonemap_srgb8, write_exr, write_png
-    from .output import output_paths
+    from .output_files import write_atomically
     from .scene import write_resolved
 
-    paths = output_paths(exr_path)
-    stem = paths["exr"].with_suffix("")
-    paths["std_png"] = stem.with_name(stem.name + ".std.png")
-    paths["sums"] = stem.with_name(stem.name + ".uq.npz")
-    paths["exr"].parent.mkdir(parents=True, exist_ok=True)
+    paths = uq_output_paths(exr_path)
     extra = {}
     planes = {"stderr": sums.mean_stderr, "var": sums.variance,
               "var_stderr": sums.variance_stderr, "std": sums.std,
@@ -285,13 +281,25 @@ def write_uq_outputs(sums: UqSums, scene, exr_path, exposure: float = 0.0) -> di
     for name, img in planes.items():
         for i, c in enumerate("RGB"):
             extra[f"{name}.{c}"] = img[..., i]
-    write_exr(paths["exr"], sums.mean, extra)
+    write_atomically(paths["exr"], lambda tmp: write_exr(tmp, sums.mean, extra))
     curve = scene.data["render"]["tonemap"] if scene is not None else "clamp"
-    write_png(paths["png"], tonemap_srgb8(sums.mean, exposure, curve))
-    write_png(paths["std_png"], tonemap_srgb8(sums.std, exposure))
-    sums.save(paths["sums"])
+    write_atomically(paths["png"],
+                     lambda tmp: write_png(tmp, tonemap_srgb8(sums.mean, exposure, curve)))
+    write_atomically(paths["std_png"],
+                     lambda tmp: write_png(tmp, tonemap_srgb8(sums.std, exposure)))
+    write_atomically(paths["sums"], sums.save)
     if scene is not None:
-        write_resolved(scene, paths["scene"])
+        write_atomically(paths["scene"], lambda tmp: write_resolved(scene, tmp))
     else:
         del paths["scene"]
+    return paths
+
+
+def uq_output_paths(exr_path) -> dict:
+    """uq's files for -o NAME.exr: the variances need the EXR, so only .exr is accepted."""
+    from .output_files import plan
+    paths = plan(exr_path, formats={".exr": ("exr", "png", "scene")})
+    base = paths["exr"].with_suffix("")
+    paths["std_png"] = base.with_name(base.name + ".std.png")
+    paths["sums"] = base.with_name(base.name + ".uq.npz")
     return paths
