@@ -11,7 +11,10 @@ import argparse
 import copy
 import math
 import sys
+from pathlib import Path
 
+from . import __version__
+from .host import arguments
 from .host.device import Device, DeviceError, list_devices
 from .host.scene import Scene, SceneError, load_scene
 
@@ -66,9 +69,19 @@ def _batch_size(text: str) -> int:
     return v
 
 
+class _Parser(argparse.ArgumentParser):
+    """Usage mistakes as one line, like every other error (argparse prints the whole
+    usage first); exit code 2 as before."""
+
+    def error(self, message):
+        self.exit(2, f"error: {self.prog}: {message} (see --help)\n")
+
+
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m gpiscl",
-                                 description="Render Gaussian Process Implicit Surfaces.")
+    # the console script is `gpiscl`; `python -m gpiscl` runs this file
+    prog = "gpiscl" if Path(sys.argv[0]).name == "gpiscl" else "python -m gpiscl"
+    ap = _Parser(prog=prog, description="Render Gaussian Process Implicit Surfaces.")
+    ap.add_argument("--version", action="version", version=f"gpiscl {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render a scene to EXR + PNG")
     r.add_argument("scene", nargs="?", help="scene JSON file (default: the built-in scene)")
@@ -152,11 +165,10 @@ def cmd_render(args) -> int:
             data["render"][key] = getattr(args, key)
     if args.realization == NO_REALIZATION:
         data["render"]["realization"] = None
-    if not 0 <= data["render"]["seed"] < 2**32:
-        raise SceneError("<command line>", "--seed", "must be in [0, 2**32)")
-    if isinstance(args.realization, int) and not 0 <= args.realization < 2**31:
-        raise SceneError("<command line>", "--realization", "must be in [0, 2**31)")
-    scene = Scene(data, scene.source, scene.base_dir)
+    arguments.check(arguments.CLI_SOURCE, arguments.cli_name, seed=args.seed,
+                    exposure=args.exposure, realization=None
+                    if args.realization == NO_REALIZATION else args.realization)
+    scene = Scene.resolved(data, scene.source, scene.base_dir)
     # before any work: a render must not end in 'cannot write' (output_files)
     check_writable(output_paths(args.output).values(), inputs=scene_inputs(scene))
     device = Device(args.device)
@@ -241,8 +253,8 @@ def cmd_uq(args) -> int:
     if args.spp < 2:
         raise SceneError("<command line>", "--spp", "must be >= 2: each realization needs a "
                          "sample variance to remove the Monte Carlo part")
-    if args.seed is not None and not 0 <= args.seed < 2**32:
-        raise SceneError("<command line>", "--seed", "must be in [0, 2**32)")
+    arguments.check(arguments.CLI_SOURCE, arguments.cli_name, seed=args.seed,
+                    exposure=args.exposure)
     if args.first < 0:
         raise SceneError("<command line>", "--first", "must be >= 0")
     scene = _load(args)
@@ -295,7 +307,7 @@ def _uq_run(args, scene, device, n, k) -> int:
     if args.resolution:
         data["camera"]["resolution"] = list(args.resolution)
     with signals.writing():
-        paths = write_uq_outputs(run.sums, Scene(data, scene.source, scene.base_dir),
+        paths = write_uq_outputs(run.sums, Scene.resolved(data, scene.source, scene.base_dir),
                                  args.output, args.exposure)
     print(f"wrote {paths['exr']}, {paths['png']}, {paths['std_png']}, {paths['sums']}",
           file=sys.stderr)

@@ -77,8 +77,11 @@ class RenderStats:
 
 @dataclass
 class RenderResult:
+    """image: the film (mean, stderr, per-pixel count); stats: how the render went; scene:
+    the resolved Scene rendered (set by the API, so write_image can record it)."""
     image: FilmImage
     stats: RenderStats = field(default_factory=RenderStats)
+    scene: object = None
 
 
 class WavefrontIntegrator:

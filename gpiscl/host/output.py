@@ -76,4 +76,4 @@ def resolved_as_rendered(scene: Scene, stats=None) -> Scene:
         return scene
     data = copy.deepcopy(scene.data)
     data["render"]["spp"] = max(1, math.floor(stats.spp_reached))
-    return Scene(data, scene.source, scene.base_dir)
+    return Scene.resolved(data, scene.source, scene.base_dir)

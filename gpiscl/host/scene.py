@@ -228,9 +228,33 @@ from . import gpis_schema  # noqa: E402,F401  (registers the "gpis" shape)
 
 @dataclass
 class Scene:
+    """A validated, resolved scene (see load_scene).
+
+    Parameters
+    ----------
+    data : dict
+        The scene document; Scene(data) validates and resolves it exactly as a scene file
+        is (SceneError on any mistake), so no Scene holds unchecked data.
+    source : str
+        Where it came from, for error messages.
+    base_dir : str
+        The folder relative file paths are resolved against.
+    """
     data: dict
     source: str = "<dict>"
     base_dir: str = field(default_factory=os.getcwd)
+
+    def __post_init__(self):
+        self.data = SCENE.resolve(self.data, "", Context(self.source, self.base_dir))
+
+    @classmethod
+    def resolved(cls, data: dict, source: str, base_dir: str) -> "Scene":
+        """A Scene of data that is already resolved (load_scene's result, edited only with
+        values checked on their own): skips validating again, which would reread every
+        mesh and image the scene names."""
+        scene = object.__new__(cls)
+        scene.data, scene.source, scene.base_dir = data, source, base_dir
+        return scene
 
     def __repr__(self):
         return (f"Scene(source={self.source!r}, {len(self.data.get('shapes', []))} shapes, "
@@ -293,7 +317,7 @@ def load_scene(source) -> Scene:
             ctx.fail("", f"top level must be a JSON object (got {kind_of(doc)})")
     else:
         raise TypeError(f"load_scene takes a path, a dict or a Scene, not {type(source).__name__}")
-    return Scene(SCENE.resolve(doc, "", ctx), ctx.file, ctx.base_dir)
+    return Scene.resolved(SCENE.resolve(doc, "", ctx), ctx.file, ctx.base_dir)
 
 
 def write_resolved(scene, path) -> None:
