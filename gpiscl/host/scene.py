@@ -16,8 +16,10 @@ from dataclasses import dataclass, field
 
 from .conductors import CONDUCTORS
 from .imageio import TONEMAPS
+from .batching import MAX_BATCH
 from .scene_schema import (Bool, Context, Enum, Field, File, Int, ListOf, Nullable, String,
-                           Number, Record, SceneError, Tagged, Vector, kind_of, show)
+                           Number, Record, SceneError, Tagged, Vector, array_problem, kind_of,
+                           show)
 
 __all__ = ["SceneError", "Scene", "load_scene", "write_resolved",
            "SHAPES", "LIGHTS", "BSDFS", "ENVIRONMENT_TYPES", "SCENE"]
@@ -49,15 +51,29 @@ ALBEDO = Vector(broadcast=True, item=Number(ge=0, le=1))
 
 def _mesh_problem(path):
     import trimesh
+    problem = _obj_index_problem(path)
+    if problem:
+        return problem
     try:
-        mesh = trimesh.load(path, force="mesh")
+        # process=False: processing drops the faces of NaN vertices without a word
+        mesh = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for a corrupt file
-        return f"cannot read mesh ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})"
+        # the type only: a message may quote the file, which can be anything a scene names
+        return f"cannot read mesh ({type(exc).__name__})"
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         return "mesh has no triangles"
-    import numpy as np
-    if not np.isfinite(mesh.vertices).all():
-        return "mesh has non-finite vertex coordinates"
+    return array_problem(mesh.vertices, "mesh")
+
+
+def _obj_index_problem(path):
+    """OBJ indices start at 1 (negative: from the end); trimesh reads 0 as the last vertex."""
+    if not path.lower().endswith(".obj"):
+        return None
+    with open(path, "rb") as f:
+        for number, line in enumerate(f, 1):
+            if line.startswith(b"f ") and any(t.split(b"/")[0] in (b"0", b"-0")
+                                              for t in line.split()[1:]):
+                return f"OBJ face on line {number} uses vertex index 0 (indices start at 1)"
     return None
 
 
@@ -76,7 +92,14 @@ def _exr_problem(path):
     if missing:
         return (f"EXR image lacks channel(s) {', '.join(missing)} "
                 f"(has: {', '.join(sorted(names)) or 'none'})")
-    return None
+    # the pixels too: a truncated file has a good header, and radiance must be >= 0 like
+    # a light's radiance in the scene
+    try:
+        from .imageio import read_exr_rgb
+        rgb = read_exr_rgb(path)
+    except Exception:  # OpenEXR reports damage as several types
+        return "cannot read the pixels of this OpenEXR image (damaged or truncated?)"
+    return array_problem(rgb, "environment map", nonnegative=True)
 
 
 # ---- cross-field rules: each returns None or (key, reason)
@@ -120,7 +143,8 @@ RENDER = Record({
     "seed": Field(Int(ge=0, lt=2**32), 0),
     # the PNG preview's curve (imageio.tonemap_srgb8); the EXR keeps linear radiance
     "tonemap": Field(Enum(*TONEMAPS), "clamp"),
-    "batch_size": Field(Nullable(Int(ge=1)), None),  # null: the integrator picks
+    # the most paths per batch (batching.py); null: 2^18
+    "batch_size": Field(Nullable(Int(ge=1, le=MAX_BATCH)), None),
     "nee": Field(Bool(), True),  # false: BSDF sampling only (a reference for the tests)
     # an integer R: every path sees GPIS realization R (shows one sample of the geometry)
     "realization": Field(Nullable(Int(ge=0, lt=2**31)), None),
@@ -277,8 +301,16 @@ def _object_pairs(pairs):
     return obj
 
 
+MAX_SCENE_BYTES = 64 << 20   # a scene names its big data in files; more is a mistake
+
+
 def _read_json(path: str, ctx: Context):
     try:
+        # a FIFO would block forever and /dev/zero fill memory: regular files only, bounded
+        if os.path.exists(path) and not os.path.isdir(path) and not os.path.isfile(path):
+            ctx.fail("", "not a regular file")
+        if os.path.isfile(path) and os.path.getsize(path) > MAX_SCENE_BYTES:
+            ctx.fail("", f"larger than {MAX_SCENE_BYTES >> 20} MiB: not a scene file")
         with open(path, encoding="utf-8") as f:
             text = f.read()
     except FileNotFoundError:
@@ -311,13 +343,35 @@ def load_scene(source) -> Scene:
         doc = source
     elif isinstance(source, (str, os.PathLike)):
         path = os.fspath(source)
-        ctx = Context(path, os.path.dirname(os.path.abspath(path)))
+        # relative asset paths are relative to the scene file itself, also through a link
+        ctx = Context(path, os.path.dirname(os.path.realpath(path)))
         doc = _read_json(path, ctx)
         if not isinstance(doc, dict):
             ctx.fail("", f"top level must be a JSON object (got {kind_of(doc)})")
     else:
         raise TypeError(f"load_scene takes a path, a dict or a Scene, not {type(source).__name__}")
+    _check_nesting(doc, ctx)
     return Scene.resolved(SCENE.resolve(doc, "", ctx), ctx.file, ctx.base_dir)
+
+
+MAX_NESTING = 100   # levels of objects and lists: the resolver recurses, and a CSG tree
+                    # anywhere near this deep is far beyond the device's stack anyway
+
+
+def _check_nesting(doc, ctx: Context):
+    """A clear error for a document nested too deeply, before the recursive resolver
+    meets it (a 600-deep union chain was a RecursionError). Iterative, so any depth."""
+    stack = [(doc, 1, "")]
+    while stack:
+        value, depth, path = stack.pop()
+        if depth > MAX_NESTING:
+            shown = path if len(path) <= 80 else path[:60] + "..."
+            ctx.fail(shown, f"nested more than {MAX_NESTING} levels deep")
+        if isinstance(value, dict):
+            stack.extend((v, depth + 1, f"{path}.{k}" if path else str(k))
+                         for k, v in value.items())
+        elif isinstance(value, (list, tuple)):
+            stack.extend((v, depth + 1, f"{path}[{i}]") for i, v in enumerate(value))
 
 
 def write_resolved(scene, path) -> None:

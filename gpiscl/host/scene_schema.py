@@ -86,6 +86,31 @@ _BOUNDS = (("ge", ">=", operator.ge), ("gt", ">", operator.gt),
            ("le", "<=", operator.le), ("lt", "<", operator.lt))
 
 
+# The device computes in float32 and squares lengths (3.4e38 overflows, and a 1e20-wide
+# floor vanished): every number of a scene, and every coordinate or sample of the files it
+# names, must stay within +-MAGNITUDE.
+MAGNITUDE = 1e18
+WHY_MAGNITUDE = "the device computes in float32, where its square would overflow"
+
+
+def array_problem(a, what: str, nonnegative: bool = False):
+    """None, or why the numbers of array a (a mesh's vertices, an image's texels, a
+    grid's samples) cannot go to the device: non-finite, out of range, or negative."""
+    import numpy as np
+    a = np.asarray(a, dtype=np.float64)
+    bad = np.count_nonzero(~np.isfinite(a))
+    if bad:
+        return f"{what} has {bad} NaN or infinite value(s)"
+    if a.size and np.abs(a).max() > MAGNITUDE:
+        return f"{what} has values beyond +-{MAGNITUDE:g} ({WHY_MAGNITUDE})"
+    if nonnegative and a.size and a.min() < 0:
+        return f"{what} has negative values (min {a.min():g})"
+    return None
+
+
+INT32 = 2**31
+
+
 class Number(Spec):
     """A finite float; the bounds are inclusive (ge/le) or exclusive (gt/lt)."""
     expected = "a number"
@@ -113,6 +138,8 @@ class Number(Spec):
             v = math.inf
         if not math.isfinite(v):
             ctx.fail(path, f"must be a finite number (got {show(value)})")
+        if abs(v) > MAGNITUDE:
+            ctx.fail(path, f"must be within +-{MAGNITUDE:g} (got {show(value)}): {WHY_MAGNITUDE}")
         self.check_range(v, path, ctx)
         return v
 
@@ -130,6 +157,9 @@ class Int(Number):
             self.wrong_type(value, path, ctx)
         v = int(value)
         self.check_range(v, path, ctx)
+        if self.le is None and self.lt is None and v >= INT32:
+            # no bound of its own: it still goes to the device as an int32
+            ctx.fail(path, f"must be < 2**31 (got {v}): the device counts in int32")
         return v
 
 
@@ -227,7 +257,12 @@ class File(Spec):
                            f"(expected one of: {', '.join(self.extensions)})")
         if not os.path.isfile(full):
             ctx.fail(path, f"file not found: {full}")
-        problem = self.check(full) if self.check else None
+        try:
+            with open(full, "rb"):
+                pass
+            problem = self.check(full) if self.check else None
+        except OSError as exc:   # unreadable (permissions, I/O): the reason, not a traceback
+            problem = f"cannot read file ({exc.strerror or type(exc).__name__})"
         if problem:
             ctx.fail(path, f"{problem}: {full}")
         return full
