@@ -61,6 +61,14 @@ def _seconds(text: str) -> float:
     return v
 
 
+def _size(text: str) -> int:
+    from .host.memory import parse_size
+    try:
+        return parse_size(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _batch_size(text: str) -> int:
     from .host.batching import MAX_BATCH
     v = _positive_int(text)
@@ -105,6 +113,9 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--tonemap", choices=("clamp", "filmic"),
                    help="PNG preview curve (default: the scene's render.tonemap)")
     r.add_argument("--stats", action="store_true", help="print per-kernel timings")
+    r.add_argument("--max-memory", type=_size, metavar="SIZE",
+                   help="memory the render may use (e.g. 8G), instead of the estimate of "
+                   "free memory it is checked against before rendering")
     sub.add_parser("devices", help="list OpenCL platforms and devices")
     _add_uq_parser(sub)
     _add_sample_parser(sub)
@@ -166,7 +177,7 @@ def cmd_render(args) -> int:
     if args.realization == NO_REALIZATION:
         data["render"]["realization"] = None
     arguments.check(arguments.CLI_SOURCE, arguments.cli_name, seed=args.seed,
-                    exposure=args.exposure, realization=None
+                    exposure=args.exposure, resolution=args.resolution, realization=None
                     if args.realization == NO_REALIZATION else args.realization)
     scene = Scene.resolved(data, scene.source, scene.base_dir)
     # before any work: a render must not end in 'cannot write' (output_files)
@@ -175,7 +186,8 @@ def cmd_render(args) -> int:
     spp = data["render"]["spp"]
     w, h = data["camera"]["resolution"]
     print(f"rendering {scene.source} at {w}x{h}, {spp} spp on {device.name}", file=sys.stderr)
-    integrator, _ = _prepare(scene, device=device, batch_size=args.batch_size)
+    integrator, _ = _prepare(scene, device=device, batch_size=args.batch_size,
+                             max_memory=args.max_memory)
     # from here on a stop signal ends the render and the samples so far are written
     with signals.noting():
         bar = SppBar(spp, w * h, file=sys.stderr) if sys.stderr.isatty() else None
@@ -234,27 +246,21 @@ def cmd_devices(_args) -> int:
 def cmd_uq(args) -> int:
     from .host import signals
     from .host.output_files import check_writable, scene_inputs
-    from .host.uq import UqSums, check_uq_scene, uq_output_paths, write_uq_outputs
+    from .host.uq import check_uq_scene, merge_partials, uq_output_paths, write_uq_outputs
 
     if args.merge:
-        sums = UqSums.empty(())
-        for path in args.merge:
-            try:
-                sums = sums.merge(UqSums.load(path))
-            except (OSError, KeyError, ValueError) as exc:
-                raise SceneError(path, "", f"cannot merge this uq partial-sums file "
-                                 f"({exc})") from None
+        sums, meta = merge_partials(args.merge)
         if sums.n < 2:
             raise SceneError("<command line>", "--merge", "needs >= 2 realizations in all")
         check_writable(uq_output_paths(args.output).values(), inputs=args.merge)
-        paths = write_uq_outputs(sums, None, args.output, args.exposure)
+        paths = write_uq_outputs(sums, None, args.output, args.exposure, meta)
         print(f"merged {sums.n} realizations; wrote {paths['exr']}", file=sys.stderr)
         return 0
     if args.spp < 2:
         raise SceneError("<command line>", "--spp", "must be >= 2: each realization needs a "
                          "sample variance to remove the Monte Carlo part")
     arguments.check(arguments.CLI_SOURCE, arguments.cli_name, seed=args.seed,
-                    exposure=args.exposure)
+                    exposure=args.exposure, resolution=args.resolution)
     if args.first < 0:
         raise SceneError("<command line>", "--first", "must be >= 0")
     scene = _load(args)
@@ -299,7 +305,7 @@ def _uq_run(args, scene, device, n, k) -> int:
         from .host.output_files import write_atomically
         path = uq_output_paths(args.output)["sums"]
         with signals.writing():
-            write_atomically(path, run.sums.save)
+            write_atomically(path, lambda tmp: run.sums.save(tmp, run.meta))
         print(f"one realization has no variance; wrote its partial sums {path} "
               f"(combine with: uq --merge)", file=sys.stderr)
         return code
@@ -308,7 +314,7 @@ def _uq_run(args, scene, device, n, k) -> int:
         data["camera"]["resolution"] = list(args.resolution)
     with signals.writing():
         paths = write_uq_outputs(run.sums, Scene.resolved(data, scene.source, scene.base_dir),
-                                 args.output, args.exposure)
+                                 args.output, args.exposure, run.meta)
     print(f"wrote {paths['exr']}, {paths['png']}, {paths['std_png']}, {paths['sums']}",
           file=sys.stderr)
     return code

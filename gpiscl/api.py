@@ -23,7 +23,7 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
                   resolution=None, device: Device | str | None = None,
                   batch_size: int | None = None, time_limit: float | None = None,
                   progress=None, realization: int | None = None,
-                  stop=None) -> RenderResult:
+                  stop=None, max_memory: int | None = None) -> RenderResult:
     """Render a scene; the image with its standard errors, sample counts and statistics.
 
     Parameters
@@ -53,6 +53,9 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
     stop : callable, optional
         stop() -> bool, asked between bounces: True ends the render with the batches
         completed so far (stats.interrupted). Ctrl-C does the same.
+    max_memory : int, optional
+        Bytes the render may use, instead of the estimate of free memory: the film must fit
+        (SceneError naming camera.resolution otherwise) and batches shrink to fit beside it.
 
     Returns
     -------
@@ -68,7 +71,7 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
     """
     checked = arguments.check(spp=spp, seed=seed, resolution=resolution,
                               realization=realization, batch_size=batch_size,
-                              time_limit=time_limit)
+                              time_limit=time_limit, max_memory=max_memory)
     integrator, scene = _prepare(scene, device=device, **{
         k: v for k, v in checked.items() if k != "time_limit"})
     spp = scene.data["render"]["spp"]
@@ -90,7 +93,7 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
 
 
 def _prepare(scene, spp=None, seed=None, resolution=None, device=None, batch_size=None,
-             realization=None):
+             realization=None, max_memory=None):
     """The compiled integrator and the resolved Scene with the overrides applied: the part
     of render_result before any sample is traced (the command line renders in between)."""
     scene = load_scene(scene)
@@ -105,7 +108,7 @@ def _prepare(scene, spp=None, seed=None, resolution=None, device=None, batch_siz
     if not isinstance(device, Device):
         device = shared_device(device)
     integrator = WavefrontIntegrator(device, compile_scene(data, scene.source), settings,
-                                     batch_size)
+                                     batch_size, max_memory, scene.source)
     return integrator, Scene.resolved(data, scene.source, scene.base_dir)
 
 
@@ -125,12 +128,14 @@ def _check_realization(data: dict, source: str):
 def render(scene, spp: int | None = None, seed: int | None = None, resolution=None,
            device: Device | str | None = None, batch_size: int | None = None,
            time_limit: float | None = None, progress=None,
-           realization: int | None = None, stop=None) -> np.ndarray:
+           realization: int | None = None, stop=None,
+           max_memory: int | None = None) -> np.ndarray:
     """Render a scene; its mean image.
 
     Parameters
     ----------
-    scene, spp, seed, resolution, device, batch_size, time_limit, progress, realization, stop
+    scene, spp, seed, resolution, device, batch_size, time_limit, progress, realization,
+    stop, max_memory
         As for render_result.
 
     Returns
@@ -146,7 +151,8 @@ def render(scene, spp: int | None = None, seed: int | None = None, resolution=No
     """
     return render_result(scene, spp=spp, seed=seed, resolution=resolution, device=device,
                          batch_size=batch_size, time_limit=time_limit, progress=progress,
-                         realization=realization, stop=stop).image.mean
+                         realization=realization, stop=stop,
+                         max_memory=max_memory).image.mean
 
 
 def write_image(path, result: RenderResult, exposure: float = 0.0) -> dict:
@@ -247,5 +253,5 @@ def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
         if "resolution" in checked:
             data["camera"]["resolution"] = checked["resolution"]
         write_uq_outputs(run.sums, Scene.resolved(data, scene.source, scene.base_dir),
-                         output, checked["exposure"])
+                         output, checked["exposure"], run.meta)
     return run

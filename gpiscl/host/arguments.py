@@ -23,7 +23,9 @@ SPECS = {
     "realization": RENDER.fields["realization"].spec,
     "batch_size": Nullable(Int(ge=1, le=MAX_BATCH)),
     "time_limit": Nullable(Number(gt=0)),
-    "exposure": Number(),
+    # stops: 2**exposure must stay a float
+    "exposure": Number(ge=-100, le=100),
+    "max_memory": Nullable(Int(ge=1, le=2**62)),
 }
 API_SOURCE = "<arguments>"
 CLI_SOURCE = "<command line>"

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyopencl as cl
 
-from . import gpis_function_space, layouts
+from . import gpis_function_space, layouts, memory
 from .batching import BatchSizer
 from .device import Device, Program, to_device
 from .film import Film, FilmImage
@@ -86,7 +86,8 @@ class RenderResult:
 
 class WavefrontIntegrator:
     def __init__(self, device: Device, scene: CompiledScene, settings: dict,
-                 batch_size: int | None = None):
+                 batch_size: int | None = None, max_memory: int | None = None,
+                 source: str = "<scene>"):
         self.device, self.scene, self.settings = device, scene, settings
         ctx = device.ctx
         self.width, self.height = scene.resolution
@@ -95,6 +96,8 @@ class WavefrontIntegrator:
         # no larger than the whole render, so the queues are sized to the work
         self.batch = int(batch_size or settings.get("batch_size") or DEFAULT_BATCH)
         self.batch = max(1, min(self.batch, self.num_pixels * int(settings.get("spp", 1))))
+        # before any allocation: the film must fit, and the batch shrinks to fit beside it
+        self.batch = memory.plan(device, self.num_pixels, self.batch, max_memory, source)
         self.program = stage_program(device)
         # scene buffers
         self.camera = to_device(device, scene.camera)
