@@ -185,9 +185,10 @@ def cmd_render(args) -> int:
     device = Device(args.device)
     spp = data["render"]["spp"]
     w, h = data["camera"]["resolution"]
-    print(f"rendering {scene.source} at {w}x{h}, {spp} spp on {device.name}", file=sys.stderr)
     integrator, _ = _prepare(scene, device=device, batch_size=args.batch_size,
                              max_memory=args.max_memory)
+    # after compiling, so that a scene refused there is still exactly one line
+    print(f"rendering {scene.source} at {w}x{h}, {spp} spp on {device.name}", file=sys.stderr)
     # from here on a stop signal ends the render and the samples so far are written
     with signals.noting():
         bar = SppBar(spp, w * h, file=sys.stderr) if sys.stderr.isatty() else None

@@ -101,7 +101,7 @@ def test_deep_nesting_is_a_clear_error(tmp_path):
 
 def test_tiny_occupancy_is_refused(tmp_path):
     refused(scene(tmp_path, [gpis({"type": "sphere", "radius": 0.8},
-                                  bounds={"occupancy": 1e-300})]),
+                                  bounds={"occupancy": 1e-20})]),
             "shapes[0].bounds.occupancy", ">= 1e-12")
 
 

@@ -90,6 +90,7 @@ _BOUNDS = (("ge", ">=", operator.ge), ("gt", ">", operator.gt),
 # floor vanished): every number of a scene, and every coordinate or sample of the files it
 # names, must stay within +-MAGNITUDE.
 MAGNITUDE = 1e18
+TINY = 1e-30     # float32 keeps ~1e-38; products of two such numbers must not vanish either
 WHY_MAGNITUDE = "the device computes in float32, where its square would overflow"
 
 
@@ -140,6 +141,9 @@ class Number(Spec):
             ctx.fail(path, f"must be a finite number (got {show(value)})")
         if abs(v) > MAGNITUDE:
             ctx.fail(path, f"must be within +-{MAGNITUDE:g} (got {show(value)}): {WHY_MAGNITUDE}")
+        if 0 < abs(v) < TINY:
+            ctx.fail(path, f"must be 0 or at least {TINY:g} in magnitude (got {show(value)}): "
+                           "the device computes in float32, where it would vanish")
         self.check_range(v, path, ctx)
         return v
 
