@@ -157,3 +157,19 @@ def test_the_command_line_gives_these_as_one_line(tmp_path):
                        env=env)
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
     assert r.stderr.startswith(f"error: {path}: shapes[0].file: mesh has 1 NaN")
+
+
+def test_small_command_line_mistakes_are_one_line(tmp_path):
+    import numpy as np
+    np.save(tmp_path / "structured.npy", np.zeros(4, dtype=[("a", "f4"), ("b", "f4")]))
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    for args, fragment in (
+            (["render", "--device", "0:0:0", "-o", str(tmp_path / "a.exr")], "expected P:D"),
+            (["render", "--exposure", "1e308", "-o", str(tmp_path / "b.exr")], "--exposure"),
+            (["render", "--exposure", "nan", "-o", str(tmp_path / "c.exr")], "--exposure"),
+            (["sample", "squared_exponential", "--observations",
+              str(tmp_path / "structured.npy"), "-o", str(tmp_path / "f")], "must be numbers")):
+        r = subprocess.run([sys.executable, "-m", "gpiscl", *args], capture_output=True,
+                           text=True, cwd=ROOT, env=env)
+        assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+        assert fragment in r.stderr and "Traceback" not in r.stderr
