@@ -1,6 +1,14 @@
-"""gpiscl: a wavefront path tracer for Gaussian Process Implicit Surfaces (OpenCL)."""
-__version__ = "0.1.0"
-__all__ = ["Scene", "load_scene", "render", "render_result"]
+"""gpiscl: a wavefront path tracer for Gaussian Process Implicit Surfaces (OpenCL).
+
+    import gpiscl
+    result = gpiscl.render_result("scene.json", spp=64)   # or render(): the mean image
+    gpiscl.write_image("out.exr", result)
+
+See help(gpiscl.render_result), gpiscl.write_image, gpiscl.uq, gpiscl.load_scene.
+"""
+from .version import __version__  # noqa: F401
+__all__ = ["Scene", "SceneError", "load_scene", "render", "render_result", "write_image",
+           "uq"]
 
 
 def __getattr__(name):
@@ -8,4 +16,9 @@ def __getattr__(name):
     if name in __all__:
         from . import api
         return getattr(api, name)
-    raise AttributeError(name)
+    raise AttributeError(f"module 'gpiscl' has no attribute {name!r}")
+
+
+def __dir__():
+    # the lazy names too, so tab completion and dir() show the API
+    return sorted(set(globals()) | set(__all__))

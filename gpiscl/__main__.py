@@ -1,11 +1,19 @@
 """Command line: python -m gpiscl render|uq|sample|devices ..."""
 from __future__ import annotations
 
+if __name__ == "__main__":
+    # first, so that a signal during the imports below (pyopencl, numpy: ~1 s) already
+    # finds the handlers: one line and exit code 130/143/129, not a traceback
+    from . import signals as _signals
+    _signals.install()
+
 import argparse
 import copy
+import math
 import sys
 from pathlib import Path
 
+from . import __version__
 # Only what every command needs: each command imports the rest, so that convert-vdb runs
 # under a Python that has numpy and an OpenVDB binding but no pyopencl or OpenEXR (the
 # system Python with Debian's python3-openvdb).
@@ -44,26 +52,71 @@ def _positive_int(text: str) -> int:
     return v
 
 
+def _seconds(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"expected a number of seconds > 0 (got {text!r})")
+    return v
+
+
+def _size(text: str) -> int:
+    from .host.render.memory import parse_size
+    try:
+        return parse_size(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _batch_size(text: str) -> int:
+    from .host.scene.records import MAX_BATCH
+    v = _positive_int(text)
+    if v > MAX_BATCH:
+        raise argparse.ArgumentTypeError(f"expected at most {MAX_BATCH} paths (got {text!r})")
+    return v
+
+
+class _Parser(argparse.ArgumentParser):
+    """Usage mistakes as one line, like every other error (argparse prints the whole
+    usage first); exit code 2 as before."""
+
+    def error(self, message):
+        self.exit(2, f"error: {self.prog}: {message} (see --help)\n")
+
+
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m gpiscl",
-                                 description="Render Gaussian Process Implicit Surfaces.")
+    # the console script is `gpiscl`; `python -m gpiscl` runs this file
+    prog = "gpiscl" if Path(sys.argv[0]).name == "gpiscl" else "python -m gpiscl"
+    ap = _Parser(prog=prog, description="Render Gaussian Process Implicit Surfaces.")
+    ap.add_argument("--version", action="version", version=f"gpiscl {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render a scene to EXR + PNG")
     r.add_argument("scene", nargs="?", help="scene JSON file (default: the built-in scene)")
-    r.add_argument("-o", "--output", default="out.exr", help="output EXR (default out.exr)")
+    r.add_argument("-o", "--output", default="out.exr",
+                   help="NAME.exr: EXR + PNG preview + NAME.scene.json; NAME.png: the PNG "
+                   "preview + NAME.scene.json (default out.exr)")
     r.add_argument("--spp", type=_positive_int, help="samples per pixel")
     r.add_argument("--seed", type=int, help="random seed")
     r.add_argument("--realization", type=_realization, metavar="R",
                    help="render one fixed GPIS realization R for every pixel (weight space); "
                    "'none' averages over realizations whatever the scene says")
     r.add_argument("--resolution", type=_resolution, help="WIDTHxHEIGHT")
-    r.add_argument("--time-limit", type=float, help="stop after this many seconds")
+    r.add_argument("--time-limit", type=_seconds, metavar="SECONDS",
+                   help="stop after this many seconds of rendering (to within one batch, "
+                   "~0.5 s)")
     r.add_argument("--device", help="OpenCL device: 'P:D' indices or a name fragment")
-    r.add_argument("--batch-size", type=_positive_int, help="paths in flight per batch")
+    r.add_argument("--batch-size", type=_batch_size, metavar="N",
+                   help="the most paths in flight per batch (batches are sized to take "
+                   "~0.5 s each below it; default 262144)")
     r.add_argument("--exposure", type=float, default=0.0, help="PNG preview exposure (stops)")
     r.add_argument("--tonemap", choices=("clamp", "filmic"),
                    help="PNG preview curve (default: the scene's render.tonemap)")
     r.add_argument("--stats", action="store_true", help="print per-kernel timings")
+    r.add_argument("--max-memory", type=_size, metavar="SIZE",
+                   help="memory the render may use (e.g. 8G), instead of the estimate of "
+                   "free memory it is checked against before rendering")
     sub.add_parser("devices", help="list OpenCL platforms and devices")
     _add_uq_parser(sub)
     _add_sample_parser(sub)
@@ -96,7 +149,8 @@ def _add_uq_parser(sub):
                    help="merge these .uq.npz partial sums (and render nothing)")
     u.add_argument("--resolution", type=_resolution, help="WIDTHxHEIGHT")
     u.add_argument("--device", help="OpenCL device: 'P:D' indices or a name fragment")
-    u.add_argument("--batch-size", type=_positive_int, help="paths in flight per batch")
+    u.add_argument("--batch-size", type=_batch_size, metavar="N",
+                   help="the most paths in flight per batch")
     u.add_argument("--exposure", type=float, default=0.0, help="PNG preview exposure (stops)")
 
 
@@ -109,10 +163,14 @@ def _load(args):  # -> scene.loading.Scene (imported per command)
 
 
 def cmd_render(args) -> int:
-    from .api import render_result
+    from . import signals
+    from .api import prepare_render
     from .host.render.device import Device
-    from .host.render.output import write_outputs
+    from .host.scene import arguments
     from .host.scene.loading import Scene
+    from .host.render.output import output_paths, write_outputs
+    from .host.io.output_files import check_writable, scene_inputs
+    from .host.render.progress import SppBar
 
     scene = _load(args)
     data = copy.deepcopy(scene.data)
@@ -123,40 +181,53 @@ def cmd_render(args) -> int:
             data["render"][key] = getattr(args, key)
     if args.realization == NO_REALIZATION:
         data["render"]["realization"] = None
-    if not 0 <= data["render"]["seed"] < 2**32:
-        raise SceneError("<command line>", "--seed", "must be in [0, 2**32)")
-    if isinstance(args.realization, int) and not 0 <= args.realization < 2**31:
-        raise SceneError("<command line>", "--realization", "must be in [0, 2**31)")
-    scene = Scene(data, scene.source, scene.base_dir)
+    arguments.check(arguments.CLI_SOURCE, arguments.cli_name, seed=args.seed,
+                    exposure=args.exposure, resolution=args.resolution, realization=None
+                    if args.realization == NO_REALIZATION else args.realization)
+    scene = Scene.resolved(data, scene.source, scene.base_dir)
+    # before any work: a render must not end in 'cannot write' (output_files)
+    check_writable(output_paths(args.output).values(), inputs=scene_inputs(scene))
     device = Device(args.device)
     spp = data["render"]["spp"]
     w, h = data["camera"]["resolution"]
+    integrator, _ = prepare_render(scene, device=device, batch_size=args.batch_size,
+                             max_memory=args.max_memory)
+    # after compiling, so that a scene refused there is still exactly one line
     print(f"rendering {scene.source} at {w}x{h}, {spp} spp on {device.name}", file=sys.stderr)
-    bar = _progress_bar(w * h * spp)
-    try:
-        result = render_result(scene, device=device, batch_size=args.batch_size,
-                               time_limit=args.time_limit,
-                               progress=bar.update if bar else None)
-    finally:
-        if bar:
-            bar.close()
-    paths = write_outputs(result.image, scene, args.output, args.exposure)
-    st = result.stats
-    if st.interrupted:
-        print("interrupted: wrote the samples rendered so far", file=sys.stderr)
+    # from here on a stop signal ends the render and the samples so far are written
+    with signals.noting():
+        bar = SppBar(spp, w * h, file=sys.stderr) if sys.stderr.isatty() else None
+        try:
+            result = integrator.render(spp, time_limit=args.time_limit, progress=bar,
+                                       stop=signals.requested)
+        finally:
+            if bar:
+                bar.close()
+        st = result.stats
+        stopped_by = signals.received()
+        reached = f"{st.spp_reached:.4g} of {spp} spp"
+        if st.paths == 0:
+            print(f"interrupted by {signals.name(stopped_by)} before the first samples: "
+                  f"nothing written", file=sys.stderr)
+            return signals.exit_code(stopped_by)
+        with signals.writing():
+            paths = write_outputs(result.image, scene, args.output, args.exposure, st)
+    if stopped_by is not None:
+        print(f"interrupted by {signals.name(stopped_by)} at {reached}", file=sys.stderr)
+    elif st.time_limited:
+        print(f"time limit: stopped at {reached}", file=sys.stderr)
+    elif st.interrupted:
+        print(f"interrupted at {reached}", file=sys.stderr)
+    uncovered = int((result.image.count == 0).sum())
+    if uncovered:
+        print(f"{uncovered} of {w * h} pixels have no sample yet: 0 in the EXR's 'samples' "
+              f"channel, magenta in the PNG preview", file=sys.stderr)
     print(st.summary(), file=sys.stderr)
     if args.stats:
         print(st.kernel_table, file=sys.stderr)
-    print(f"wrote {paths['exr']}, {paths['png']}, {paths['scene']}", file=sys.stderr)
-    return 0
-
-
-def _progress_bar(total):
-    if not sys.stderr.isatty():
-        return None
-    from tqdm import tqdm
-    return tqdm(total=total, unit="path", unit_scale=True, file=sys.stderr,
-                desc="paths", smoothing=0.1)
+    print("wrote " + ", ".join(str(p) for p in paths.values() if p is not None),
+          file=sys.stderr)
+    return 0 if stopped_by is None else signals.exit_code(stopped_by)
 
 
 def cmd_devices(_args) -> int:
@@ -180,36 +251,42 @@ def cmd_devices(_args) -> int:
 
 
 def cmd_uq(args) -> int:
+    from . import signals
     from .host.render.device import Device
-    from .host.scene.loading import Scene
-    from .host.commands.uq import UqSums, check_uq_scene, render_realizations, write_uq_outputs
+    from .host.scene import arguments
+    from .host.io.output_files import check_writable, scene_inputs
+    from .host.commands.uq import check_uq_scene, merge_partials, uq_output_paths, write_uq_outputs
 
     if args.merge:
-        sums = UqSums.empty(())
-        for path in args.merge:
-            try:
-                sums = sums.merge(UqSums.load(path))
-            except (OSError, KeyError, ValueError) as exc:
-                raise SceneError(path, "", f"cannot merge this uq partial-sums file "
-                                 f"({exc})") from None
+        sums, meta = merge_partials(args.merge)
         if sums.n < 2:
             raise SceneError("<command line>", "--merge", "needs >= 2 realizations in all")
-        paths = write_uq_outputs(sums, None, args.output, args.exposure)
+        check_writable(uq_output_paths(args.output).values(), inputs=args.merge)
+        paths = write_uq_outputs(sums, None, args.output, args.exposure, meta)
         print(f"merged {sums.n} realizations; wrote {paths['exr']}", file=sys.stderr)
         return 0
     if args.spp < 2:
         raise SceneError("<command line>", "--spp", "must be >= 2: each realization needs a "
                          "sample variance to remove the Monte Carlo part")
-    if args.seed is not None and not 0 <= args.seed < 2**32:
-        raise SceneError("<command line>", "--seed", "must be in [0, 2**32)")
+    arguments.check(arguments.CLI_SOURCE, arguments.cli_name, seed=args.seed,
+                    exposure=args.exposure, resolution=args.resolution)
     if args.first < 0:
         raise SceneError("<command line>", "--first", "must be >= 0")
     scene = _load(args)
     check_uq_scene(scene.data, scene.source)
+    check_writable(uq_output_paths(args.output).values(), inputs=scene_inputs(scene))
     device = Device(args.device)
     n, k = args.realizations, args.spp
     print(f"uq: {n} realizations x {k} spp of {scene.source} on {device.name}",
           file=sys.stderr)
+    with signals.noting():
+        return _uq_run(args, scene, device, n, k)
+
+
+def _uq_run(args, scene, device, n, k) -> int:
+    from .host.scene.loading import Scene
+    from . import signals
+    from .host.commands.uq import render_realizations, uq_output_paths, write_uq_outputs
     bar = None
     if sys.stderr.isatty():
         from tqdm import tqdm
@@ -218,32 +295,39 @@ def cmd_uq(args) -> int:
         run = render_realizations(scene, n, k, seed=args.seed, first=args.first,
                                   resolution=args.resolution, device=device,
                                   batch_size=args.batch_size,
-                                  progress=bar.update if bar else None)
+                                  progress=bar.update if bar else None,
+                                  stop=signals.requested)
     finally:
         if bar:
             bar.close()
     n = run.sums.n
+    stopped_by = signals.received()
+    code = 0 if stopped_by is None else signals.exit_code(stopped_by)
     if run.interrupted:
         print(f"interrupted: keeping the {n} completed realizations", file=sys.stderr)
     if n == 0:
-        return 1
+        if stopped_by is not None:
+            print("no realization completed: nothing written", file=sys.stderr)
+        return code or 1
     print(f"{n} realizations in {run.seconds:.2f} s ({n / run.seconds:.3g} realizations/s, "
           f"{run.paths / run.seconds:.4g} paths/s)", file=sys.stderr)
     if n < 2:   # a batch to merge later: no variance yet
-        path = Path(args.output).with_suffix(".uq.npz")
-        path.parent.mkdir(parents=True, exist_ok=True)
-        run.sums.save(path)
+        from .host.io.output_files import write_atomically
+        path = uq_output_paths(args.output)["sums"]
+        with signals.writing():
+            write_atomically(path, lambda tmp: run.sums.save(tmp, run.meta))
         print(f"one realization has no variance; wrote its partial sums {path} "
               f"(combine with: uq --merge)", file=sys.stderr)
-        return 0
+        return code
     data = copy.deepcopy(scene.data)
     if args.resolution:
         data["camera"]["resolution"] = list(args.resolution)
-    paths = write_uq_outputs(run.sums, Scene(data, scene.source, scene.base_dir),
-                             args.output, args.exposure)
+    with signals.writing():
+        paths = write_uq_outputs(run.sums, Scene.resolved(data, scene.source, scene.base_dir),
+                                 args.output, args.exposure, run.meta)
     print(f"wrote {paths['exr']}, {paths['png']}, {paths['std_png']}, {paths['sums']}",
           file=sys.stderr)
-    return 0
+    return code
 
 
 def _add_sample_parser(sub):
@@ -308,14 +392,23 @@ def cmd_convert_vdb(args) -> int:
 
 
 def main(argv=None) -> int:
-    args = _parser().parse_args(argv)
+    from . import signals
     try:
+        args = _parser().parse_args(argv)
         commands = {"render": cmd_render, "devices": cmd_devices, "uq": cmd_uq,
                     "sample": cmd_sample, "convert-vdb": cmd_convert_vdb}
         return commands[args.command](args)
     except (SceneError, DeviceError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except BaseException:
+        # a stop signal during start-up: Interrupted itself, or what it became on the way
+        # out of a C extension (an ImportError, a pyopencl error)
+        stopped_by = signals.received()
+        if stopped_by is None:
+            raise
+        print(signals.startup_message(stopped_by), file=sys.stderr)
+        return signals.exit_code(stopped_by)
 
 
 if __name__ == "__main__":

@@ -1,39 +1,116 @@
-"""The Python API: load a scene, render it, get numpy images."""
+"""The Python API: load a scene, render it, get numpy images, write them, run uq.
+
+Every argument is checked as the command line checks it (host/arguments.py): a bad one
+raises SceneError naming it, before any work.
+"""
 from __future__ import annotations
 
 import copy
 
 import numpy as np
 
+from .host.scene import arguments
 from .host.render.device import Device, shared_device
 from .host.render.integrator import RenderResult, WavefrontIntegrator
-from .host.errors import SceneError
 from .host.scene.loading import Scene, load_scene
+from .host.errors import SceneError
 from .host.compile.scene import compile_scene
+
+__all__ = ["Scene", "SceneError", "load_scene", "render", "render_result", "write_image",
+           "uq"]
 
 
 def render_result(scene, spp: int | None = None, seed: int | None = None,
                   resolution=None, device: Device | str | None = None,
                   batch_size: int | None = None, time_limit: float | None = None,
-                  progress=None, realization: int | None = None) -> RenderResult:
-    """Render a scene (path, dict or Scene); arguments override its render block."""
+                  progress=None, realization: int | None = None,
+                  stop=None, max_memory: int | None = None) -> RenderResult:
+    """Render a scene; the image with its standard errors, sample counts and statistics.
+
+    Parameters
+    ----------
+    scene : str, os.PathLike, dict or Scene
+        A scene file, a scene document, or a loaded Scene.
+    spp : int, optional
+        Samples per pixel, >= 1 (default: the scene's render.spp).
+    seed : int, optional
+        Random seed in [0, 2**32) (default: the scene's render.seed). A fixed seed gives
+        the same image whatever the batch size and device.
+    resolution : (int, int), optional
+        (width, height), each in [1, 16384] (default: the scene's camera.resolution).
+    device : Device or str, optional
+        An OpenCL device, or 'P:D' indices / a name fragment (default: the first usable
+        device, shared between calls).
+    batch_size : int, optional
+        The most paths traced at once, in [1, 2**24]; batches are sized to take about
+        0.5 s each below it (default 262144).
+    time_limit : float, optional
+        Stop after this many seconds of rendering (> 0, finite); holds to within one batch.
+    progress : callable or bool, optional
+        progress(paths) after each batch, or True for a progress bar in spp (a notebook
+        widget under Jupyter).
+    realization : int, optional
+        Render GPIS realization R in [0, 2**31) for every pixel (weight space only).
+    stop : callable, optional
+        stop() -> bool, asked between bounces: True ends the render with the batches
+        completed so far (stats.interrupted). Ctrl-C does the same.
+    max_memory : int, optional
+        Bytes the render may use, instead of the estimate of free memory: the film must fit
+        (SceneError naming camera.resolution otherwise) and batches shrink to fit beside it.
+
+    Returns
+    -------
+    RenderResult
+        .image.mean (H, W, 3) float32, .image.stderr, .image.count (samples per pixel: 0
+        for pixels a stopped render never reached), .stats (paths, seconds, spp_reached,
+        interrupted, time_limited), .scene (the resolved scene rendered).
+
+    Raises
+    ------
+    SceneError
+        For a mistake in the scene or in an argument, naming it.
+    """
+    checked = arguments.check(spp=spp, seed=seed, resolution=resolution,
+                              realization=realization, batch_size=batch_size,
+                              time_limit=time_limit, max_memory=max_memory)
+    integrator, scene = prepare_render(scene, device=device, **{
+        k: v for k, v in checked.items() if k != "time_limit"})
+    spp = scene.data["render"]["spp"]
+    bar = None
+    if progress is True:
+        from .host.render.progress import SppBar
+        w, h = scene.data["camera"]["resolution"]
+        progress = bar = SppBar(spp, w * h, notebook=True)
+    elif progress is False:
+        progress = None
+    try:
+        result = integrator.render(spp, time_limit=checked.get("time_limit"),
+                                   progress=progress, stop=stop)
+    finally:
+        if bar is not None:
+            bar.close()
+    result.scene = scene
+    return result
+
+
+def prepare_render(scene, spp=None, seed=None, resolution=None, device=None, batch_size=None,
+             realization=None, max_memory=None):
+    """The compiled integrator and the resolved Scene with the overrides applied: the part
+    of render_result before any sample is traced (the command line renders in between)."""
     scene = load_scene(scene)
     data = copy.deepcopy(scene.data)
     settings = data["render"]
-    if spp is not None:
-        settings["spp"] = int(spp)
-    if seed is not None:
-        settings["seed"] = int(seed)
-    if realization is not None:
-        settings["realization"] = int(realization)
+    for key, value in (("spp", spp), ("seed", seed), ("realization", realization)):
+        if value is not None:
+            settings[key] = value
     if resolution is not None:
-        data["camera"]["resolution"] = [int(resolution[0]), int(resolution[1])]
+        data["camera"]["resolution"] = list(resolution)
     _check_realization(data, scene.source)
     if not isinstance(device, Device):
         device = shared_device(device)
     integrator = WavefrontIntegrator(device, compile_scene(data, scene.source), settings,
-                                     batch_size)
-    return integrator.render(settings["spp"], time_limit=time_limit, progress=progress)
+                                     batch_size, max_memory, scene.source)
+    return integrator, Scene.resolved(data, scene.source, scene.base_dir)
 
 
 def _check_realization(data: dict, source: str):
@@ -49,9 +126,132 @@ def _check_realization(data: dict, source: str):
                              "one realization")
 
 
-def render(scene, spp: int | None = None, **kwargs) -> np.ndarray:
-    """Render and return the mean image, float32 (H, W, 3)."""
-    return render_result(scene, spp=spp, **kwargs).image.mean
+def render(scene, spp: int | None = None, seed: int | None = None, resolution=None,
+           device: Device | str | None = None, batch_size: int | None = None,
+           time_limit: float | None = None, progress=None,
+           realization: int | None = None, stop=None,
+           max_memory: int | None = None) -> np.ndarray:
+    """Render a scene; its mean image.
+
+    Parameters
+    ----------
+    scene, spp, seed, resolution, device, batch_size, time_limit, progress, realization,
+    stop, max_memory
+        As for render_result.
+
+    Returns
+    -------
+    numpy.ndarray
+        (H, W, 3) float32 linear radiance; pixels a stopped render never reached are 0 (use
+        render_result and its image.count to tell them apart).
+
+    Raises
+    ------
+    SceneError
+        For a mistake in the scene or in an argument, naming it.
+    """
+    return render_result(scene, spp=spp, seed=seed, resolution=resolution, device=device,
+                         batch_size=batch_size, time_limit=time_limit, progress=progress,
+                         realization=realization, stop=stop,
+                         max_memory=max_memory).image.mean
 
 
-__all__ = ["Scene", "load_scene", "render", "render_result"]
+def write_image(path, result: RenderResult, exposure: float = 0.0) -> dict:
+    """Write a render as the command line does.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        NAME.exr (EXR with standard errors, sample counts and how it was made, a PNG
+        preview and NAME.scene.json) or NAME.png (the preview and NAME.scene.json).
+    result : RenderResult
+        From render_result.
+    exposure : float
+        Preview exposure in stops.
+
+    Returns
+    -------
+    dict
+        {"exr", "png", "scene"}: the paths written (None for one not written).
+
+    Raises
+    ------
+    SceneError
+        For an unknown extension or a path that cannot be written, before anything is
+        written; each file is written whole or not at all.
+    """
+    from .host.render.output import output_paths, write_outputs
+    from .host.io.output_files import check_writable, scene_inputs
+
+    if not isinstance(result, RenderResult) or result.scene is None:
+        raise SceneError(arguments.API_SOURCE, "result",
+                         "expected the RenderResult of render_result()")
+    exposure = arguments.check(exposure=exposure)["exposure"]
+    check_writable(output_paths(path).values(), "path", inputs=scene_inputs(result.scene))
+    return write_outputs(result.image, result.scene, path, exposure, result.stats)
+
+
+def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
+       first: int = 0, resolution=None, device: Device | str | None = None,
+       batch_size: int | None = None, output=None, exposure: float = 0.0, stop=None):
+    """Per-pixel mean and unbiased variance over GPIS realizations (as `gpiscl uq`).
+
+    Parameters
+    ----------
+    scene : str, os.PathLike, dict or Scene
+        A scene whose GPIS objects all use the weight_space sampler.
+    realizations : int
+        N >= 1 realizations, each with its own geometry and its own samples.
+    spp : int
+        K >= 2 samples per pixel per realization (the within-realization variance needs 2).
+    seed : int, optional
+        Picks the realizations and their samples, in [0, 2**32).
+    first : int
+        Index of the first realization (>= 0): runs [I, I+N) of one seed merge exactly.
+    resolution, device, batch_size, stop
+        As for render_result.
+    output : str or os.PathLike, optional
+        NAME.exr: also write the EXR (mean, variance, std and their standard errors), the
+        previews, NAME.uq.npz (partial sums for merging) and the resolved scene; needs
+        N >= 2 in all.
+    exposure : float
+        Preview exposure in stops.
+
+    Returns
+    -------
+    UqRun
+        .sums (UqSums: .mean, .variance, .std, .mean_stderr, .variance_stderr, .n),
+        .ids, .seconds, .paths, .interrupted.
+
+    Raises
+    ------
+    SceneError
+        For a mistake in the scene or an argument, naming it.
+    """
+    from .host.io.output_files import check_writable, scene_inputs
+    from .host.scene.schema import Context, Int
+    from .host.commands.uq import check_uq_scene, render_realizations, uq_output_paths, write_uq_outputs
+
+    ctx = Context(arguments.API_SOURCE, ".")
+    realizations = Int(ge=1, le=2**31).resolve(realizations, "realizations", ctx)
+    spp = Int(ge=2, lt=2**31).resolve(spp, "spp", ctx)
+    first = Int(ge=0, lt=2**31).resolve(first, "first", ctx)
+    checked = arguments.check(seed=seed, resolution=resolution, batch_size=batch_size,
+                              exposure=exposure)
+    scene = load_scene(scene)
+    check_uq_scene(scene.data, scene.source)
+    if output is not None:
+        check_writable(uq_output_paths(output).values(), "output", inputs=scene_inputs(scene))
+    run = render_realizations(scene, realizations, spp, seed=checked.get("seed"), first=first,
+                              resolution=checked.get("resolution"), device=device,
+                              batch_size=checked.get("batch_size"), stop=stop)
+    if output is not None:
+        if run.sums.n < 2:
+            raise SceneError(arguments.API_SOURCE, "output",
+                             f"needs >= 2 realizations to write (got {run.sums.n})")
+        data = copy.deepcopy(scene.data)
+        if "resolution" in checked:
+            data["camera"]["resolution"] = checked["resolution"]
+        write_uq_outputs(run.sums, Scene.resolved(data, scene.source, scene.base_dir),
+                         output, checked["exposure"], run.meta)
+    return run

@@ -283,14 +283,13 @@ def load_observations(path, noise: float = 1e-4):
     """Surface points (n, 3), or points and normals (n, 6), from .npy or a text file
     (x y z [nx ny nz] per line), as posterior Observations (f = 0, grad f = n)."""
     from ..gp.posterior import surface_observations
+    from ..io.points import load_points   # the scene's reader: same checks, no echo
     try:
-        a = np.load(path) if str(path).endswith(".npy") else np.loadtxt(path, ndmin=2)
-    except (OSError, ValueError) as exc:
-        raise SceneError(str(path), "", f"cannot read observations ({exc})") from None
-    a = np.asarray(a, float)
-    if a.ndim != 2 or a.shape[1] not in (3, 6) or len(a) == 0 or not np.all(np.isfinite(a)):
-        raise SceneError(str(path), "", f"expected finite rows of x y z or x y z nx ny nz "
-                         f"(got shape {a.shape})")
+        a = load_points(str(path))
+    except ValueError as exc:
+        raise SceneError(str(path), "", str(exc)) from None
+    except OSError as exc:
+        raise SceneError(str(path), "", f"cannot read file ({exc.strerror or exc})") from None
     return surface_observations(a[:, :3], a[:, 3:] if a.shape[1] == 6 else None, noise=noise)
 
 

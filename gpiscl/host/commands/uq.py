@@ -28,6 +28,8 @@ accurate when the variance is tiny next to the mean.
 from __future__ import annotations
 
 import copy
+import hashlib
+import json
 import time
 from dataclasses import dataclass, fields
 
@@ -58,11 +60,16 @@ def realization_ids(seed: int, first: int, count: int):
     are distinct; path seeds are hashed again so that no two realizations of a run share
     Monte Carlo samples (the path seed is a bijection of i too).
     """
-    base = _mix32(seed ^ 0x5BD1E995)
-    idx = [first + i for i in range(count)]
-    ids = [(base + i * 0x2545F491) & _MASK31 for i in idx]
-    seeds = [_mix32((_mix32(seed) + i * 0x9E3779B9) & _MASK32) for i in idx]
-    return ids, seeds
+    pairs = list(iter_realizations(seed, first, count))
+    return [p[0] for p in pairs], [p[1] for p in pairs]
+
+
+def iter_realizations(seed: int, first: int, count: int):
+    """(geometry id, path seed) of each realization, one at a time: a run of 10^9
+    realizations is interrupted or time-limited long before its ids would fit in memory."""
+    base, hashed = _mix32(seed ^ 0x5BD1E995), _mix32(seed)
+    for i in range(first, first + count):
+        yield (base + i * 0x2545F491) & _MASK31, _mix32((hashed + i * 0x9E3779B9) & _MASK32)
 
 
 @dataclass
@@ -184,9 +191,12 @@ class UqSums:
 
     # --- partial results on disk, for batches rendered elsewhere ---------------------
 
-    def save(self, path) -> None:
+    def save(self, path, meta: dict | None = None) -> None:
+        """meta: where the sums come from (render_realizations' UqRun.meta), kept as JSON
+        so that --merge can check the batches belong together."""
+        extra = {} if meta is None else {"meta": np.array(json.dumps(meta))}
         np.savez_compressed(path, **{f.name: np.asarray(getattr(self, f.name))
-                                     for f in fields(self)})
+                                     for f in fields(self)}, **extra)
 
     @classmethod
     def load(cls, path) -> "UqSums":
@@ -212,12 +222,93 @@ class UqRun:
     seconds: float
     paths: int
     interrupted: bool = False
+    meta: dict = None  # provenance of the sums (see merge_partials)
+
+
+# ---- partial sums from elsewhere: --merge checks that they belong together -----------
+#
+# A partial-sums file carries meta: a digest of the scene (everything but the render
+# settings uq overrides), the seed, the spp, the resolution and the realization index
+# ranges it holds. Batches merge only with equal scene, seed, spp and resolution and
+# disjoint ranges: the same file twice would count its realizations twice, and batches of
+# different scenes or seeds mean nothing together.
+
+MATCH = ("scene", "seed", "spp", "resolution")
+
+
+def scene_digest(data: dict) -> str:
+    render = {k: v for k, v in data["render"].items()
+              if k not in ("spp", "seed", "realization", "batch_size", "tonemap")}
+    body = dict(data, render=render)
+    return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def load_partial(path):
+    """(UqSums, meta) of a .uq.npz, checked: SceneError naming the file and the problem."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: np.asarray(z[k]) for k in z.files}
+    except Exception as exc:   # zipfile, format and OS errors alike
+        raise SceneError(path, "", f"cannot read as a uq partial-sums file "
+                         f"({type(exc).__name__})") from None
+    names = [f.name for f in fields(UqSums)]
+    missing = [k for k in names + ["meta"] if k not in arrays]
+    if missing:
+        raise SceneError(path, "", f"not a uq partial-sums file of this version (lacks "
+                         f"{', '.join(missing)})")
+    n = arrays["n"]
+    if n.shape != () or n.dtype.kind not in "iu" or int(n) < 1:
+        raise SceneError(path, "n", f"must be one integer >= 1 (got {n.ravel()[:3].tolist()} "
+                         f"of {n.dtype})")
+    shape = arrays["mean"].shape
+    for k in names[1:]:
+        a = arrays[k]
+        if a.shape != shape or len(shape) != 3 or shape[2] != 3 or a.dtype.kind != "f":
+            raise SceneError(path, k, f"must be a float (H, W, 3) array like 'mean' "
+                             f"(got {a.shape} {a.dtype})")
+        if not np.isfinite(a).all():
+            raise SceneError(path, k, "has NaN or infinite values")
+    try:
+        meta = json.loads(str(arrays["meta"]))
+        ranges = [(int(a), int(b)) for a, b in meta["ranges"]]
+        assert all(k in meta for k in MATCH)
+    except Exception:
+        raise SceneError(path, "meta", "unreadable provenance") from None
+    if sum(b - a for a, b in ranges) != int(n):
+        raise SceneError(path, "n", f"{int(n)} realizations, but its ranges hold "
+                         f"{sum(b - a for a, b in ranges)}")
+    sums = UqSums(int(n), *(arrays[k].astype(np.float64) for k in names[1:]))
+    return sums, dict(meta, ranges=ranges)
+
+
+def merge_partials(paths):
+    """(UqSums, meta) of the partial-sums files, refusing batches that do not belong
+    together or overlap (SceneError naming the file)."""
+    sums, meta, owner = UqSums.empty(()), None, {}
+    for path in paths:
+        s, m = load_partial(path)
+        if meta is None:
+            meta = dict(m, ranges=[])
+        for key in MATCH:
+            if m[key] != meta[key]:
+                raise SceneError(path, "", f"its {key} ({m[key]}) differs from "
+                                 f"{paths[0]}'s ({meta[key]}): not batches of one uq run")
+        for a, b in m["ranges"]:
+            for (c, d), other in owner.items():
+                if a < d and c < b:
+                    raise SceneError(path, "", f"realizations [{max(a, c)}, {min(b, d)}) "
+                                     f"are also in {other}: merging would count them twice")
+            owner[(a, b)] = path
+        sums = sums.merge(s)
+        meta["ranges"] = sorted(meta["ranges"] + m["ranges"])
+    return sums, meta
 
 
 def render_realizations(scene, realizations: int, spp: int, seed: int | None = None,
                         first: int = 0, resolution=None, device=None, batch_size=None,
-                        progress=None) -> UqRun:
-    """Render realizations first .. first+realizations-1 with spp samples each."""
+                        progress=None, stop=None) -> UqRun:
+    """Render realizations first .. first+realizations-1 with spp samples each; stop()
+    (asked between bounces) or Ctrl-C ends it, keeping the completed realizations."""
     from ..render.device import Device, shared_device
     from ..render.integrator import WavefrontIntegrator
     from ..scene.loading import load_scene
@@ -228,6 +319,10 @@ def render_realizations(scene, realizations: int, spp: int, seed: int | None = N
                          "sample variance to remove the Monte Carlo part")
     if realizations < 1:
         raise SceneError("<command line>", "--realizations", "must be >= 1")
+    if first + realizations > 2**31:
+        # ids are distinct only modulo 2^31
+        raise SceneError("<command line>", "--realizations", "--first + --realizations must "
+                         "be <= 2**31")
     scene = load_scene(scene)
     data = copy.deepcopy(scene.data)
     check_uq_scene(data, scene.source)
@@ -237,16 +332,15 @@ def render_realizations(scene, realizations: int, spp: int, seed: int | None = N
     if not isinstance(device, Device):
         device = shared_device(device)
     compiled = compile_scene(data, scene.source)   # once: only the ids and seeds change
-    ids, seeds = realization_ids(seed, first, realizations)
     w, h = data["camera"]["resolution"]
     sums = UqSums.empty((h, w, 3))
     paths, done, interrupted = 0, [], False
     start = time.perf_counter()
     try:
-        for rid, rseed in zip(ids, seeds):
+        for rid, rseed in iter_realizations(seed, first, realizations):
             settings = dict(data["render"], spp=int(spp), seed=rseed, realization=rid)
             integ = WavefrontIntegrator(device, compiled, settings, batch_size)
-            result = integ.render(int(spp))
+            result = integ.render(int(spp), stop=stop)
             if result.stats.interrupted:   # Ctrl-C: fewer than K samples, so not used
                 interrupted = True
                 break
@@ -257,10 +351,13 @@ def render_realizations(scene, realizations: int, spp: int, seed: int | None = N
                 progress(1)
     except KeyboardInterrupt:
         interrupted = True
-    return UqRun(sums, done, time.perf_counter() - start, paths, interrupted)
+    meta = {"scene": scene_digest(data), "seed": seed, "spp": int(spp), "resolution": [w, h],
+            "ranges": [[first, first + len(done)]] if done else []}
+    return UqRun(sums, done, time.perf_counter() - start, paths, interrupted, meta)
 
 
-def write_uq_outputs(sums: UqSums, scene, exr_path, exposure: float = 0.0) -> dict:
+def write_uq_outputs(sums: UqSums, scene, exr_path, exposure: float = 0.0,
+                     meta: dict | None = None) -> dict:
     """EXR channels (float32):
       R, G, B             mean over realizations       stderr.R/G/B   its standard error
       var.R/G/B           unbiased variance, unclamped  var_stderr.R/G/B  its standard error
@@ -269,14 +366,10 @@ def write_uq_outputs(sums: UqSums, scene, exr_path, exposure: float = 0.0) -> di
     (PATH.uq.npz, to merge with other batches) and the resolved scene.
     """
     from ..io.images import tonemap_srgb8, write_exr, write_png
-    from ..render.output import output_paths
+    from ..io.output_files import write_atomically
     from ..scene.loading import write_resolved
 
-    paths = output_paths(exr_path)
-    stem = paths["exr"].with_suffix("")
-    paths["std_png"] = stem.with_name(stem.name + ".std.png")
-    paths["sums"] = stem.with_name(stem.name + ".uq.npz")
-    paths["exr"].parent.mkdir(parents=True, exist_ok=True)
+    paths = uq_output_paths(exr_path)
     extra = {}
     planes = {"stderr": sums.mean_stderr, "var": sums.variance,
               "var_stderr": sums.variance_stderr, "std": sums.std,
@@ -284,13 +377,25 @@ def write_uq_outputs(sums: UqSums, scene, exr_path, exposure: float = 0.0) -> di
     for name, img in planes.items():
         for i, c in enumerate("RGB"):
             extra[f"{name}.{c}"] = img[..., i]
-    write_exr(paths["exr"], sums.mean, extra)
+    write_atomically(paths["exr"], lambda tmp: write_exr(tmp, sums.mean, extra))
     curve = scene.data["render"]["tonemap"] if scene is not None else "clamp"
-    write_png(paths["png"], tonemap_srgb8(sums.mean, exposure, curve))
-    write_png(paths["std_png"], tonemap_srgb8(sums.std, exposure))
-    sums.save(paths["sums"])
+    write_atomically(paths["png"],
+                     lambda tmp: write_png(tmp, tonemap_srgb8(sums.mean, exposure, curve)))
+    write_atomically(paths["std_png"],
+                     lambda tmp: write_png(tmp, tonemap_srgb8(sums.std, exposure)))
+    write_atomically(paths["sums"], lambda tmp: sums.save(tmp, meta))
     if scene is not None:
-        write_resolved(scene, paths["scene"])
+        write_atomically(paths["scene"], lambda tmp: write_resolved(scene, tmp))
     else:
         del paths["scene"]
+    return paths
+
+
+def uq_output_paths(exr_path) -> dict:
+    """uq's files for -o NAME.exr: the variances need the EXR, so only .exr is accepted."""
+    from ..io.output_files import plan
+    paths = plan(exr_path, formats={".exr": ("exr", "png", "scene")})
+    base = paths["exr"].with_suffix("")
+    paths["std_png"] = base.with_name(base.name + ".std.png")
+    paths["sums"] = base.with_name(base.name + ".uq.npz")
     return paths

@@ -128,4 +128,6 @@ def mesh_mean(path, resolution: int = 128, margin: float | None = None,
         except OSError as exc:              # a read-only cache costs time, not the render
             print(f"gpiscl: cannot cache the SDF bake in {cached.parent} ({exc.strerror}); "
                   "set GPISCL_CACHE to a writable folder", file=sys.stderr)
+        finally:                            # a full disk or a signal: no half file left
+            tmp.unlink(missing_ok=True)
     return grid, False

@@ -16,8 +16,10 @@ import numpy as np
 
 from ..gp.kernels import GridField
 from ..gp.means import GridMean
+from .float_range import MAGNITUDE, array_problem
 
 GRID_KEYS = ("values", "origin", "voxel_size")
+MIN_VOXEL = 1e-9
 
 
 def problem_of(load):
@@ -57,6 +59,14 @@ def read_grid_arrays(path, keys=GRID_KEYS) -> dict:
             or not h.item() > 0:
         raise ValueError(f"grid array 'voxel_size' must be one positive number (got "
                          f"{h.ravel()[:3].tolist()})")
+    # the grid's extent is voxel_size * samples and lookups divide by voxel_size: both
+    # must stay within float32 (1e-300 divided by zero, a 1e20 origin vanished)
+    if not MIN_VOXEL <= h.item() <= MAGNITUDE:
+        raise ValueError(f"grid array 'voxel_size' must be in [{MIN_VOXEL:g}, {MAGNITUDE:g}] "
+                         f"(got {h.item():g})")
+    problem = array_problem(origin, "grid array 'origin'")
+    if problem:
+        raise ValueError(problem)
     return arrays
 
 
@@ -67,9 +77,9 @@ def check_grid_values(values, shape_ok: bool, expected: str) -> np.ndarray:
     if not np.issubdtype(values.dtype, np.number) or np.iscomplexobj(values):
         raise ValueError(f"grid array 'values' must be real numbers (got {values.dtype})")
     values = values.astype(np.float64)
-    bad = np.count_nonzero(~np.isfinite(values))
-    if bad:
-        raise ValueError(f"grid array 'values' has {bad} NaN or infinite sample(s)")
+    problem = array_problem(values, "grid array 'values'")
+    if problem:
+        raise ValueError(problem)
     return values
 
 

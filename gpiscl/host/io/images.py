@@ -11,8 +11,9 @@ import numpy as np
 import OpenEXR
 
 
-def write_exr(path, rgb, extra=None) -> None:
-    """Write rgb (H,W,3) as float32 channels R, G, B plus extra {name: (H,W)} channels.
+def write_exr(path, rgb, extra=None, attributes=None) -> None:
+    """Write rgb (H,W,3) as float32 channels R, G, B plus extra {name: (H,W)} channels,
+    and attributes {name: str | int | float} in the header.
 
     ZIP compression is lossless, so a read gives back the same bits.
     """
@@ -29,7 +30,13 @@ def write_exr(path, rgb, extra=None) -> None:
             raise ValueError(f"write_exr: channel {name!r} given twice")
         channels[name] = values
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    header.update(attributes or {})
     OpenEXR.File(header, channels).write(str(path))
+
+
+def read_exr_attributes(path) -> dict:
+    """The header attributes of an EXR file."""
+    return dict(OpenEXR.File(str(path)).header())
 
 
 def read_exr(path) -> dict:

@@ -2,6 +2,8 @@
 ('#' comments), or .npy of shape (n, 3) or (n, 6)."""
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 EXTENSIONS = (".xyz", ".txt", ".npy")
@@ -18,7 +20,13 @@ def load_points(path: str) -> np.ndarray:
         try:
             a = np.loadtxt(path, comments="#", ndmin=2)
         except ValueError as exc:
-            raise ValueError(f"cannot read points ({str(exc).splitlines()[0]})") from None
+            # numpy's message quotes the offending text: the file may be anything a scene
+            # names (a symlink to /etc/passwd), so say where, never what
+            at = re.search(r"at row (\d+), column (\d+)", str(exc))
+            where = f" (row {int(at[1]) + 1}, column {at[2]})" if at else ""
+            raise ValueError(f"cannot read points: not rows of numbers{where}") from None
+        except UnicodeDecodeError:
+            raise ValueError("cannot read points: not a text file") from None
     a = np.asarray(a)
     if a.dtype.kind not in "fiu":
         raise ValueError(f"points must be numbers, got dtype {a.dtype}")

@@ -33,8 +33,12 @@ def _pick(spec: str | None):
         raise DeviceError("no OpenCL platform found; install the CPU runtime with "
                           "pip install 'pyopencl[pocl]'")
     if spec:
-        if ":" in spec and all(p.isdigit() for p in spec.split(":")):
-            pi, di = (int(p) for p in spec.split(":"))
+        parts = spec.split(":")
+        if ":" in spec and all(p.isdigit() for p in parts):
+            if len(parts) != 2:
+                raise DeviceError(f"--device {spec}: expected P:D, a platform and a device "
+                                  "index (see: python -m gpiscl devices)")
+            pi, di = (int(p) for p in parts)
             for p_i, d_i, _, dev in devices:
                 if (p_i, d_i) == (pi, di):
                     return dev

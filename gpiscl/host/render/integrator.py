@@ -5,6 +5,7 @@ size the next launches; all other counts stay on the device.
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -12,14 +13,16 @@ import numpy as np
 import pyopencl as cl
 
 from . import function_space_stages as gpis_function_space
+from . import memory
 from ..layout import records as layouts
+from .batching import BatchSizer
 from .device import Device, Program, to_device
 from .film import Film, FilmImage
 from .program_sources import GPIS_HEADERS, STAGE_FILES
 from .queues import DeviceQueue
 from ..compile.scene import CompiledScene
 
-DEFAULT_BATCH = 1 << 18
+DEFAULT_BATCH = 1 << 18   # the most paths in flight unless asked otherwise (queue memory)
 
 
 def ws_defines(device: Device) -> dict:
@@ -46,7 +49,17 @@ class RenderStats:
     gpis_failed: int = 0       # GPIS root searches that could not decide (counted, no hit)
     seconds: float = 0.0
     interrupted: bool = False
+    time_limited: bool = False   # stopped by the time limit
+    spp_requested: int = 0
+    batches: int = 0
+    pixels: int = 0
     kernel_table: str = ""
+
+    @property
+    def spp_reached(self) -> float:
+        """Samples per pixel rendered, as a fraction: paths run in pixel order, so every
+        pixel has the floor or the ceiling of it."""
+        return 0.0 if not self.pixels else self.paths / self.pixels
 
     def summary(self) -> str:
         rate = self.paths / self.seconds if self.seconds > 0 else 0.0
@@ -62,18 +75,27 @@ class RenderStats:
 
 @dataclass
 class RenderResult:
+    """image: the film (mean, stderr, per-pixel count); stats: how the render went; scene:
+    the resolved Scene rendered (set by the API, so write_image can record it)."""
     image: FilmImage
     stats: RenderStats = field(default_factory=RenderStats)
+    scene: object = None
 
 
 class WavefrontIntegrator:
     def __init__(self, device: Device, scene: CompiledScene, settings: dict,
-                 batch_size: int | None = None):
+                 batch_size: int | None = None, max_memory: int | None = None,
+                 source: str = "<scene>"):
         self.device, self.scene, self.settings = device, scene, settings
         ctx = device.ctx
         self.width, self.height = scene.resolution
         self.num_pixels = self.width * self.height
+        # the most paths per batch: batches are sized in time below it (batching.py), and
+        # no larger than the whole render, so the queues are sized to the work
         self.batch = int(batch_size or settings.get("batch_size") or DEFAULT_BATCH)
+        self.batch = max(1, min(self.batch, self.num_pixels * int(settings.get("spp", 1))))
+        # before any allocation: the film must fit, and the batch shrinks to fit beside it
+        self.batch = memory.plan(device, self.num_pixels, self.batch, max_memory, source)
         self.program = stage_program(device)
         # scene buffers
         self.camera = to_device(device, scene.camera)
@@ -118,7 +140,7 @@ class WavefrontIntegrator:
         p["realization"] = -1 if realization is None else realization
         # null surfaces do not count as bounces, so allow extra iterations for them
         self.max_iterations = 4 * settings["max_depth"] + 64
-        self.stats = RenderStats()
+        self.stats = RenderStats(pixels=self.num_pixels)
 
     # --- one method per stage -------------------------------------------------------
 
@@ -185,8 +207,14 @@ class WavefrontIntegrator:
 
     # --- the loop -------------------------------------------------------------------
 
-    def render_batch(self, sample_base: int, path_base: int, num_paths: int):
-        """Trace paths path_base .. path_base+num_paths-1 of samples from sample_base."""
+    def render_batch(self, sample_base: int, path_base: int, num_paths: int,
+                     stop=None) -> bool:
+        """Trace paths path_base .. path_base+num_paths-1 of samples from sample_base.
+
+        stop() is asked between bounces: True abandons the batch (nothing of it reaches the
+        film) so a stop request waits for one bounce, not for the whole batch. Returns
+        whether the batch was completed and accumulated.
+        """
         queue = self.device.queue
         self._upload_params(sample_base=sample_base, path_base=path_base,
                             num_paths=num_paths, bounce=0)
@@ -210,27 +238,54 @@ class WavefrontIntegrator:
             cur, nxt = nxt, cur
             if n == 0:
                 break
+            if stop is not None and stop():
+                return False
         else:
             self.stats.truncated_paths += n
         self.accumulate()
+        queue.finish()   # so the batch's time is measured whole, accumulate included
         self.stats.paths += num_paths
+        self.stats.batches += 1
+        return True
 
-    def render(self, spp: int, time_limit: float | None = None, progress=None) -> RenderResult:
-        """Render spp samples per pixel (fewer if time_limit or Ctrl-C stops it early)."""
+    def render(self, spp: int, time_limit: float | None = None, progress=None,
+               stop=None) -> RenderResult:
+        """Render spp samples per pixel, fewer if time_limit (seconds), stop() or Ctrl-C
+        ends it early.
+
+        Batches are sized to take about batching.TARGET_SECONDS each, so progress(paths)
+        is called at least about once a second, stop() is asked between bounces and the
+        time limit holds to within one batch. Paths run in pixel order, so a render
+        stopped during its first pass leaves the later pixels with no sample: their film
+        count is 0 (see FilmImage.count).
+        """
+        if time_limit is not None and not (math.isfinite(time_limit) and time_limit > 0):
+            raise ValueError(f"time_limit must be a finite number of seconds > 0 "
+                             f"(got {time_limit})")
         start = time.perf_counter()
         total = self.num_pixels * spp
+        self.stats.spp_requested = spp
+        sizer = BatchSizer(self.batch)
         done = 0
         try:
             while done < total:
-                n = min(self.batch, total - done)
-                self.render_batch(done // self.num_pixels, done % self.num_pixels, n)
+                if stop is not None and stop():
+                    self.stats.interrupted = True
+                    break
+                left = None if time_limit is None else time_limit - (time.perf_counter() - start)
+                n = sizer.next(total - done, left)
+                if n == 0 or (left is not None and left <= 0):
+                    self.stats.time_limited = True
+                    break
+                t0 = time.perf_counter()
+                if not self.render_batch(done // self.num_pixels, done % self.num_pixels, n,
+                                         stop):
+                    self.stats.interrupted = True
+                    break
+                sizer.record(n, time.perf_counter() - t0)
                 done += n
                 if progress is not None:
                     progress(n)
-                # stop on time only once every pixel has at least one sample
-                if (time_limit is not None and done >= self.num_pixels
-                        and time.perf_counter() - start > time_limit):
-                    break
         except KeyboardInterrupt:
             self.stats.interrupted = True
         self.device.queue.finish()

@@ -17,9 +17,33 @@ from .schema import Context, kind_of
 
 @dataclass
 class Scene:
+    """A validated, resolved scene (see load_scene).
+
+    Parameters
+    ----------
+    data : dict
+        The scene document; Scene(data) validates and resolves it exactly as a scene file
+        is (SceneError on any mistake), so no Scene holds unchecked data.
+    source : str
+        Where it came from, for error messages.
+    base_dir : str
+        The folder relative file paths are resolved against.
+    """
     data: dict
     source: str = "<dict>"
     base_dir: str = field(default_factory=os.getcwd)
+
+    def __post_init__(self):
+        self.data = SCENE.resolve(self.data, "", Context(self.source, self.base_dir))
+
+    @classmethod
+    def resolved(cls, data: dict, source: str, base_dir: str) -> "Scene":
+        """A Scene of data that is already resolved (load_scene's result, edited only with
+        values checked on their own): skips validating again, which would reread every
+        mesh and image the scene names."""
+        scene = object.__new__(cls)
+        scene.data, scene.source, scene.base_dir = data, source, base_dir
+        return scene
 
     def __repr__(self):
         return (f"Scene(source={self.source!r}, {len(self.data.get('shapes', []))} shapes, "
@@ -42,8 +66,16 @@ def _object_pairs(pairs):
     return obj
 
 
+MAX_SCENE_BYTES = 64 << 20   # a scene names its big data in files; more is a mistake
+
+
 def _read_json(path: str, ctx: Context):
     try:
+        # a FIFO would block forever and /dev/zero fill memory: regular files only, bounded
+        if os.path.exists(path) and not os.path.isdir(path) and not os.path.isfile(path):
+            ctx.fail("", "not a regular file")
+        if os.path.isfile(path) and os.path.getsize(path) > MAX_SCENE_BYTES:
+            ctx.fail("", f"larger than {MAX_SCENE_BYTES >> 20} MiB: not a scene file")
         with open(path, encoding="utf-8") as f:
             text = f.read()
     except FileNotFoundError:
@@ -76,13 +108,35 @@ def load_scene(source) -> Scene:
         doc = source
     elif isinstance(source, (str, os.PathLike)):
         path = os.fspath(source)
-        ctx = Context(path, os.path.dirname(os.path.abspath(path)))
+        # relative asset paths are relative to the scene file itself, also through a link
+        ctx = Context(path, os.path.dirname(os.path.realpath(path)))
         doc = _read_json(path, ctx)
         if not isinstance(doc, dict):
             ctx.fail("", f"top level must be a JSON object (got {kind_of(doc)})")
     else:
         raise TypeError(f"load_scene takes a path, a dict or a Scene, not {type(source).__name__}")
-    return Scene(SCENE.resolve(doc, "", ctx), ctx.file, ctx.base_dir)
+    _check_nesting(doc, ctx)
+    return Scene.resolved(SCENE.resolve(doc, "", ctx), ctx.file, ctx.base_dir)
+
+
+MAX_NESTING = 100   # levels of objects and lists: the resolver recurses, and a CSG tree
+                    # anywhere near this deep is far beyond the device's stack anyway
+
+
+def _check_nesting(doc, ctx: Context):
+    """A clear error for a document nested too deeply, before the recursive resolver
+    meets it (a 600-deep union chain was a RecursionError). Iterative, so any depth."""
+    stack = [(doc, 1, "")]
+    while stack:
+        value, depth, path = stack.pop()
+        if depth > MAX_NESTING:
+            shown = path if len(path) <= 80 else path[:60] + "..."
+            ctx.fail(shown, f"nested more than {MAX_NESTING} levels deep")
+        if isinstance(value, dict):
+            stack.extend((v, depth + 1, f"{path}.{k}" if path else str(k))
+                         for k, v in value.items())
+        elif isinstance(value, (list, tuple)):
+            stack.extend((v, depth + 1, f"{path}[{i}]") for i, v in enumerate(value))
 
 
 def write_resolved(scene, path) -> None:

@@ -12,12 +12,16 @@ from __future__ import annotations
 import math
 
 from .conductors import CONDUCTORS
+from ..io.float_range import array_problem
 from ..io.images import TONEMAPS
 from ..io.meshes import mesh_problem
-from .schema import (Bool, Enum, Field, File, Int, ListOf, Nullable, String,
-                           Number, Record, Tagged, Vector, show)
+from .schema import (Bool, Enum, Field, File, Int, ListOf, Nullable, String, Number, Record,
+                     Tagged, Vector, show)
 
 __all__ = ["SHAPES", "LIGHTS", "BSDFS", "ENVIRONMENT_TYPES", "SCENE"]
+
+
+MAX_BATCH = 1 << 24       # paths: the queues' size at 16M paths is ~3 GiB already
 
 
 # ---- small vector helpers for the cross-field checks (plain Python: no numpy needed)
@@ -59,7 +63,14 @@ def _exr_problem(path):
     if missing:
         return (f"EXR image lacks channel(s) {', '.join(missing)} "
                 f"(has: {', '.join(sorted(names)) or 'none'})")
-    return None
+    # the pixels too: a truncated file has a good header, and radiance must be >= 0 like
+    # a light's radiance in the scene
+    try:
+        from ..io.images import read_exr_rgb
+        rgb = read_exr_rgb(path)
+    except Exception:  # OpenEXR reports damage as several types
+        return "cannot read the pixels of this OpenEXR image (damaged or truncated?)"
+    return array_problem(rgb, "environment map", nonnegative=True)
 
 
 def _envmap_problem(path):
@@ -111,7 +122,8 @@ RENDER = Record({
     "seed": Field(Int(ge=0, lt=2**32), 0),
     # the PNG preview's curve (io/images.tonemap_srgb8); the EXR keeps linear radiance
     "tonemap": Field(Enum(*TONEMAPS), "clamp"),
-    "batch_size": Field(Nullable(Int(ge=1)), None),  # null: the integrator picks
+    # the most paths per batch (batching.py); null: 2^18
+    "batch_size": Field(Nullable(Int(ge=1, le=MAX_BATCH)), None),
     "nee": Field(Bool(), True),  # false: BSDF sampling only (a reference for the tests)
     # an integer R: every path sees GPIS realization R (shows one sample of the geometry)
     "realization": Field(Nullable(Int(ge=0, lt=2**31)), None),

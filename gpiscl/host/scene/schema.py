@@ -13,6 +13,7 @@ import operator
 import os
 
 from ..errors import SceneError
+from ..io.float_range import MAGNITUDE, TINY, WHY_MAGNITUDE
 
 
 class Context:
@@ -76,6 +77,9 @@ _BOUNDS = (("ge", ">=", operator.ge), ("gt", ">", operator.gt),
            ("le", "<=", operator.le), ("lt", "<", operator.lt))
 
 
+INT32 = 2**31
+
+
 class Number(Spec):
     """A finite float; the bounds are inclusive (ge/le) or exclusive (gt/lt)."""
     expected = "a number"
@@ -103,6 +107,11 @@ class Number(Spec):
             v = math.inf
         if not math.isfinite(v):
             ctx.fail(path, f"must be a finite number (got {show(value)})")
+        if abs(v) > MAGNITUDE:
+            ctx.fail(path, f"must be within +-{MAGNITUDE:g} (got {show(value)}): {WHY_MAGNITUDE}")
+        if 0 < abs(v) < TINY:
+            ctx.fail(path, f"must be 0 or at least {TINY:g} in magnitude (got {show(value)}): "
+                           "the device computes in float32, where it would vanish")
         self.check_range(v, path, ctx)
         return v
 
@@ -120,6 +129,9 @@ class Int(Number):
             self.wrong_type(value, path, ctx)
         v = int(value)
         self.check_range(v, path, ctx)
+        if self.le is None and self.lt is None and v >= INT32:
+            # no bound of its own: it still goes to the device as an int32
+            ctx.fail(path, f"must be < 2**31 (got {v}): the device counts in int32")
         return v
 
 
@@ -217,7 +229,12 @@ class File(Spec):
                            f"(expected one of: {', '.join(self.extensions)})")
         if not os.path.isfile(full):
             ctx.fail(path, f"file not found: {full}")
-        problem = self.check(full) if self.check else None
+        try:
+            with open(full, "rb"):
+                pass
+            problem = self.check(full) if self.check else None
+        except OSError as exc:   # unreadable (permissions, I/O): the reason, not a traceback
+            problem = f"cannot read file ({exc.strerror or type(exc).__name__})"
         if problem:
             ctx.fail(path, f"{problem}: {full}")
         return full

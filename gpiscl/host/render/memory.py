@@ -1,0 +1,101 @@
+"""What a render will allocate, checked against what there is before anything is allocated.
+
+A legal 16384^2 camera needs ~15 GiB of film on the device and more on the host to read it
+back; a 10^8-path batch needs ~23 GiB of queues. Allocating first and failing later gave
+MemoryError tracebacks (or a segfault in the OpenCL runtime) minutes into a run. Here:
+  film    56 bytes a pixel on the device (sum, sum of squares, count, in double), and
+          HOST_BYTES_PER_PIXEL on the host to read it back, convert and write it
+  queues  the per-path queues of one batch (layouts.py), sized to the batch cap
+The batch cap shrinks until the queues take at most a quarter of the memory left (a smaller
+batch is only slower); the film cannot shrink, so a film that does not fit is an error
+naming the resolution, with --max-memory to override the estimate of what is available.
+"""
+from __future__ import annotations
+
+import os
+import re
+
+from ..layout import records as layouts
+from ..errors import SceneError
+
+FILM_BYTES_PER_PIXEL = 7 * 8          # film.py: 3 sums, 3 sums of squares, 1 count
+# film.read's float64 copies and results, the float32 mean/stderr, the EXR and PNG buffers
+HOST_BYTES_PER_PIXEL = 7 * 8 * 2 + 6 * 4 * 2 + 3 * 4 + 3
+QUEUE_SHARE = 0.25
+UNITS = {"": 1, "k": 1 << 10, "m": 1 << 20, "g": 1 << 30, "t": 1 << 40}
+
+
+def parse_size(text: str) -> int:
+    """'512M', '8G', '8GiB', '1.5g', '1000000' -> bytes."""
+    m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*([kmgt]?)(i?b)?\s*", str(text).lower())
+    if not m:
+        raise ValueError(f"expected a size like 8G, 512M or a number of bytes (got {text!r})")
+    size = int(float(m[1]) * UNITS[m[2]])
+    if size <= 0:
+        raise ValueError(f"expected a size > 0 (got {text!r})")
+    return size
+
+
+def gib(n: float) -> str:
+    return f"{n / (1 << 30):.3g} GiB"
+
+
+# the queues integrator.py allocates per batch slot: path state, two ray queues, the hit
+# and escaped index queues, the shadow rays
+QUEUES = (layouts.PATH_STATE, layouts.RAY_QUEUE, layouts.RAY_QUEUE, layouts.INDEX_QUEUE,
+          layouts.INDEX_QUEUE, layouts.SHADOW_QUEUE)
+
+
+def bytes_per_path() -> int:
+    """Device bytes of one path in flight."""
+    return sum(layout.numpy_dtype(f).itemsize for layout in QUEUES for _, f in layout.fields)
+
+
+def host_available() -> int:
+    """MemAvailable of /proc/meminfo (free RAM a new allocation can get), else all RAM."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return 1 << 62   # unknown: do not refuse
+
+
+def plan(device, num_pixels: int, batch: int, max_memory: int | None = None,
+         source: str = "<scene>", key: str = "camera.resolution") -> int:
+    """The batch cap that fits (<= batch); SceneError when the film itself does not fit.
+
+    max_memory: the bytes the render may use, instead of the estimate of what is free
+    (the device's global memory, and the host's available memory, whichever is smaller;
+    on a CPU device both are the same RAM, so their needs add up)."""
+    dev = device.device
+    is_cpu = bool(dev.type & 2)           # cl.device_type.CPU, without importing pyopencl
+    film_device = num_pixels * FILM_BYTES_PER_PIXEL
+    film_host = num_pixels * HOST_BYTES_PER_PIXEL
+    if max_memory is not None:
+        available = max_memory
+    else:
+        available = min(int(dev.global_mem_size), host_available())
+    per_buffer = int(dev.max_mem_alloc_size)
+    biggest_film_buffer = num_pixels * 3 * 8
+    film = film_device + film_host if is_cpu or max_memory is not None else film_device
+    if film > available or biggest_film_buffer > per_buffer:
+        limit = (f"{gib(available)} available" if film > available else
+                 f"the device allocates at most {gib(per_buffer)} at once")
+        raise SceneError(source, key, f"{num_pixels} pixels need about {gib(film)} for the "
+                         f"film; {limit} (render fewer pixels, or set --max-memory if the "
+                         "estimate is wrong)")
+    per_path = bytes_per_path()
+    room = max(available - film, 0) * QUEUE_SHARE
+    fits = int(room // per_path)
+    widest = max(layout.numpy_dtype(f).itemsize for layout in QUEUES for _, f in layout.fields)
+    fits = min(fits, per_buffer // widest)   # each queue field is one buffer
+    if fits < 1:
+        raise SceneError(source, key, f"no memory left for even one path after the film "
+                         f"({gib(film)} of {gib(available)})")
+    return max(1, min(batch, fits))

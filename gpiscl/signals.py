@@ -1,0 +1,153 @@
+"""SIGINT, SIGTERM and SIGHUP for the command line: stop soon, keep what was rendered.
+
+Ctrl-C, `kill`, `docker stop`, a batch scheduler's time-out and a closed terminal all mean
+"stop": none of them should print a traceback, lose finished samples or leave a half-written
+file. The process is in one of three modes:
+
+  start-up  (the default) a signal raises Interrupted, which main() turns into one line and
+            the exit code; nothing has been rendered, so nothing is written
+  noting    (while rendering) a signal is only noted; the render loop asks requested()
+            between bounces, stops, and the partial image is written
+  writing   (while writing outputs) a signal is noted and acted on once the files are whole
+
+A blocking call (a device wait, a program build) holds the main thread, where Python runs
+its signal handlers, so a watchdog thread also hears every signal through the wakeup fd: in
+start-up mode it ends the process if main() has not within GRACE_SECONDS, and a second
+signal while rendering ends it at once (the user asked twice; the partial image is given
+up). Exit codes follow the shell's 128 + signal number.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+from contextlib import contextmanager
+
+SIGNALS = tuple(s for s in (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None))
+                if s is not None)
+GRACE_SECONDS = 1.0
+
+
+def exit_code(signum: int) -> int:
+    return 128 + int(signum)
+
+
+def name(signum: int) -> str:
+    return signal.Signals(signum).name
+
+
+class Interrupted(BaseException):
+    """A stop signal during start-up. BaseException, like KeyboardInterrupt, so that the
+    `except Exception` around file readers does not swallow it."""
+
+    def __init__(self, signum: int):
+        super().__init__(name(signum))
+        self.signum = signum
+
+    @property
+    def exit_code(self) -> int:
+        return exit_code(self.signum)
+
+
+class _State:
+    signum = None          # the first stop signal received, if any
+    mode = "start-up"
+    installed = False
+    heard = 0              # signals the watchdog has seen
+
+
+_state = _State()
+
+
+def requested() -> bool:
+    """Whether a stop signal has arrived (the render loop's stop())."""
+    return _state.signum is not None
+
+
+def received():
+    """The first stop signal received, or None."""
+    return _state.signum
+
+
+def _handle(signum, _frame):
+    if _state.signum is None:
+        _state.signum = signum
+    if _state.mode == "start-up":
+        raise Interrupted(signum)
+
+
+def _force_exit(message: str, signum: int):
+    try:
+        os.write(2, f"\n{message}\n".encode())
+    finally:
+        os._exit(exit_code(signum))
+
+
+def _watchdog(fd: int):
+    while True:
+        try:
+            data = os.read(fd, 64)
+        except OSError:
+            return
+        if not data:
+            return
+        for signum in data:
+            if signum not in SIGNALS:
+                continue
+            _state.heard += 1
+            first = _state.signum if _state.signum is not None else signum
+            if _state.mode == "start-up":
+                timer = threading.Timer(GRACE_SECONDS, _force_exit,
+                                        (startup_message(first), first))
+                timer.daemon = True    # a main() that exits in time is not held up by it
+                timer.start()
+            elif _state.mode == "noting" and _state.heard > 1:
+                _force_exit(f"{name(signum)} again: stopped at once, nothing written", first)
+
+
+def _excepthook(kind, value, tb):
+    """An exception that escapes after a stop signal (raised where no main() catches it,
+    as in the imports before main runs, or turned into another one, as a C extension's
+    ImportError 'initialization failed'): the same one line and exit code."""
+    if _state.signum is not None:
+        _force_exit(startup_message(_state.signum), _state.signum)
+    sys.__excepthook__(kind, value, tb)
+
+
+def startup_message(signum: int) -> str:
+    return f"interrupted by {name(signum)} during start-up: nothing rendered, nothing written"
+
+
+def install() -> None:
+    """Take over the stop signals for this process (the command line only: a library must
+    leave a caller's handlers alone)."""
+    if _state.installed:
+        return
+    for sig in SIGNALS:
+        signal.signal(sig, _handle)
+    sys.excepthook = _excepthook
+    r, w = os.pipe()
+    os.set_blocking(w, False)
+    signal.set_wakeup_fd(w, warn_on_full_buffer=False)
+    threading.Thread(target=_watchdog, args=(r,), daemon=True, name="gpiscl-signals").start()
+    _state.installed = True
+
+
+@contextmanager
+def _mode(mode: str):
+    previous, _state.mode = _state.mode, mode
+    try:
+        yield
+    finally:
+        _state.mode = previous
+
+
+def noting():
+    """While rendering: a signal is noted for requested(), not raised."""
+    return _mode("noting")
+
+
+def writing():
+    """While writing outputs: a signal waits until the files are complete."""
+    return _mode("writing")

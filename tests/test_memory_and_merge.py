@@ -1,0 +1,89 @@
+"""Allocations checked before they are made; uq batches merged only when they belong
+together."""
+import json
+
+import numpy as np
+import pytest
+
+from gpiscl import SceneError, render_result
+from gpiscl.__main__ import main
+from gpiscl.api import prepare_render
+from gpiscl.host.render.memory import bytes_per_path, parse_size
+from gpiscl.host.commands.uq import load_partial
+
+TINY = {"lights": [{"type": "environment"}], "camera": {"resolution": [4, 3]},
+        "render": {"spp": 2}}
+
+
+def test_sizes_parse():
+    assert parse_size("8G") == 8 << 30 and parse_size("512m") == 512 << 20
+    assert parse_size("1.5GiB") == 3 << 29 and parse_size("1000") == 1000
+    for bad in ("", "-1G", "8X", "0"):
+        with pytest.raises(ValueError):
+            parse_size(bad)
+
+
+def test_a_film_that_does_not_fit_is_refused_before_allocating(device):
+    with pytest.raises(SceneError, match="camera.resolution.*GiB for the film.*max-memory"):
+        render_result(TINY, resolution=(16384, 16384), device=device, max_memory=1 << 30)
+
+
+def test_batches_shrink_to_fit_beside_the_film(device):
+    budget = 64 << 20
+    integrator, _ = prepare_render(TINY, spp=1 << 20, device=device, max_memory=budget)
+    assert integrator.batch * bytes_per_path() <= budget / 4
+    assert integrator.batch >= 1000
+    roomy, _ = prepare_render(TINY, spp=1 << 20, device=device)
+    assert roomy.batch == 1 << 18            # the default cap where memory is plenty
+
+
+SCENE = {"camera": {"position": [0, 0, 4], "look_at": [0, 0, 0], "resolution": [4, 3]},
+         "lights": [{"type": "environment"}],
+         "shapes": [{"type": "gpis", "proxy": {"type": "sphere", "radius": 2},
+                     "mean": {"type": "sphere", "radius": 1},
+                     "kernel": {"type": "squared_exponential", "sigma": 0.1,
+                                "length_scale": 0.3}}]}
+
+
+def test_uq_merge_refuses_batches_that_do_not_belong_together(tmp_path, capsys):
+    scene = tmp_path / "s.json"
+    scene.write_text(json.dumps(SCENE))
+
+    def run(name, *extra):
+        assert main(["uq", str(scene), "--realizations", "2", "--spp", "2", "-o",
+                     str(tmp_path / f"{name}.exr"), *extra]) == 0
+        return str(tmp_path / f"{name}.uq.npz")
+    a, b, c = run("a"), run("b", "--first", "2"), run("c", "--seed", "5")
+    other = dict(SCENE, camera=dict(SCENE["camera"], fov=30))
+    scene.write_text(json.dumps(other))
+    d = run("d", "--first", "4")
+    capsys.readouterr()
+    for files, why in (((a, a), "also in"),
+                       ((a, c), "seed"), ((a, d), "scene"), ((a, b, b), "also in")):
+        assert main(["uq", "--merge", *files, "-o", str(tmp_path / "m.exr")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and why in err[0], err
+    assert main(["uq", "--merge", b, a, "-o", str(tmp_path / "ab.exr")]) == 0
+    sums, meta = load_partial(tmp_path / "ab.uq.npz")
+    assert sums.n == 4 and meta["ranges"] == [(0, 2), (2, 4)]
+
+
+def test_uq_merge_refuses_damaged_partial_sums(tmp_path, capsys):
+    scene = tmp_path / "s.json"
+    scene.write_text(json.dumps(SCENE))
+    assert main(["uq", str(scene), "--realizations", "2", "--spp", "2", "-o",
+                 str(tmp_path / "a.exr")]) == 0
+    a = tmp_path / "a.uq.npz"
+    z = dict(np.load(a))
+    for name, change in (("n_float", {"n": np.array(2.7)}), ("n_vec", {"n": np.array([2, 2])}),
+                         ("nan", {"m2": np.full_like(z["m2"], np.nan)}),
+                         ("old", {"meta": None})):
+        bad = {k: v for k, v in dict(z, **change).items() if v is not None}
+        np.savez(tmp_path / f"{name}.uq.npz", **bad)
+    (tmp_path / "empty.uq.npz").write_bytes(b"")
+    capsys.readouterr()
+    for name in ("n_float", "n_vec", "nan", "old", "empty"):
+        assert main(["uq", "--merge", str(a), str(tmp_path / f"{name}.uq.npz"), "-o",
+                     str(tmp_path / "m.exr")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and f"{name}.uq.npz" in err[0], err

@@ -1,0 +1,111 @@
+"""Real signals sent to a real `python -m gpiscl render` on a scene made slow on purpose.
+
+Each case waits until the render has started (its 'rendering ...' line and a little more),
+sends the signal, and checks: the process ends within a couple of seconds with 128 + the
+signal number, says how far it got, prints no traceback, and leaves a valid EXR whose
+`samples` channel says which pixels hold samples.
+"""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gpiscl.host.io.images import read_exr
+from test_long_renders import slow_scene
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def start_render(tmp_path, *args, scene=None):
+    path = tmp_path / "slow.json"
+    path.write_text(json.dumps(scene or slow_scene()))
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    return subprocess.Popen([sys.executable, "-m", "gpiscl", "render", str(path), *args],
+                            cwd=ROOT, env=env, stderr=subprocess.PIPE, text=True)
+
+
+def wait_for_line(proc, fragment, timeout=60):
+    deadline = time.monotonic() + timeout
+    lines = []
+    while time.monotonic() < deadline:
+        line = proc.stderr.readline()
+        if not line:
+            break
+        lines.append(line)
+        if fragment in line:
+            return lines
+    raise AssertionError(f"no {fragment!r} in {''.join(lines)!r}")
+
+
+def stop(proc, signum):
+    """Send signum; returns (seconds until the process ended, its stderr)."""
+    sent = time.monotonic()
+    proc.send_signal(signum)
+    try:
+        _, rest = proc.communicate(timeout=20)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        raise
+    return time.monotonic() - sent, rest
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+def test_signal_mid_render_writes_the_samples_so_far(tmp_path, signum):
+    out = tmp_path / "img.exr"
+    proc = start_render(tmp_path, "-o", str(out))
+    wait_for_line(proc, "rendering ")
+    time.sleep(2.5)                       # compile, and a few batches
+    seconds, err = stop(proc, signum)
+    assert proc.returncode == 128 + signum, err
+    assert seconds < 2.5, seconds
+    assert "Traceback" not in err
+    name = signal.Signals(signum).name
+    assert f"interrupted by {name} at " in err and " of 1000000 spp" in err, err
+    ch = read_exr(out)
+    samples = ch["samples"]
+    assert samples.max() >= 1 and np.isfinite(ch["R"]).all()
+    # paths run in pixel order: every pixel has the floor or the ceiling of the spp reached
+    assert samples.max() - samples.min() <= 1
+    resolved = json.loads(out.with_suffix(".scene.json").read_text())
+    assert resolved["render"]["spp"] == max(1, int(samples.min()))
+
+
+def test_signal_during_start_up_writes_nothing_and_keeps_an_old_output(tmp_path):
+    out = tmp_path / "img.exr"
+    startups = 0
+    for delay in (0.2, 0.6, 1.2):        # imports, loading, compiling (or rendering)
+        out.write_bytes(b"an earlier render")
+        proc = start_render(tmp_path, "-o", str(out))
+        time.sleep(delay)
+        seconds, err = stop(proc, signal.SIGINT)
+        assert proc.returncode == 130, err
+        assert seconds < 2.5 and "Traceback" not in err, err
+        assert len(err.strip().splitlines()) <= 6, err
+        if "nothing written" in err:
+            startups += 1
+            assert out.read_bytes() == b"an earlier render"
+            assert not out.with_suffix(".png").exists()
+        else:                             # the render had begun: its samples are written
+            assert "interrupted by SIGINT at " in err, err
+            assert "samples" in read_exr(out)
+    assert startups >= 1
+
+
+def test_signal_in_the_first_pass_flags_the_pixels_without_samples(tmp_path):
+    out = tmp_path / "img.exr"
+    proc = start_render(tmp_path, "-o", str(out), scene=slow_scene(resolution=(64, 64)))
+    wait_for_line(proc, "rendering ")
+    time.sleep(2.0)
+    _, err = stop(proc, signal.SIGINT)
+    assert proc.returncode == 130, err
+    samples = read_exr(out)["samples"]
+    assert (samples == 0).any() and (samples > 0).any()
+    assert "pixels have no sample yet" in err
+    png = out.with_suffix(".png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
