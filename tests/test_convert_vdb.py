@@ -89,3 +89,49 @@ def test_convert_vdb_runs_without_pyopencl_or_openexr(tmp_path):
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
     if "no OpenVDB Python binding" in r.stderr:
         assert "apt install python3-openvdb" in r.stderr
+
+
+SYSTEM_PYTHON = "/usr/bin/python3"
+
+
+def _system_python_has_openvdb() -> bool:
+    import subprocess
+    from pathlib import Path
+    if not Path(SYSTEM_PYTHON).exists():
+        return False
+    probe = ("import numpy\ntry:\n    import openvdb\nexcept ImportError:\n"
+             "    import pyopenvdb\n")
+    return subprocess.run([SYSTEM_PYTHON, "-c", probe], capture_output=True).returncode == 0
+
+
+@pytest.mark.skipif(not _system_python_has_openvdb(),
+                    reason="no system Python with an OpenVDB binding (apt install "
+                    "python3-openvdb)")
+def test_convert_vdb_under_debians_binding(tmp_path):
+    """A real .vdb written by OpenVDB itself (Debian's python3-openvdb), converted by
+    `python -m gpiscl convert-vdb` under that same system Python: values, inactive
+    voxels (the background), origin and voxel size survive."""
+    import os
+    import subprocess
+    from pathlib import Path
+    root = Path(__file__).resolve().parent.parent
+    values = np.random.default_rng(4).normal(size=(4, 3, 5)).astype(np.float32)
+    np.save(tmp_path / "values.npy", values)
+    write = (
+        "import numpy as np, sys\n"
+        "try:\n    import openvdb as vdb\nexcept ImportError:\n    import pyopenvdb as vdb\n"
+        "g = vdb.FloatGrid(background=100.0)\n"
+        "g.name = 'mean'\n"
+        f"g.copyFromArray(np.load({str(tmp_path / 'values.npy')!r}), ijk=(2, -1, 0))\n"
+        "g.transform = vdb.createLinearTransform(voxelSize=0.25)\n"
+        "g.transform.translate((1.0, 2.0, 3.0))\n"
+        f"vdb.write({str(tmp_path / 'a.vdb')!r}, grids=[g])\n")
+    subprocess.run([SYSTEM_PYTHON, "-c", write], check=True)
+    r = subprocess.run([SYSTEM_PYTHON, "-m", "gpiscl", "convert-vdb", str(tmp_path / "a.vdb"),
+                        str(tmp_path / "a.npz"), "--grid", "mean"], capture_output=True,
+                       text=True, env={**os.environ, "PYTHONPATH": str(root)})
+    assert r.returncode == 0, r.stderr
+    g = load_grid(tmp_path / "a.npz")
+    assert g.shape == values.shape and g.voxel_size == pytest.approx(0.25)
+    assert g.origin == pytest.approx((1.5, 1.75, 3.0))   # index (2, -1, 0) in world space
+    np.testing.assert_allclose(g.values, values, rtol=1e-6)

@@ -244,3 +244,31 @@ def test_unmapped_keys_are_noted_when_they_matter(fixture_dir):
         assert any(n.startswith(key + ":") for n in notes), key
     mirror = [s for s in scene["shapes"] if s["type"] == "gpis"][0]["bsdf"]
     assert mirror["albedo"] == pytest.approx([0.35 / 2, 0.3 / 2, 0.9 / 2])
+
+
+@pytest.mark.parametrize("turn", [0.0, -67.2614, 145.0])
+def test_environment_rotation_looks_up_their_pixel(fixture_dir, turn):
+    """Every direction finds the pixel their InfiniteSphere finds: theirs maps w to
+    u = atan2(z, x) / 2 pi + 1/2, v = acos(-y) / pi of w in the map's frame (their
+    transform's inverse), row (1 - v) h, column u w; ours turns w by env_to_map
+    (lights.h) with the converted rotation and reads envmap.direction_to_pixel."""
+    from gpiscl.host.compile.envmap import direction_to_pixel
+    from gpiscl.host.scene.tungsten import tungsten_rotation
+    doc = {"primitives": [{"type": "infinite_sphere", "emission": "sky.hdr",
+                           "transform": {"rotation": [0, turn, 0]}}]}
+    conv = convert_tungsten(doc, str(fixture_dir / "scene.json"))[0]["lights"][0]
+    h, w = 32, 64
+    rng = np.random.default_rng(2)
+    d = rng.normal(size=(2000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    local = d @ tungsten_rotation([0, turn, 0])          # R^T d = R^-1 d
+    u = np.arctan2(local[:, 2], local[:, 0]) / (2 * np.pi) + 0.5
+    v = np.arccos(np.clip(-local[:, 1], -1, 1)) / np.pi
+    theirs = np.stack([np.minimum(((1 - v) * h).astype(int), h - 1),
+                       np.minimum((u * w).astype(int), w - 1) % w], axis=1)
+    a = math.radians(conv["rotation"])
+    c, s = math.cos(a), math.sin(a)
+    mapped = np.stack([c * d[:, 0] + s * d[:, 2], d[:, 1], -s * d[:, 0] + c * d[:, 2]], 1)
+    ours = np.stack(direction_to_pixel(mapped, h, w)[:2], axis=1)
+    # directions within float noise of a pixel edge may land either side
+    assert np.mean(np.all(ours == theirs, axis=1)) > 0.995

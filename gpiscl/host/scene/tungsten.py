@@ -43,7 +43,7 @@ Mapping (../shared/design/REFERENCE-ALGORITHMS.md section 8 describes their form
           procedural {func: knob | knob_inner | knob_outer | two_spheres, transform} ->
             procedural (the knobs) or a union of two spheres, inside a transform mean (their
             renderer ignores that transform, a bug: the knob sinks into the floor; noted);
-            a mean's `color` field is dropped with a note;
+            a mean's `color` and `emission` fields are dropped with a note;
           linear {reference_point, direction, scale} -> plane;
           mesh {file (.obj/.ply/.stl/.off, relative to the scene file), transform} -> mesh
             (the transform goes to the vertices before the bake, as the reference applies
@@ -54,8 +54,9 @@ Mapping (../shared/design/REFERENCE-ALGORITHMS.md section 8 describes their form
             g <- -log(max(1e-4, g)) first when volume; interpolate "quadratic" -> linear:
             trilinear stays between neighbouring samples, so it makes no zero crossing the
             samples lack, like their quadratic B-spline and unlike an interpolating cubic,
-            which overshoots the bunny's far-field 100 to -34 and shows a box-shaped shell;
-            the grid's transform -> a transform mean)
+            which overshoots the bunny's far-field 100 to -38.6 in cells whose samples are
+            all positive, a box-shaped shell around the bunny; the grid's transform -> a
+            transform mean)
   kernels squared_exponential, rational_quadratic (a -> alpha), thin_plate (R -> radius),
           with sigma, lengthScale and aniso; the reference's kernels and ours agree there;
           their knob's `roughness` (which their renderer ignores, keeping l = 1) is read as
@@ -64,7 +65,8 @@ Mapping (../shared/design/REFERENCE-ALGORITHMS.md section 8 describes their form
           nonstationary {cov, grid | variance, offset, scale} -> cov with a sigma_field grid
             of (g + offset) scale (their grid holds a deviation multiplier, the name
             notwithstanding; a translation in the grid's transform moves the grid's origin)
-  grids   {type: vdb, file, density_name} (a VDB grid): read with an OpenVDB binding when
+  grids   {type: vdb, file, density_name} (a VDB grid, inline or named in the top-level
+          "grids" list): read with an OpenVDB binding when
           one imports (vdb.py), else from FILE_STEM.DENSITY_NAME.npz next to the .vdb if
           present (made elsewhere with `python -m gpiscl convert-vdb`); written .npz files
           go to `grid_dir` (default: next to the .vdb)
@@ -405,7 +407,7 @@ class _Converter:
         if interp == "quadratic":
             # Their quadratic B-spline blends samples with non-negative weights, so it
             # cannot cross zero where the samples do not; gpiscl's interpolating cubic can
-            # (it overshoots the bunny's far-field 100 to -34). Trilinear keeps that
+            # (it overshoots the bunny's far-field 100 to -38.6). Trilinear keeps that
             # property, at the cost of facets in a mirror's reflections.
             self.notes.append(f"{gkey}.interpolate: their quadratic B-spline becomes "
                               "trilinear (also never crosses zero where the samples do not; "
