@@ -114,6 +114,9 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--tonemap", choices=("clamp", "filmic"),
                    help="PNG preview curve (default: the scene's render.tonemap)")
     r.add_argument("--stats", action="store_true", help="print per-kernel timings")
+    r.add_argument("--aov", metavar="LIST",
+                   help="also write first-hit AOVs as EXR layers, for denoisers: any of "
+                   "depth,normal,albedo,position")
     r.add_argument("--max-memory", type=_size, metavar="SIZE",
                    help="memory the render may use (e.g. 8G), instead of the estimate of "
                    "free memory it is checked against before rendering")
@@ -171,6 +174,7 @@ def cmd_render(args) -> int:
     from .host.render.output import output_paths, write_outputs
     from .host.io.output_files import check_writable, scene_inputs
     from .host.render.progress import SppBar
+    from .host.render.aov import parse as aov_names
 
     scene = _load(args)
     data = copy.deepcopy(scene.data)
@@ -187,11 +191,14 @@ def cmd_render(args) -> int:
     scene = Scene.resolved(data, scene.source, scene.base_dir)
     # before any work: a render must not end in 'cannot write' (output_files)
     check_writable(output_paths(args.output).values(), inputs=scene_inputs(scene))
+    aovs = aov_names(args.aov) if args.aov is not None else ()
+    if aovs and output_paths(args.output)["exr"] is None:
+        raise SceneError("<command line>", "--aov", "AOVs are EXR layers: use -o NAME.exr")
     device = Device(args.device)
     spp = data["render"]["spp"]
     w, h = data["camera"]["resolution"]
     integrator, _ = prepare_render(scene, device=device, batch_size=args.batch_size,
-                             max_memory=args.max_memory)
+                             max_memory=args.max_memory, aov=bool(aovs))
     # after compiling, so that a scene refused there is still exactly one line
     print(f"rendering {scene.source} at {w}x{h}, {spp} spp on {device.name}", file=sys.stderr)
     # from here on a stop signal ends the render and the samples so far are written
@@ -211,7 +218,7 @@ def cmd_render(args) -> int:
                   f"nothing written", file=sys.stderr)
             return signals.exit_code(stopped_by)
         with signals.writing():
-            paths = write_outputs(result.image, scene, args.output, args.exposure, st)
+            paths = write_outputs(result.image, scene, args.output, args.exposure, st, aovs)
     if stopped_by is not None:
         print(f"interrupted by {signals.name(stopped_by)} at {reached}", file=sys.stderr)
     elif st.time_limited:

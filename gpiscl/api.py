@@ -15,6 +15,7 @@ from .host.render.integrator import RenderResult, WavefrontIntegrator
 from .host.scene.loading import Scene, load_scene
 from .host.errors import SceneError
 from .host.compile.scene import compile_scene
+from .host.render.aov import parse as aov_names
 
 __all__ = ["Scene", "SceneError", "load_scene", "render", "render_result", "write_image",
            "uq"]
@@ -24,7 +25,7 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
                   resolution=None, device: Device | str | None = None,
                   batch_size: int | None = None, time_limit: float | None = None,
                   progress=None, realization: int | None = None,
-                  stop=None, max_memory: int | None = None) -> RenderResult:
+                  stop=None, max_memory: int | None = None, aov=None) -> RenderResult:
     """Render a scene; the image with its standard errors, sample counts and statistics.
 
     Parameters
@@ -57,6 +58,10 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
     max_memory : int, optional
         Bytes the render may use, instead of the estimate of free memory: the film must fit
         (SceneError naming camera.resolution otherwise) and batches shrink to fit beside it.
+    aov : str or list of str, optional
+        Also collect these first-hit AOVs: 'depth', 'normal', 'albedo', 'position' (or
+        'depth,normal'); write_image adds them as EXR layers. How they are averaged over a
+        pixel's samples: gpiscl.host.aov.
 
     Returns
     -------
@@ -73,7 +78,8 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
     checked = arguments.check(spp=spp, seed=seed, resolution=resolution,
                               realization=realization, batch_size=batch_size,
                               time_limit=time_limit, max_memory=max_memory)
-    integrator, scene = prepare_render(scene, device=device, **{
+    aovs = aov_names(aov, "aov") if aov else ()
+    integrator, scene = prepare_render(scene, device=device, aov=bool(aovs), **{
         k: v for k, v in checked.items() if k != "time_limit"})
     spp = scene.data["render"]["spp"]
     bar = None
@@ -89,12 +95,12 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
     finally:
         if bar is not None:
             bar.close()
-    result.scene = scene
+    result.scene, result.aovs = scene, aovs
     return result
 
 
 def prepare_render(scene, spp=None, seed=None, resolution=None, device=None, batch_size=None,
-             realization=None, max_memory=None):
+             realization=None, max_memory=None, aov=False):
     """The compiled integrator and the resolved Scene with the overrides applied: the part
     of render_result before any sample is traced (the command line renders in between)."""
     scene = load_scene(scene)
@@ -109,7 +115,7 @@ def prepare_render(scene, spp=None, seed=None, resolution=None, device=None, bat
     if not isinstance(device, Device):
         device = shared_device(device)
     integrator = WavefrontIntegrator(device, compile_scene(data, scene.source), settings,
-                                     batch_size, max_memory, scene.source)
+                                     batch_size, max_memory, scene.source, aov)
     return integrator, Scene.resolved(data, scene.source, scene.base_dir)
 
 
@@ -162,8 +168,9 @@ def write_image(path, result: RenderResult, exposure: float = 0.0) -> dict:
     Parameters
     ----------
     path : str or os.PathLike
-        NAME.exr (EXR with standard errors, sample counts and how it was made, a PNG
-        preview and NAME.scene.json) or NAME.png (the preview and NAME.scene.json).
+        NAME.exr (EXR with standard errors, sample counts, the AOVs the render collected
+        and how it was made, a PNG preview and NAME.scene.json) or NAME.png (the preview
+        and NAME.scene.json).
     result : RenderResult
         From render_result.
     exposure : float
@@ -188,7 +195,7 @@ def write_image(path, result: RenderResult, exposure: float = 0.0) -> dict:
                          "expected the RenderResult of render_result()")
     exposure = arguments.check(exposure=exposure)["exposure"]
     check_writable(output_paths(path).values(), "path", inputs=scene_inputs(result.scene))
-    return write_outputs(result.image, result.scene, path, exposure, result.stats)
+    return write_outputs(result.image, result.scene, path, exposure, result.stats, result.aovs)
 
 
 def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,

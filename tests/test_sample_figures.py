@@ -177,7 +177,7 @@ def test10_posterior_maps_honour_the_observed_surface(tmp_path):
     assert maps["mean"].shape == maps["samples"][0].shape == (8, 8)
     bad = tmp_path / "bad.txt"
     bad.write_text("1 2\n3 4\n")
-    with pytest.raises(SceneError, match="rows of 3 \(x y z\) or 6"):
+    with pytest.raises(SceneError, match=r"rows of 3 \(x y z\) or 6"):
         load_observations(bad)
 
 

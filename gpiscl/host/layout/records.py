@@ -107,6 +107,7 @@ RENDER_PARAMS = Struct("RenderParams", (
     ("int", "nee"),            # 1: next-event estimation with MIS; 0: BSDF sampling only
     ("int", "num_gpis"),
     ("int", "realization"),    # >= 0: every path uses this one GPIS realization
+    ("int", "aov"),            # 1: record first hits (aov.py) and add them to the film
 ))
 
 # --- queues ---------------------------------------------------------------------------
@@ -119,6 +120,10 @@ PATH_STATE = Queue("path", (
     ("float4", "prev_pos"),   # last scattering vertex, for emitter pdfs (w = bsdf pdf, 0 = delta)
     ("int", "depth"),         # scattering events so far
     ("int", "medium"),        # GPIS object the ray travels in, or -1
+    # the first scattering event, for AOVs (aov.py; written only when params.aov is set)
+    ("float4", "aov_position"),  # world position; w = distance from the camera
+    ("float4", "aov_normal"),    # unit normal facing the camera; w = 1 (a hit)
+    ("float4", "aov_albedo"),    # albedo there
 ))
 
 RAY_QUEUE = Queue("ray", (

@@ -16,10 +16,12 @@ class FilmImage:
     count: np.ndarray      # (H, W) float64
     sum: np.ndarray        # (H, W, 3) float64
     sum_sq: np.ndarray     # (H, W, 3) float64
+    aov: np.ndarray | None = None   # (H, W, 12) float64 first-hit sums (aov.py), if asked
 
 
 class Film:
-    def __init__(self, ctx: cl.Context, queue: cl.CommandQueue, width: int, height: int):
+    def __init__(self, ctx: cl.Context, queue: cl.CommandQueue, width: int, height: int,
+                 aov: bool = False):
         self.width, self.height = width, height
         self.queue = queue
         n = width * height
@@ -29,10 +31,14 @@ class Film:
         self.sum_sq = cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=zeros3)
         self.count = cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR,
                                hostbuf=np.zeros(n, np.float64))
+        # the kernel takes the argument either way: one unused double without AOVs
+        self.has_aov = aov
+        self.aov = cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR,
+                             hostbuf=np.zeros(12 * n if aov else 1, np.float64))
 
     @property
     def args(self) -> list:
-        return [self.sum, self.sum_sq, self.count]
+        return [self.sum, self.sum_sq, self.count, self.aov]
 
     def read(self) -> FilmImage:
         h, w = self.height, self.width
@@ -47,4 +53,8 @@ class Film:
             mean = np.where(n > 0, s / n, 0.0)
             var = np.where(n > 1, np.maximum(q - n * mean * mean, 0.0) / (n - 1), 0.0)
             stderr = np.sqrt(np.where(n > 0, var / n, 0.0))
-        return FilmImage(mean.astype(np.float32), stderr.astype(np.float32), c, s, q)
+        aov = None
+        if self.has_aov:
+            aov = np.empty((h, w, 12), np.float64)
+            cl.enqueue_copy(self.queue, aov, self.aov)
+        return FilmImage(mean.astype(np.float32), stderr.astype(np.float32), c, s, q, aov)

@@ -80,12 +80,13 @@ class RenderResult:
     image: FilmImage
     stats: RenderStats = field(default_factory=RenderStats)
     scene: object = None
+    aovs: tuple = ()   # the AOVs asked for (aov.py); their sums are image.aov
 
 
 class WavefrontIntegrator:
     def __init__(self, device: Device, scene: CompiledScene, settings: dict,
                  batch_size: int | None = None, max_memory: int | None = None,
-                 source: str = "<scene>"):
+                 source: str = "<scene>", aov: bool = False):
         self.device, self.scene, self.settings = device, scene, settings
         ctx = device.ctx
         self.width, self.height = scene.resolution
@@ -95,7 +96,8 @@ class WavefrontIntegrator:
         self.batch = int(batch_size or settings.get("batch_size") or DEFAULT_BATCH)
         self.batch = max(1, min(self.batch, self.num_pixels * int(settings.get("spp", 1))))
         # before any allocation: the film must fit, and the batch shrinks to fit beside it
-        self.batch = memory.plan(device, self.num_pixels, self.batch, max_memory, source)
+        self.batch = memory.plan(device, self.num_pixels, self.batch, max_memory, source,
+                                 aov=aov)
         self.program = stage_program(device)
         # scene buffers
         self.camera = to_device(device, scene.camera)
@@ -127,7 +129,7 @@ class WavefrontIntegrator:
         self.counters = to_device(device, self.counters_host, writable=True)
         self.params_host = layouts.RENDER_PARAMS.zeros(1)
         self.params = cl.Buffer(ctx, cl.mem_flags.READ_ONLY, self.params_host.nbytes)
-        self.film = Film(ctx, device.queue, self.width, self.height)
+        self.film = Film(ctx, device.queue, self.width, self.height, aov=aov)
         rr = settings["russian_roulette"]
         p = self.params_host[0]
         p["seed"], p["max_depth"] = settings["seed"], settings["max_depth"]
@@ -138,6 +140,7 @@ class WavefrontIntegrator:
         p["num_gpis"] = len(gpis.objects)
         realization = settings.get("realization")
         p["realization"] = -1 if realization is None else realization
+        p["aov"] = 1 if aov else 0
         # null surfaces do not count as bounces, so allow extra iterations for them
         self.max_iterations = 4 * settings["max_depth"] + 64
         self.stats = RenderStats(pixels=self.num_pixels)

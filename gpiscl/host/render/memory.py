@@ -21,6 +21,7 @@ from ..errors import SceneError
 FILM_BYTES_PER_PIXEL = 7 * 8          # film.py: 3 sums, 3 sums of squares, 1 count
 # film.read's float64 copies and results, the float32 mean/stderr, the EXR and PNG buffers
 HOST_BYTES_PER_PIXEL = 7 * 8 * 2 + 6 * 4 * 2 + 3 * 4 + 3
+AOV_BYTES_PER_PIXEL = 12 * 8         # aov.py: first-hit sums, in double
 QUEUE_SHARE = 0.25
 UNITS = {"": 1, "k": 1 << 10, "m": 1 << 20, "g": 1 << 30, "t": 1 << 40}
 
@@ -67,7 +68,7 @@ def host_available() -> int:
 
 
 def plan(device, num_pixels: int, batch: int, max_memory: int | None = None,
-         source: str = "<scene>", key: str = "camera.resolution") -> int:
+         source: str = "<scene>", key: str = "camera.resolution", aov: bool = False) -> int:
     """The batch cap that fits (<= batch); SceneError when the film itself does not fit.
 
     max_memory: the bytes the render may use, instead of the estimate of what is free
@@ -75,8 +76,8 @@ def plan(device, num_pixels: int, batch: int, max_memory: int | None = None,
     on a CPU device both are the same RAM, so their needs add up)."""
     dev = device.device
     is_cpu = bool(dev.type & 2)           # cl.device_type.CPU, without importing pyopencl
-    film_device = num_pixels * FILM_BYTES_PER_PIXEL
-    film_host = num_pixels * HOST_BYTES_PER_PIXEL
+    film_device = num_pixels * (FILM_BYTES_PER_PIXEL + (AOV_BYTES_PER_PIXEL if aov else 0))
+    film_host = num_pixels * (HOST_BYTES_PER_PIXEL + (2 * AOV_BYTES_PER_PIXEL if aov else 0))
     if max_memory is not None:
         available = max_memory
     else:

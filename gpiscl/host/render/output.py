@@ -12,10 +12,12 @@ import math
 
 import numpy as np
 
+from . import aov
 from ..io import output_files
 from .film import FilmImage
 from ..io.images import tonemap_srgb8, write_exr, write_png
 from ..scene.loading import Scene, write_resolved
+from ..errors import SceneError
 
 UNCOVERED = (255, 0, 255)
 
@@ -27,15 +29,20 @@ def output_paths(path) -> dict:
 
 
 def write_outputs(image: FilmImage, scene: Scene, path, exposure: float = 0.0,
-                  stats=None) -> dict:
+                  stats=None, aovs=()) -> dict:
     """Write the files the extension of path asks for (see output_files), each whole or
     not at all. stats (RenderStats), when given, go into the EXR header (gpiscl:* attributes:
     spp reached and requested, paths, seed, render seconds, version, scene file), and for a
-    render stopped early the resolved scene records the spp every pixel has."""
+    render stopped early the resolved scene records the spp every pixel has. aovs: names of
+    aov.AOVS to add as EXR layers (the film must have collected them)."""
     paths = output_paths(path)
+    if aovs and paths["exr"] is None:
+        raise SceneError("<command line>", "--aov", "AOVs are EXR layers: write NAME.exr")
     if paths["exr"] is not None:
         extra = {f"stderr.{c}": image.stderr[..., i] for i, c in enumerate("RGB")}
         extra["samples"] = image.count
+        if aovs:
+            extra.update(aov.channels(image.aov, image.count, aovs))
         attributes = exr_attributes(scene, stats)
         output_files.write_atomically(
             paths["exr"], lambda tmp: write_exr(tmp, image.mean, extra, attributes))

@@ -3,7 +3,8 @@
  * Non-finite path radiance is counted (COUNT_NAN_PATHS) and recorded as zero. */
 __kernel void accumulate(__constant RenderParams* params, PATH_PARAMS(path),
                          __global int* counters, __global double* film_sum,
-                         __global double* film_sum_sq, __global double* film_count)
+                         __global double* film_sum_sq, __global double* film_count,
+                         __global double* film_aov)
 {
     int pixel = get_global_id(0);
     if (pixel >= params->num_pixels) return;
@@ -22,5 +23,11 @@ __kernel void accumulate(__constant RenderParams* params, PATH_PARAMS(path),
         vstore3(s, pixel, film_sum);
         vstore3(q, pixel, film_sum_sq);
         film_count[pixel] += 1.0;
+        if (params->aov) {   /* 12 doubles a pixel: the three float4s of aov.py */
+            __global double* f = film_aov + 12 * (size_t)pixel;
+            vstore4(vload4(0, f) + convert_double4(path_aov_position[i]), 0, f);
+            vstore4(vload4(1, f) + convert_double4(path_aov_normal[i]), 1, f);
+            vstore4(vload4(2, f) + convert_double4(path_aov_albedo[i]), 2, f);
+        }
     }
 }

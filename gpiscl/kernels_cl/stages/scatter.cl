@@ -51,6 +51,14 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
         return;
     }
 
+    if (params->aov && path_depth[p] == 0) {
+        /* the path's first scattering event: the guides a denoiser takes (aov.py). Until
+         * then prev_pos holds the camera position, so its w-less distance is the depth. */
+        path_aov_position[p] = (float4)(x, length(x - path_prev_pos[p].xyz));
+        path_aov_normal[p] = (float4)((dot(ng, wo) < 0.0f) ? ng : -ng, 1.0f);
+        path_aov_albedo[p] = (float4)(albedo, 0.0f);
+    }
+
     int depth = path_depth[p];
     float3 beta = path_beta[p].xyz;
     if (depth >= params->max_depth || max3(albedo) <= 0.0f) return;
