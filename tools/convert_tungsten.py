@@ -12,8 +12,10 @@ import json
 import sys
 from pathlib import Path
 
-from gpiscl.host.scene import SceneError, load_scene
-from gpiscl.host.tungsten import convert_tungsten
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # this checkout's gpiscl
+
+from gpiscl.host.scene import SceneError, load_scene  # noqa: E402
+from gpiscl.host.tungsten import convert_tungsten  # noqa: E402
 
 
 def _environment(text):
@@ -35,12 +37,17 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     try:
         try:
-            doc = json.loads(Path(args.scene).read_text())
+            doc = json.loads(Path(args.scene).read_text(encoding="utf-8"))
         except (OSError, json.JSONDecodeError) as exc:
             raise SceneError(args.scene, "", f"cannot read JSON: {exc}") from None
+        except UnicodeDecodeError:
+            raise SceneError(args.scene, "", "cannot read JSON: not UTF-8 text") from None
         scene, notes = convert_tungsten(doc, args.scene, _environment(args.environment),
                                         args.grid_dir)
-        load_scene(scene)  # strict validation before anything is written
+        try:
+            load_scene(scene)  # strict validation before anything is written
+        except SceneError as exc:   # name the input file, not '<dict>'
+            raise SceneError(args.scene, f"(converted scene) {exc.key}", exc.reason) from None
     except SceneError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -188,7 +188,8 @@ class _Converter:
             out["max_depth"] = integ["max_bounces"]
         if "enable_light_sampling" in integ:
             out["nee"] = bool(integ["enable_light_sampling"])
-        if self.doc.get("camera", {}).get("tonemap") == "filmic":
+        cam = self.doc.get("camera", {})
+        if isinstance(cam, dict) and cam.get("tonemap") == "filmic":
             out["tonemap"] = "filmic"
         return out
 
@@ -452,13 +453,33 @@ class _Converter:
             return {"type": "environment_map", "file": str(path)}
         return {"type": "environment", "radiance": self.colour(emission, key)}
 
+    def guarded(self, key: str, convert, *args):
+        """convert(*args), with a malformed part of the input (a number where an object
+        belongs, a string for a resolution, a zero divisor) as one SceneError naming the
+        input file and key instead of whatever the mapping code tripped on."""
+        try:
+            return convert(*args)
+        except (TypeError, ValueError, AttributeError, KeyError, IndexError,
+                ZeroDivisionError, OverflowError) as exc:
+            if isinstance(exc, SceneError):
+                raise
+            self.fail(key, f"malformed Tungsten input ({type(exc).__name__}: "
+                           f"{str(exc).splitlines()[0] if str(exc) else ''})")
+
     def convert(self) -> dict:
-        render = self.render()
+        if not isinstance(self.doc, dict):
+            self.fail("", "a Tungsten scene is a JSON object")
+        render = self.guarded("renderer", self.render)
         shapes, lights = [], []
-        for i, p in enumerate(self.doc.get("primitives", [])):
-            self.primitive(p, f"primitives[{i}]", render, shapes, lights)
+        primitives = self.doc.get("primitives", [])
+        if not isinstance(primitives, list):
+            self.fail("primitives", "must be a list")
+        for i, p in enumerate(primitives):
+            key = f"primitives[{i}]"
+            self.guarded(key, self.primitive, p, key, render, shapes, lights)
         return {"description": f"converted from {Path(self.source).name}",
-                "camera": self.camera(), "render": render, "shapes": shapes, "lights": lights}
+                "camera": self.guarded("camera", self.camera), "render": render,
+                "shapes": shapes, "lights": lights}
 
 
 def convert_tungsten(doc: dict, source: str = "<dict>", environment: dict | None = None,
