@@ -219,22 +219,24 @@ def cmd_render(args) -> int:
             return signals.exit_code(stopped_by)
         with signals.writing():
             paths = write_outputs(result.image, scene, args.output, args.exposure, st, aovs)
-    if stopped_by is not None:
-        print(f"interrupted by {signals.name(stopped_by)} at {reached}", file=sys.stderr)
-    elif st.time_limited:
-        print(f"time limit: stopped at {reached}", file=sys.stderr)
-    elif st.interrupted:
-        print(f"interrupted at {reached}", file=sys.stderr)
-    uncovered = int((result.image.count == 0).sum())
-    if uncovered:
-        print(f"{uncovered} of {w * h} pixels have no sample yet: 0 in the EXR's 'samples' "
-              f"channel, magenta in the PNG preview", file=sys.stderr)
-    print(st.summary(), file=sys.stderr)
-    if args.stats:
-        print(st.kernel_table, file=sys.stderr)
-    print("wrote " + ", ".join(str(p) for p in paths.values() if p is not None),
-          file=sys.stderr)
-    return 0 if stopped_by is None else signals.exit_code(stopped_by)
+        # still noting: a signal now only changes the exit code, the files are written
+        stopped_by = signals.received()
+        if stopped_by is not None:
+            print(f"interrupted by {signals.name(stopped_by)} at {reached}", file=sys.stderr)
+        elif st.time_limited:
+            print(f"time limit: stopped at {reached}", file=sys.stderr)
+        elif st.interrupted:
+            print(f"interrupted at {reached}", file=sys.stderr)
+        uncovered = int((result.image.count == 0).sum())
+        if uncovered:
+            print(f"{uncovered} of {w * h} pixels have no sample yet: 0 in the EXR's "
+                  f"'samples' channel, magenta in the PNG preview", file=sys.stderr)
+        print(st.summary(), file=sys.stderr)
+        if args.stats:
+            print(st.kernel_table, file=sys.stderr)
+        print("wrote " + ", ".join(str(p) for p in paths.values() if p is not None),
+              file=sys.stderr)
+        return 0 if stopped_by is None else signals.exit_code(stopped_by)
 
 
 def cmd_devices(_args) -> int:
@@ -414,6 +416,7 @@ def main(argv=None) -> int:
         stopped_by = signals.received()
         if stopped_by is None:
             raise
+        signals.acknowledge()
         print(signals.startup_message(stopped_by), file=sys.stderr)
         return signals.exit_code(stopped_by)
 

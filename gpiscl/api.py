@@ -1,6 +1,6 @@
 """The Python API: load a scene, render it, get numpy images, write them, run uq.
 
-Every argument is checked as the command line checks it (host/arguments.py): a bad one
+Every argument is checked as the command line checks it (host/scene/arguments.py): a bad one
 raises SceneError naming it, before any work.
 """
 from __future__ import annotations
@@ -61,7 +61,7 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
     aov : str or list of str, optional
         Also collect these first-hit AOVs: 'depth', 'normal', 'albedo', 'position' (or
         'depth,normal'); write_image adds them as EXR layers. How they are averaged over a
-        pixel's samples: gpiscl.host.aov.
+        pixel's samples: gpiscl.host.render.aov.
 
     Returns
     -------

@@ -55,6 +55,7 @@ class _State:
     mode = "start-up"
     installed = False
     heard = 0              # signals the watchdog has seen
+    acknowledged = False   # main() has reported the stop: the watchdog must not again
 
 
 _state = _State()
@@ -84,6 +85,17 @@ def _force_exit(message: str, signum: int):
         os._exit(exit_code(signum))
 
 
+def _force_exit_unless_acknowledged(message: str, signum: int):
+    if not _state.acknowledged:
+        _force_exit(message, signum)
+
+
+def acknowledge() -> None:
+    """main() has reported the stop and is exiting (interpreter shutdown may take longer
+    than GRACE_SECONDS): the watchdog must not end it with a second message."""
+    _state.acknowledged = True
+
+
 def _watchdog(fd: int):
     while True:
         try:
@@ -98,7 +110,7 @@ def _watchdog(fd: int):
             _state.heard += 1
             first = _state.signum if _state.signum is not None else signum
             if _state.mode == "start-up":
-                timer = threading.Timer(GRACE_SECONDS, _force_exit,
+                timer = threading.Timer(GRACE_SECONDS, _force_exit_unless_acknowledged,
                                         (startup_message(first), first))
                 timer.daemon = True    # a main() that exits in time is not held up by it
                 timer.start()

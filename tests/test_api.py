@@ -105,3 +105,9 @@ def test_usage_mistakes_are_one_line():
     r = subprocess.run([sys.executable, "-m", "gpiscl", "render", "--spp", "0"],
                        capture_output=True, text=True, cwd=ROOT, env=env)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--spp" in r.stderr
+
+
+def test_progress_true_draws_a_bar_in_spp(device, capsys):
+    gpiscl.render_result(TINY, device=device, progress=True)
+    err = capsys.readouterr().err
+    assert "spp" in err and "paths/s" in err

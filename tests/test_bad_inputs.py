@@ -174,3 +174,16 @@ def test_small_command_line_mistakes_are_one_line(tmp_path):
                            text=True, cwd=ROOT, env=env)
         assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
         assert fragment in r.stderr and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("doc,key", [({"camera": 5}, "camera"),
+                                     ({"camera": {"resolution": "abc"}}, "camera.resolution"),
+                                     ({"renderer": 3}, "renderer"),
+                                     ({"primitives": 3}, "primitives"),
+                                     ({"primitives": [7]}, "primitives[0]"),
+                                     ([1, 2], "")])
+def test_malformed_tungsten_input_is_a_scene_error(doc, key):
+    from gpiscl.host.scene.tungsten import convert_tungsten
+    with pytest.raises(SceneError) as info:
+        convert_tungsten(doc, "in.json", {"type": "environment", "radiance": 0.5})
+    assert info.value.file == "in.json" and info.value.key == key, str(info.value)

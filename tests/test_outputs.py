@@ -109,3 +109,33 @@ def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path):
         write_atomically(target, lambda tmp: write_png(tmp, np.zeros((2, 2, 3), np.uint8)))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["taken.png"]
     assert (target / "keep").read_text() == "x"
+
+
+def test_a_full_disk_leaves_no_temporary_files(tmp_path):
+    """RLIMIT_FSIZE makes every write past 4 KiB fail with EFBIG (Python ignores SIGXFSZ),
+    as a full disk would: neither the SDF cache nor an output may leave a temporary file.
+    (Only the bake and the writers run under it: PoCL's compiler writes files too.)"""
+    import resource
+    import trimesh
+    trimesh.creation.icosphere(subdivisions=2).export(tmp_path / "ball.obj")
+    code = (
+        "import sys, numpy as np\n"
+        "from gpiscl.host.compile.sdf_bake import mesh_mean\n"
+        "from gpiscl.host.io.images import write_exr\n"
+        "from gpiscl.host.io.output_files import write_atomically\n"
+        "from gpiscl.host.errors import SceneError\n"
+        "grid, hit = mesh_mean(sys.argv[1], 16)\n"
+        "try:\n"
+        "    write_atomically(sys.argv[2], lambda t: write_exr(t, np.random.rand(64, 64, 3)))\n"
+        "except SceneError as e:\n"
+        "    print('error:', e, file=sys.stderr)\n")
+    env = dict(os.environ, PYTHONPATH=str(ROOT), GPISCL_CACHE=str(tmp_path / "cache"))
+    r = subprocess.run([sys.executable, "-c", code, str(tmp_path / "ball.obj"),
+                        str(tmp_path / "img.exr")], capture_output=True, text=True, cwd=ROOT,
+                       env=env, preexec_fn=lambda: resource.setrlimit(
+                           resource.RLIMIT_FSIZE, (4096, 4096)))
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    assert "cannot cache the SDF bake" in r.stderr
+    assert "img.exr: cannot write" in r.stderr.splitlines()[-1], r.stderr
+    left = [p.name for p in tmp_path.rglob("*") if p.is_file() and ".tmp" in p.name]
+    assert left == [] and not (tmp_path / "img.exr").exists()

@@ -109,3 +109,31 @@ def test_signal_in_the_first_pass_flags_the_pixels_without_samples(tmp_path):
     assert "pixels have no sample yet" in err
     png = out.with_suffix(".png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_signal_during_an_sdf_bake_acts_at_once_and_leaves_no_files(tmp_path):
+    """libigl holds the GIL for a whole call, so bakes run in chunks (sdf_bake.BAKE_CHUNK)
+    and a signal acts between them instead of minutes later."""
+    import trimesh
+    trimesh.creation.icosphere(subdivisions=5).export(tmp_path / "ball.obj")
+    scene = {"camera": {"position": [0, 0, 4], "look_at": [0, 0, 0], "resolution": [8, 8]},
+             "shapes": [{"type": "gpis", "proxy": {"type": "sphere", "radius": 1.5},
+                         "mean": {"type": "mesh", "file": str(tmp_path / "ball.obj"),
+                                  "resolution": 256},
+                         "kernel": {"type": "squared_exponential", "sigma": 0.05,
+                                    "length_scale": 0.3}}],
+             "lights": [{"type": "environment"}]}
+    cache = tmp_path / "cache"
+    path = tmp_path / "bake.json"
+    path.write_text(json.dumps(scene))
+    env = dict(os.environ, PYTHONPATH=str(ROOT), GPISCL_CACHE=str(cache))
+    proc = subprocess.Popen([sys.executable, "-m", "gpiscl", "render", str(path), "-o",
+                             str(tmp_path / "b.exr")], cwd=ROOT, env=env,
+                            stderr=subprocess.PIPE, text=True)
+    time.sleep(4.0)                       # imports, loading: the bake takes minutes
+    seconds, err = stop(proc, signal.SIGINT)
+    assert proc.returncode == 130, err
+    assert seconds < 3.0, seconds
+    assert "Traceback" not in err and "nothing written" in err, err
+    assert not (tmp_path / "b.exr").exists()
+    assert not cache.exists() or not any(p.is_file() for p in cache.rglob("*"))

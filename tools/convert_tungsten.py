@@ -4,7 +4,7 @@
                                      [--grid-dir DIR]
 
 The scene file is read as their renderer reads it (trailing commas, comments, NaN and
-Infinity). The mapping and what is unsupported are documented in gpiscl/host/tungsten.py.
+Infinity). The mapping and what is unsupported are documented in gpiscl/host/scene/tungsten.py.
 The result is validated by the strict scene loader before it is written; errors are one
 line naming the input file, the key path and the reason (exit code 2).
 """
@@ -13,10 +13,12 @@ import json
 import sys
 from pathlib import Path
 
-from gpiscl.host.errors import SceneError
-from gpiscl.host.io.lenient_json import read_lenient_json
-from gpiscl.host.scene.loading import load_scene
-from gpiscl.host.scene.tungsten import convert_tungsten
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # this checkout's gpiscl
+
+from gpiscl.host.errors import SceneError  # noqa: E402
+from gpiscl.host.io.lenient_json import read_lenient_json  # noqa: E402
+from gpiscl.host.scene.loading import load_scene  # noqa: E402
+from gpiscl.host.scene.tungsten import convert_tungsten  # noqa: E402
 
 
 def _environment(text):

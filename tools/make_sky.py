@@ -4,7 +4,7 @@ The authors' scenes light their objects with "FlowCheck.hdr", whose content is m
 their public repository (the file is listed there, but its data is not). This is
 a procedural stand-in with the same role: a bright sky gradient over a darker ground, a
 warm patch around the sun direction and a few soft "windows", so mirror micro-facets show
-structured reflections. Lat-long layout of gpiscl/host/envmap.py (row 0 = +y).
+structured reflections. Lat-long layout of gpiscl/host/compile/envmap.py (row 0 = +y).
 
     python tools/make_sky.py [--width 512]
 """

@@ -47,7 +47,21 @@ def grid_box(lo, hi, resolution: int, margin: float):
     return origin, h, counts
 
 
+# points per libigl call: libigl holds the GIL for a whole call (a 256^3 bake is minutes on
+# two cores), so Ctrl-C and SIGTERM could act only at its end; between chunks the signal
+# handlers run (signals.py). Each point's distance is independent: results do not change.
+BAKE_CHUNK = 1 << 16
+
+
 def _signed_distance(points, verts, faces, watertight: bool, band=None) -> np.ndarray:
+    if len(points) <= BAKE_CHUNK:
+        return _signed_distance_chunk(points, verts, faces, watertight, band)
+    return np.concatenate([_signed_distance_chunk(points[i:i + BAKE_CHUNK], verts, faces,
+                                                  watertight, band)
+                           for i in range(0, len(points), BAKE_CHUNK)])
+
+
+def _signed_distance_chunk(points, verts, faces, watertight: bool, band=None) -> np.ndarray:
     import igl
     t = igl.SignedDistanceType
     sign = (t.SIGNED_DISTANCE_TYPE_PSEUDONORMAL if watertight

@@ -277,7 +277,9 @@ class WavefrontIntegrator:
                     break
                 left = None if time_limit is None else time_limit - (time.perf_counter() - start)
                 n = sizer.next(total - done, left)
-                if n == 0 or (left is not None and left <= 0):
+                # the first batch always runs: a limit shorter than one batch still gives
+                # an image (the limit holds to within one batch)
+                if done and (n == 0 or (left is not None and left <= 0)):
                     self.stats.time_limited = True
                     break
                 t0 = time.perf_counter()

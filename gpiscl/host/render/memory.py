@@ -5,7 +5,7 @@ back; a 10^8-path batch needs ~23 GiB of queues. Allocating first and failing la
 MemoryError tracebacks (or a segfault in the OpenCL runtime) minutes into a run. Here:
   film    56 bytes a pixel on the device (sum, sum of squares, count, in double), and
           HOST_BYTES_PER_PIXEL on the host to read it back, convert and write it
-  queues  the per-path queues of one batch (layouts.py), sized to the batch cap
+  queues  the per-path queues of one batch (layout/records.py), sized to the batch cap
 The batch cap shrinks until the queues take at most a quarter of the memory left (a smaller
 batch is only slower); the film cannot shrink, so a film that does not fit is an error
 naming the resolution, with --max-memory to override the estimate of what is available.

@@ -670,17 +670,32 @@ class _Converter:
         return {"type": "environment_map", "file": str(path),
                 "rotation": (spin + 180.0) % 360.0}
 
+    def guarded(self, key: str, convert, *args):
+        """convert(*args), with a malformed part of the input (a number where an object
+        belongs, a string for a resolution, a zero divisor) as one SceneError naming the
+        input file and key instead of whatever the mapping code tripped on."""
+        try:
+            return convert(*args)
+        except (TypeError, ValueError, AttributeError, KeyError, IndexError,
+                ZeroDivisionError, OverflowError) as exc:
+            if isinstance(exc, SceneError):
+                raise
+            self.fail(key, f"malformed Tungsten input ({type(exc).__name__}: "
+                           f"{str(exc).splitlines()[0] if str(exc) else ''})")
+
     def convert(self) -> dict:
         self.table(self.doc, "")
-        camera = self.camera()  # first: render() reads the camera's tonemap
-        render = self.render()
+        # every value is checked where it is read; guarded() is the net for any case
+        # those checks missed, so no input ends in a traceback
+        camera = self.guarded("camera", self.camera)  # first: render() reads its tonemap
+        render = self.guarded("renderer", self.render)
         shapes, lights = [], []
         primitives = self.doc.get("primitives", [])
         if not isinstance(primitives, list):
             self.fail("primitives", f"expected a list (got {kind_of(primitives)})")
         for i, p in enumerate(primitives):
-            self.primitive(self.table(p, f"primitives[{i}]"), f"primitives[{i}]", render,
-                           shapes, lights)
+            key = f"primitives[{i}]"
+            self.guarded(key, self.primitive, self.table(p, key), key, render, shapes, lights)
         return {"description": f"converted from {Path(self.source).name}",
                 "camera": camera, "render": render, "shapes": shapes, "lights": lights}
 

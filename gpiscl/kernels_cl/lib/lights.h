@@ -61,7 +61,7 @@ inline bool in_cone(float3 d, float3 axis, float omc)
     return dot(e, e) <= 2.0f * omc;
 }
 
-/* --- environment map: lat-long, theta from +y, phi = atan2(z, x) (gpiscl/host/envmap.py) */
+/* --- environment map: lat-long, theta from +y, phi = atan2(z, x) (gpiscl/host/compile/envmap.py) */
 
 inline float3 env_to_map(float3 d, float rot)
 {
