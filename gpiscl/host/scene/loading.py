@@ -97,9 +97,25 @@ def _read_json(path: str, ctx: Context):
 
 
 def load_scene(source) -> Scene:
-    """Validate and resolve a scene given as a path, a dict or a Scene (returned as is).
+    """Validate and resolve a scene.
 
-    Raises SceneError for any mistake in the scene; never mutates a given dict.
+    Parameters
+    ----------
+    source : str, os.PathLike, dict or Scene
+        A scene file (relative asset paths resolve against its real folder, also through
+        a link), a scene document (relative paths resolve against the working folder), or
+        a Scene, returned as is.
+
+    Returns
+    -------
+    Scene
+        Every default filled in, every colour three floats, every file path absolute.
+
+    Raises
+    ------
+    SceneError
+        For any mistake in the scene, naming the file, the key path and the reason. A given
+        dict is never changed.
     """
     if isinstance(source, Scene):
         return source

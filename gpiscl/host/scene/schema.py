@@ -107,12 +107,12 @@ class Number(Spec):
             v = math.inf
         if not math.isfinite(v):
             ctx.fail(path, f"must be a finite number (got {show(value)})")
+        self.check_range(v, path, ctx)   # first: a field's own bounds say it best
         if abs(v) > MAGNITUDE:
             ctx.fail(path, f"must be within +-{MAGNITUDE:g} (got {show(value)}): {WHY_MAGNITUDE}")
         if 0 < abs(v) < TINY:
             ctx.fail(path, f"must be 0 or at least {TINY:g} in magnitude (got {show(value)}): "
                            "the device computes in float32, where it would vanish")
-        self.check_range(v, path, ctx)
         return v
 
 
