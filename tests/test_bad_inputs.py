@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from unprivileged import permissions_enforced
 from gpiscl.host.io.images import write_exr
 from gpiscl.host.errors import SceneError
 from gpiscl.host.scene.loading import load_scene
@@ -140,13 +141,18 @@ def test_assets_resolve_next_to_the_scene_file_through_a_link(tmp_path):
     assert s.data["shapes"][0]["file"] == str(tmp_path / "project" / "m.obj")
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="root reads any file")
 def test_unreadable_points_file_is_one_line(tmp_path):
     (tmp_path / "p.xyz").write_text("0 0 0\n")
     (tmp_path / "p.xyz").chmod(0)
     shape = gpis({"type": "sphere", "radius": 0.8}, sampler={"type": "function_space"},
                  observations={"file": "p.xyz"})
-    refused(scene(tmp_path, [shape]), "shapes[0].observations.file", "Permission denied")
+    path = scene(tmp_path, [shape])
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    r = subprocess.run(permissions_enforced([sys.executable, "-m", "gpiscl", "render", str(path),
+                                             "-o", str(tmp_path / "x.exr")]),
+                       capture_output=True, text=True, cwd=ROOT, env=env)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert "shapes[0].observations.file" in r.stderr and "Permission denied" in r.stderr
 
 
 def test_the_command_line_gives_these_as_one_line(tmp_path):

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import gpiscl
+from unprivileged import permissions_enforced
 from gpiscl.host.io.images import read_exr, read_exr_attributes, write_png
 from gpiscl.host.io.output_files import plan, write_atomically
 from gpiscl.host.errors import SceneError
@@ -20,8 +21,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def gpiscl_cli(*args, cwd=None):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.run([sys.executable, "-m", "gpiscl", *args], capture_output=True,
-                          text=True, cwd=cwd or ROOT, env=env, timeout=600)
+    return subprocess.run(permissions_enforced([sys.executable, "-m", "gpiscl", *args]),
+                          capture_output=True, text=True, cwd=cwd or ROOT, env=env, timeout=600)
 
 
 def one_line_error(r, *fragments):
@@ -79,7 +80,6 @@ def test_bad_outputs_are_refused_before_rendering(tmp_path, scene_file):
     one_line_error(r, "--output", ".exr")
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="root may write anywhere")
 def test_unwritable_folder_is_refused_before_rendering(tmp_path, scene_file):
     ro = tmp_path / "ro"
     ro.mkdir(mode=0o500)
