@@ -117,6 +117,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--max-memory", type=_size, metavar="SIZE",
                    help="memory the render may use (e.g. 8G), instead of the estimate of "
                    "free memory it is checked against before rendering")
+    _add_cluster_option(r, "samples")
     sub.add_parser("devices", help="list OpenCL platforms and devices")
     _add_uq_parser(sub)
     _add_sample_parser(sub)
@@ -128,6 +129,13 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("output", help=".npz file to write")
     v.add_argument("--grid", help="grid name (default: the only grid, or 'density')")
     return ap
+
+
+def _add_cluster_option(p, what):
+    p.add_argument("--cluster", metavar="ADDRESS",
+                   help=f"render the {what} on a Dask cluster: a running scheduler "
+                   "(tcp://HOST:8786) or local:N (N worker processes for this run); the "
+                   "same image bit for bit (needs: pip install 'gpiscl[distributed]')")
 
 
 def _add_uq_parser(sub):
@@ -152,6 +160,7 @@ def _add_uq_parser(sub):
     u.add_argument("--batch-size", type=_batch_size, metavar="N",
                    help="the most paths in flight per batch")
     u.add_argument("--exposure", type=float, default=0.0, help="PNG preview exposure (stops)")
+    _add_cluster_option(u, "realizations")
 
 
 def _load(args):  # -> scene.loading.Scene (imported per command)
@@ -198,8 +207,14 @@ def cmd_render(args) -> int:
     with signals.noting():
         bar = SppBar(spp, w * h, file=sys.stderr) if sys.stderr.isatty() else None
         try:
-            result = integrator.render(spp, time_limit=args.time_limit, progress=bar,
-                                       stop=signals.requested)
+            if args.cluster:
+                from .host.commands.cluster import render_on_cluster
+                result = render_on_cluster(args.cluster, integrator, scene, spp,
+                                           args.time_limit, bar, signals.requested,
+                                           arguments.CLI_SOURCE, "--cluster")
+            else:
+                result = integrator.render(spp, time_limit=args.time_limit, progress=bar,
+                                           stop=signals.requested)
         finally:
             if bar:
                 bar.close()
@@ -292,11 +307,19 @@ def _uq_run(args, scene, device, n, k) -> int:
         from tqdm import tqdm
         bar = tqdm(total=n, unit="realization", file=sys.stderr, desc="realizations")
     try:
-        run = render_realizations(scene, n, k, seed=args.seed, first=args.first,
-                                  resolution=args.resolution, device=device,
-                                  batch_size=args.batch_size,
-                                  progress=bar.update if bar else None,
-                                  stop=signals.requested)
+        if args.cluster:
+            from .host.commands.cluster import uq_on_cluster
+            run = uq_on_cluster(args.cluster, scene, n, k, seed=args.seed, first=args.first,
+                                resolution=args.resolution, batch_size=args.batch_size,
+                                progress=bar.update if bar else None,
+                                stop=signals.requested, source="<command line>",
+                                key="--cluster")
+        else:
+            run = render_realizations(scene, n, k, seed=args.seed, first=args.first,
+                                      resolution=args.resolution, device=device,
+                                      batch_size=args.batch_size,
+                                      progress=bar.update if bar else None,
+                                      stop=signals.requested)
     finally:
         if bar:
             bar.close()
