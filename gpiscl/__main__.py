@@ -202,7 +202,8 @@ def cmd_render(args) -> int:
     integrator, _ = prepare_render(scene, device=device, batch_size=args.batch_size,
                              max_memory=args.max_memory)
     # after compiling, so that a scene refused there is still exactly one line
-    print(f"rendering {scene.source} at {w}x{h}, {spp} spp on {device.name}", file=sys.stderr)
+    where = f"the Dask cluster {args.cluster}" if args.cluster else device.name
+    print(f"rendering {scene.source} at {w}x{h}, {spp} spp on {where}", file=sys.stderr)
     # from here on a stop signal ends the render and the samples so far are written
     with signals.noting():
         bar = SppBar(spp, w * h, file=sys.stderr) if sys.stderr.isatty() else None
@@ -242,6 +243,8 @@ def cmd_render(args) -> int:
         print(st.kernel_table, file=sys.stderr)
     print("wrote " + ", ".join(str(p) for p in paths.values() if p is not None),
           file=sys.stderr)
+    if getattr(st, "lost", None):    # the cluster failed: the image is what it merged
+        return 1
     return 0 if stopped_by is None else signals.exit_code(stopped_by)
 
 
@@ -292,7 +295,8 @@ def cmd_uq(args) -> int:
     check_writable(uq_output_paths(args.output).values(), inputs=scene_inputs(scene))
     device = Device(args.device)
     n, k = args.realizations, args.spp
-    print(f"uq: {n} realizations x {k} spp of {scene.source} on {device.name}",
+    where = f"the Dask cluster {args.cluster}" if args.cluster else device.name
+    print(f"uq: {n} realizations x {k} spp of {scene.source} on {where}",
           file=sys.stderr)
     with signals.noting():
         return _uq_run(args, scene, device, n, k)
@@ -334,6 +338,8 @@ def _uq_run(args, scene, device, n, k) -> int:
         return code or 1
     print(f"{n} realizations in {run.seconds:.2f} s ({n / run.seconds:.3g} realizations/s, "
           f"{run.paths / run.seconds:.4g} paths/s)", file=sys.stderr)
+    if args.cluster:
+        print(run.cluster.table(), file=sys.stderr)
     if n < 2:   # a batch to merge later: no variance yet
         from .host.io.output_files import write_atomically
         path = uq_output_paths(args.output)["sums"]

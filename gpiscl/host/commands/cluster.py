@@ -83,9 +83,10 @@ def connect(cluster, source: str, key: str):
         if not 1 <= n <= 1024:
             raise SceneError(source, key, f"local:N needs 1 <= N <= 1024 (got {spec!r})")
         # one thread each: a worker process runs one unit at a time anyway (_LOCK), and
-        # the OpenCL runtime spreads each kernel over the cores itself
+        # the OpenCL runtime spreads each kernel over the cores itself; the dashboard on
+        # any free port (8787 may be another cluster's)
         lc = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                          dashboard_address=None)
+                          dashboard_address=":0")
         client = Client(lc)
         try:
             yield client
@@ -308,6 +309,46 @@ class InOrder:
             self.next += 1
 
 
+class FilmMerge:
+    """merge() for render units: adds a unit's paths to integrator's film with the
+    accumulate kernel (at most one batch of paths per launch, as the local loop's batches)
+    and its counts to stats."""
+
+    def __init__(self, integrator: WavefrontIntegrator, stats: RenderStats, progress=None):
+        self.integrator, self.stats, self.progress = integrator, stats, progress
+        self.rgba = np.zeros((integrator.batch, 4), np.float32)
+
+    def __call__(self, r: UnitResult) -> None:
+        batch = self.integrator.batch
+        for k in range(0, r.count, batch):
+            chunk = r.radiance[k:k + batch]
+            self.rgba[:len(chunk), :3] = chunk
+            self.integrator.accumulate_paths(r.start + k, self.rgba[:len(chunk)])
+        for name in COUNTED:
+            setattr(self.stats, name, getattr(self.stats, name) + r.counts[name])
+        self.stats.units += 1
+        if self.progress is not None:
+            self.progress(r.count)
+
+
+class RealizationMerge:
+    """merge() for uq units: each realization merged on its own, in order, from the
+    numbers UqSums.from_film made on the worker (from_film is from_realization of them),
+    so the sums go through the local loop's sequence of merges."""
+
+    def __init__(self, shape, progress=None):
+        self.sums = UqSums.empty(shape)
+        self.ids, self.paths, self.progress = [], 0, progress
+
+    def __call__(self, r: UnitResult) -> None:
+        for rid, mean, within in zip(r.ids, r.means, r.within):
+            self.sums = self.sums.merge(UqSums.from_realization(mean, within))
+            self.ids.append(rid)
+            if self.progress is not None:
+                self.progress(1)
+        self.paths += r.counts["paths"]
+
+
 @dataclass
 class WorkerLoad:
     units: int = 0
@@ -420,21 +461,8 @@ def render_on_cluster(cluster, integrator: WavefrontIntegrator, scene: Scene, sp
     stats = ClusterStats(pixels=pixels, spp_requested=spp)
     payload = scene_payload(scene)
     run = uuid.uuid4().hex[:8]
-    rgba = np.zeros((batch, 4), np.float32)
-
-    def merge(r: UnitResult):
-        for k in range(0, r.count, batch):
-            chunk = r.radiance[k:k + batch]
-            rgba[:len(chunk), :3] = chunk
-            integrator.accumulate_paths(r.start + k, rgba[:len(chunk)])
-        for name in COUNTED:
-            setattr(stats, name, getattr(stats, name) + r.counts[name])
-        stats.units += 1
-        if progress is not None:
-            progress(r.count)
-
-    start = time.perf_counter()
     with connect(cluster, source, key) as client:
+        start = time.perf_counter()   # the rendering, not starting a local:N cluster
         # the scene as a task of its own, not scattered data: should every worker holding
         # it die, the scheduler can make it again
         scene_future = client.submit(_identity, payload, key=f"gpiscl-scene-{run}")
@@ -442,8 +470,8 @@ def render_on_cluster(cluster, integrator: WavefrontIntegrator, scene: Scene, sp
         sizer = BatchSizer(cap, UNIT_SECONDS, first=min(cap, FIRST_UNIT_PATHS))
         submit = lambda i, s, n: client.submit(render_unit, scene_future, batch, s, n,
                                                key=f"gpiscl-render-{run}-{i}", priority=-i)
-        out = run_units(client, submit, pixels * spp, sizer, InOrder(merge), stop,
-                        time_limit)
+        out = run_units(client, submit, pixels * spp, sizer,
+                        InOrder(FilmMerge(integrator, stats, progress)), stop, time_limit)
         scene_future.release()
     integrator.device.queue.finish()
     stats.seconds = time.perf_counter() - start
@@ -470,30 +498,19 @@ def uq_on_cluster(cluster, scene, realizations: int, spp: int, seed: int | None 
     w, h = data["camera"]["resolution"]
     payload = scene_payload(Scene.resolved(data, scene.source, scene.base_dir))
     run = uuid.uuid4().hex[:8]
-    merged = {"sums": UqSums.empty((h, w, 3)), "ids": [], "paths": 0}
-
-    def merge(r: UnitResult):
-        for rid, mean, within in zip(r.ids, r.means, r.within):
-            # from_film's own constructor on the worker's numbers: the local loop's sums
-            merged["sums"] = merged["sums"].merge(UqSums.from_realization(mean, within))
-            merged["ids"].append(rid)
-            if progress is not None:
-                progress(1)
-        merged["paths"] += r.counts["paths"]
-
-    start = time.perf_counter()
+    merged = RealizationMerge((h, w, 3), progress)
     with connect(cluster, source, key) as client:
+        start = time.perf_counter()   # the rendering, not starting a local:N cluster
         scene_future = client.submit(_identity, payload, key=f"gpiscl-scene-{run}")
         cap = _unit_cap(2 * 3 * 8 * w * h, unit_realizations)
         sizer = BatchSizer(cap, UNIT_SECONDS, first=1)
         submit = lambda i, s, n: client.submit(uq_unit, scene_future, spp, seed, first,
                                                batch_size, s, n,
                                                key=f"gpiscl-uq-{run}-{i}", priority=-i)
-        out = run_units(client, submit, realizations, sizer, InOrder(merge), stop)
+        out = run_units(client, submit, realizations, sizer, InOrder(merged), stop)
         scene_future.release()
-    done = merged["ids"]
-    result = UqRun(merged["sums"], done, time.perf_counter() - start, merged["paths"],
-                   out.stopped is not None, run_meta(data, seed, spp, first, len(done)))
+    result = UqRun(merged.sums, merged.ids, time.perf_counter() - start, merged.paths,
+                   out.stopped is not None, run_meta(data, seed, spp, first, len(merged.ids)))
     result.cluster = out
     return result
 
