@@ -2,6 +2,7 @@
 for bit, on 1 and 2 worker processes, in any completion order, and with a worker killed
 mid-run; a stop or a lost scheduler keeps exactly the units merged; a bad --cluster is one
 line. Real Dask throughout: LocalClusters of worker processes started by the tests."""
+import json
 import os
 import random
 import signal
@@ -248,3 +249,51 @@ def test10_without_cluster_dask_is_never_imported(tmp_path):
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                        cwd=ROOT, env=_env(), timeout=120)
     assert p.stdout.split() == ["0", "[]"], p.stdout + p.stderr
+
+
+def test11_workers_get_the_scene_files_not_their_paths():
+    """A worker needs no shared file system: every file the scene reads travels with it,
+    written to the worker's own folder, and the data it compiles names only those."""
+    scene = gpiscl.load_scene(str(ROOT / "scenes" / "bunny_grid.json"))
+    payload = cm.scene_payload(scene)
+    assert len(payload.files) >= 4
+    ws = cm.WorkerScene(payload)
+    try:
+        text = repr(ws.data)
+        for path, content in payload.files.items():
+            assert path not in text
+        found = [v for v in cm.scene_inputs(cm.Scene.resolved(ws.data, "x", ws.dir))[1:]]
+        assert len(found) == len(payload.files) and all(p.startswith(ws.dir) for p in found)
+        assert sorted(Path(p).read_bytes() for p in found) == sorted(payload.files.values())
+    finally:
+        ws.close()
+    assert not Path(ws.dir).exists()
+
+
+def test12_the_readme_commands_dask_scheduler_and_dask_worker(tmp_path):
+    """The several-machine form on one machine: `dask scheduler`, `dask worker`, then
+    --cluster ADDRESS gives the local EXR."""
+    info = tmp_path / "scheduler.json"
+    dask = [sys.executable, "-m", "dask"]     # the `dask` command of this Python
+    quiet = dict(env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    started = [subprocess.Popen(dask + ["scheduler", "--scheduler-file", str(info), "--port",
+                                        "0", "--dashboard-address", ":0"], **quiet)]
+    try:
+        deadline = time.time() + 60
+        while not info.exists() and time.time() < deadline:
+            time.sleep(0.2)
+        address = json.loads(info.read_text())["address"]
+        started.append(subprocess.Popen(dask + ["worker", address, "--nworkers", "1",
+                                                "--nthreads", "1"], **quiet))
+        with Client(address, timeout=30) as c:
+            c.wait_for_workers(1, timeout=60)
+        common = [SCENE, "--resolution", "10x8", "--spp", "3", "--seed", "2"]
+        p = _cli("render", *common, "--cluster", address, "-o", str(tmp_path / "c.exr"))
+        assert p.returncode == 0, p.stderr
+        p = _cli("render", *common, "-o", str(tmp_path / "l.exr"))
+        a, b = read_exr(tmp_path / "l.exr"), read_exr(tmp_path / "c.exr")
+        assert all(np.array_equal(a[k], b[k]) for k in a)
+    finally:
+        for proc in reversed(started):
+            proc.terminate()
+            proc.wait(timeout=30)

@@ -29,6 +29,7 @@ from __future__ import annotations
 import atexit
 import hashlib
 import json
+import logging
 import os
 import re
 import shutil
@@ -101,10 +102,24 @@ def connect(cluster, source: str, key: str):
         raise SceneError(source, key, f"cannot reach a Dask scheduler at {spec!r} "
                          f"({reason}); expected 'local:N' or an address such as "
                          "tcp://HOST:8786") from None
+    with _quiet_client_log():     # closing a client that lost its scheduler logs too
+        try:
+            yield client
+        finally:
+            client.close()
+
+
+@contextmanager
+def _quiet_client_log():
+    """A lost scheduler is reported in one line (ClusterStats.lost); the Client's own
+    log of it is tracebacks of its reconnect attempt, so that log is muted meanwhile."""
+    log = logging.getLogger("distributed.client")
+    level = log.level
+    log.setLevel(logging.CRITICAL)
     try:
-        yield client
+        yield
     finally:
-        client.close()
+        log.setLevel(level)
 
 
 # ---- the scene, sent once -------------------------------------------------------------
