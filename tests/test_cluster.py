@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -190,24 +191,26 @@ def test06_a_worker_killed_mid_run_still_gives_the_local_image(client, small_uni
     assert before[killed[0]] not in client.run(os.getpid).values()
 
 
-def test07_a_lost_scheduler_keeps_the_units_merged(workers_env, small_units):
-    """The scheduler closes mid-run: the run ends with the units merged before it."""
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
-                      dashboard_address=":0") as lc, Client(lc) as c:
+def test07_a_lost_scheduler_keeps_the_units_merged(small_units, tmp_path):
+    """The scheduler process dies mid-run: the run ends with the units merged before it."""
+    with dask_processes(tmp_path) as (address, started):
         merged = []
 
-        def close_scheduler_after_two(paths):
+        def kill_scheduler_after_two(paths):
             merged.append(paths)
             if len(merged) == 2:
-                lc.sync(lc.scheduler.close)
+                started[0].kill()
 
-        t0 = time.perf_counter()
-        result = gpiscl.render_result(SCENE, cluster=c, progress=close_scheduler_after_two,
-                                      **RENDER)
-        assert time.perf_counter() - t0 < 60
+        with Client(address, timeout=3) as c:
+            c.wait_for_workers(1, timeout=60)
+            t0 = time.perf_counter()
+            result = gpiscl.render_result(SCENE, cluster=c, progress=kill_scheduler_after_two,
+                                          **RENDER)
+            assert time.perf_counter() - t0 < 60
     st = result.stats
     assert st.interrupted and st.lost and "scheduler" in st.lost
     assert st.paths == sum(merged) and result.image.count.sum() == st.paths
+    assert st.paths < RENDER["spp"] * 20 * 14
 
 
 def _cli(*args, timeout=120):
@@ -270,9 +273,10 @@ def test11_workers_get_the_scene_files_not_their_paths():
     assert not Path(ws.dir).exists()
 
 
-def test12_the_readme_commands_dask_scheduler_and_dask_worker(tmp_path):
-    """The several-machine form on one machine: `dask scheduler`, `dask worker`, then
-    --cluster ADDRESS gives the local EXR."""
+@contextmanager
+def dask_processes(tmp_path):
+    """(address, [scheduler, worker]): `dask scheduler` and one `dask worker`, as the README
+    starts them on several machines."""
     info = tmp_path / "scheduler.json"
     dask = [sys.executable, "-m", "dask"]     # the `dask` command of this Python
     quiet = dict(env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -285,15 +289,35 @@ def test12_the_readme_commands_dask_scheduler_and_dask_worker(tmp_path):
         address = json.loads(info.read_text())["address"]
         started.append(subprocess.Popen(dask + ["worker", address, "--nworkers", "1",
                                                 "--nthreads", "1"], **quiet))
+        yield address, started
+    finally:
+        for proc in reversed(started):
+            proc.terminate()
+            proc.wait(timeout=30)
+
+
+def test12_the_readme_commands_dask_scheduler_and_dask_worker(tmp_path):
+    """The several-machine form on one machine: --cluster ADDRESS gives the local EXR."""
+    with dask_processes(tmp_path) as (address, _):
         with Client(address, timeout=30) as c:
             c.wait_for_workers(1, timeout=60)
         common = [SCENE, "--resolution", "10x8", "--spp", "3", "--seed", "2"]
         p = _cli("render", *common, "--cluster", address, "-o", str(tmp_path / "c.exr"))
         assert p.returncode == 0, p.stderr
-        p = _cli("render", *common, "-o", str(tmp_path / "l.exr"))
-        a, b = read_exr(tmp_path / "l.exr"), read_exr(tmp_path / "c.exr")
-        assert all(np.array_equal(a[k], b[k]) for k in a)
-    finally:
-        for proc in reversed(started):
-            proc.terminate()
-            proc.wait(timeout=30)
+    p = _cli("render", *common, "-o", str(tmp_path / "l.exr"))
+    a, b = read_exr(tmp_path / "l.exr"), read_exr(tmp_path / "c.exr")
+    assert all(np.array_equal(a[k], b[k]) for k in a)
+
+
+def test13_a_unit_error_is_raised_as_itself(client):
+    """A unit that fails (here a SceneError, as a worker that cannot load the scene
+    raises) ends the run with that error, one line on the command line."""
+    from gpiscl.host.errors import SceneError
+
+    def fail(*_):
+        raise SceneError("<worker>", "scene", "cannot read it")
+
+    submit = lambda i, s, n: client.submit(fail, i, s, n, pure=False)
+    with pytest.raises(SceneError, match="cannot read it"):
+        cm.run_units(client, submit, 10, cm.BatchSizer(1, first=1),
+                     cm.InOrder(lambda r: None))

@@ -33,6 +33,7 @@ import logging
 import os
 import re
 import shutil
+import signal
 import tempfile
 import threading
 import time
@@ -87,7 +88,9 @@ def connect(cluster, source: str, key: str):
         # the OpenCL runtime spreads each kernel over the cores itself; the dashboard on
         # any free port (8787 may be another cluster's)
         lc = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                          dashboard_address=":0")
+                          dashboard_address=":0", preload=[__name__],
+                          # its warnings are about units cancelled by a stop: expected
+                          silence_logs=logging.ERROR)
         client = Client(lc)
         try:
             yield client
@@ -120,6 +123,13 @@ def _quiet_client_log():
         yield
     finally:
         log.setLevel(level)
+
+
+def dask_setup(worker):
+    """Run by each local:N worker process as it starts (Dask's preload): Ctrl-C in the
+    terminal reaches these processes too, and the client already owns it (it keeps the
+    units merged and closes the cluster); without this each worker dies with a traceback."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 # ---- the scene, sent once -------------------------------------------------------------
@@ -395,9 +405,10 @@ def run_units(client: Client, submit, total: int, sizer: BatchSizer, merger: InO
     out = Outcome()
     pending = {}
     issued = index = 0
+    failed = None      # a unit's own error: raised as it is, after the cancelling
     t0 = time.perf_counter()
     try:
-        while True:
+        while failed is None:
             if stop is not None and stop():
                 out.stopped = "signal"
                 break
@@ -420,7 +431,10 @@ def run_units(client: Client, submit, total: int, sizer: BatchSizer, merger: InO
             except TimeoutError:
                 continue
             for fut in done:
-                result = fut.result()      # a unit's own error is raised here
+                if fut.status == "error":
+                    failed = fut.exception()
+                    break
+                result = fut.result()      # CancelledError when the scheduler is gone
                 unit = pending.pop(fut)
                 sizer.record(result.count, result.seconds)
                 load = out.workers[result.worker]
@@ -432,11 +446,10 @@ def run_units(client: Client, submit, total: int, sizer: BatchSizer, merger: InO
                 merger.add(unit, result)
     except KeyboardInterrupt:
         out.stopped = "signal"
-    except KilledWorker as exc:
-        out.stopped, out.lost = f"a unit killed every worker it ran on ({exc})", True
     except (OSError, CancelledError) as exc:
-        if client.status == "running" and not isinstance(exc, CancelledError):
-            raise
+        # every call above but a unit's own result talks to the scheduler: a closed
+        # connection, a refused reconnect or futures cancelled by the Client all mean it
+        # is gone
         out.stopped, out.lost = f"lost the scheduler ({type(exc).__name__})", True
     finally:
         if pending:
@@ -444,6 +457,10 @@ def run_units(client: Client, submit, total: int, sizer: BatchSizer, merger: InO
                 client.cancel(list(pending))
             except Exception:   # the scheduler is gone: nothing left to cancel
                 pass
+    if isinstance(failed, KilledWorker):
+        out.stopped, out.lost = f"a unit killed every worker it ran on ({failed})", True
+    elif failed is not None:
+        raise failed
     return out
 
 
