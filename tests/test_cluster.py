@@ -321,3 +321,11 @@ def test13_a_unit_error_is_raised_as_itself(client):
     with pytest.raises(SceneError, match="cannot read it"):
         cm.run_units(client, submit, 10, cm.BatchSizer(1, first=1),
                      cm.InOrder(lambda r: None))
+
+
+def test14_a_time_limit_keeps_the_units_merged(client):
+    result = gpiscl.render_result(SCENE, cluster=client, time_limit=1.0,
+                                  **dict(RENDER, spp=100000))
+    st = result.stats
+    assert st.time_limited and not st.interrupted and 0 < st.paths < 100000 * 20 * 14
+    assert result.image.count.sum() == st.paths and st.seconds < 30

@@ -38,6 +38,7 @@ import tempfile
 import threading
 import time
 import uuid
+import warnings
 from collections import OrderedDict, defaultdict
 from concurrent.futures import CancelledError
 from contextlib import contextmanager
@@ -58,7 +59,7 @@ from ..compile.scene import compile_scene
 from .uq import (UqRun, UqSums, iter_realizations, prepare_realizations, render_realization,
                  run_meta)
 
-CONNECT_TIMEOUT = 5         # s: a wrong address is a prompt one-line error, not a hang
+CONNECT_TIMEOUT = 3         # s: a wrong address is a prompt one-line error, not a hang
 UNIT_SECONDS = 2.0          # per unit: long next to Dask's per-task overhead (~ms), short
                             # enough that progress moves, a stop acts and a lost worker
                             # costs little
@@ -412,7 +413,9 @@ def run_units(client: Client, submit, total: int, sizer: BatchSizer, merger: InO
             if stop is not None and stop():
                 out.stopped = "signal"
                 break
-            if time_limit is not None and time.perf_counter() - t0 >= time_limit:
+            # as locally, a time limit keeps at least the first unit
+            if (time_limit is not None and merger.next > 0
+                    and time.perf_counter() - t0 >= time_limit):
                 out.stopped = "time limit"
                 break
             if client.status != "running":
@@ -495,9 +498,7 @@ def render_on_cluster(cluster, integrator: WavefrontIntegrator, scene: Scene, sp
     run = uuid.uuid4().hex[:8]
     with connect(cluster, source, key) as client:
         start = time.perf_counter()   # the rendering, not starting a local:N cluster
-        # the scene as a task of its own, not scattered data: should every worker holding
-        # it die, the scheduler can make it again
-        scene_future = client.submit(_identity, payload, key=f"gpiscl-scene-{run}")
+        scene_future = submit_scene(client, payload, run)
         cap = _unit_cap(12, unit_paths)
         sizer = BatchSizer(cap, UNIT_SECONDS, first=min(cap, FIRST_UNIT_PATHS))
         submit = lambda i, s, n: client.submit(render_unit, scene_future, batch, s, n,
@@ -505,6 +506,9 @@ def render_on_cluster(cluster, integrator: WavefrontIntegrator, scene: Scene, sp
         out = run_units(client, submit, pixels * spp, sizer,
                         InOrder(FilmMerge(integrator, stats, progress)), stop, time_limit)
         scene_future.release()
+    if out.lost and stats.units == 0:
+        raise SceneError(source, key, f"{out.stopped} before the first unit finished: "
+                         "nothing rendered")
     integrator.device.queue.finish()
     stats.seconds = time.perf_counter() - start
     stats.batches = stats.units
@@ -533,7 +537,7 @@ def uq_on_cluster(cluster, scene, realizations: int, spp: int, seed: int | None 
     merged = RealizationMerge((h, w, 3), progress)
     with connect(cluster, source, key) as client:
         start = time.perf_counter()   # the rendering, not starting a local:N cluster
-        scene_future = client.submit(_identity, payload, key=f"gpiscl-scene-{run}")
+        scene_future = submit_scene(client, payload, run)
         cap = _unit_cap(2 * 3 * 8 * w * h, unit_realizations)
         sizer = BatchSizer(cap, UNIT_SECONDS, first=1)
         submit = lambda i, s, n: client.submit(uq_unit, scene_future, spp, seed, first,
@@ -545,6 +549,17 @@ def uq_on_cluster(cluster, scene, realizations: int, spp: int, seed: int | None 
                    out.stopped is not None, run_meta(data, seed, spp, first, len(merged.ids)))
     result.cluster = out
     return result
+
+
+def submit_scene(client: Client, payload: ScenePayload, run: str):
+    """The scene as a task of its own, not scattered data: should every worker holding it
+    die, the scheduler can make it again. Units take its future, so each worker receives
+    it once."""
+    with warnings.catch_warnings():
+        # Dask warns of a large graph and advises not repeating data in it: this is the
+        # one copy
+        warnings.filterwarnings("ignore", message="Sending large graph")
+        return client.submit(_identity, payload, key=f"gpiscl-scene-{run}")
 
 
 def _identity(x):
