@@ -422,7 +422,10 @@ def run_units(client: Client, submit, total: int, sizer: BatchSizer, merger: InO
                 raise CancelledError("the client is no longer connected")
             if issued < total:
                 slots = IN_FLIGHT_PER_WORKER * max(1, len(client.nthreads()))
-                while issued < total and len(pending) < slots:
+                # units finished behind a late one wait in memory: at most slots of them
+                # (the late one, rescheduled, runs first: the lowest index has the highest
+                # priority)
+                while issued < total and len(pending) < slots and len(merger.waiting) < slots:
                     n = sizer.next(total - issued)
                     pending[submit(index, issued, n)] = index
                     index, issued = index + 1, issued + n
