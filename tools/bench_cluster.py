@@ -5,8 +5,8 @@ them a paper estimate of the time to converge a scene on 16 and 64 such workers.
     python tools/bench_cluster.py [--scene scenes/knob.json] [--resolution 96] [--spp 16]
                                   [--target 0.01] [--full 512]
 
-Each rate is measured after a warm-up render (the worker processes compile the scene and
-build their programs once). The estimate: the spp for a median relative standard error of
+Each rate is measured after a warm-up render of the same scene (the worker processes
+compile the scene and build their programs once per run; the warm-up's time is shown). The estimate: the spp for a median relative standard error of
 --target per pixel, from the plain render's film (1/sqrt(spp)); the paths of a --full
 square image at that spp; divided by the measured 1-worker rate times the workers, the
 unit efficiency (work / (work + overhead) at UNIT_SECONDS per unit), and capped by how fast
@@ -63,7 +63,11 @@ def client_merge_rate(scene, spp, resolution, paths=1 << 20) -> float:
 def on_cluster(n: int, scene, kw, overhead_scene, overhead_kw, unit_paths):
     with LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                       dashboard_address=":0") as lc, Client(lc) as client:
-        render_result(scene, cluster=client, **dict(kw, spp=1))           # warm-up
+        # warm-up: the same scene (so the same digest) cut short, so the workers have
+        # compiled it and built their programs; a run pays that once per worker
+        t0 = time.perf_counter()
+        render_result(scene, cluster=client, time_limit=0.1, **kw)
+        setup = time.perf_counter() - t0
         result = render_result(scene, cluster=client, **kw)
         st = result.stats
         # per-unit overhead: many tiny units of a cheap scene, wall time minus worker time
@@ -77,7 +81,7 @@ def on_cluster(n: int, scene, kw, overhead_scene, overhead_kw, unit_paths):
         wall = time.perf_counter() - t0
     busy = _busy(small.stats.kernel_table)
     overhead = (wall * n - busy) / small.stats.units
-    return st, overhead, small.stats.units
+    return st, overhead, small.stats.units, setup
 
 
 def _busy(table: str) -> float:
@@ -114,11 +118,13 @@ def main() -> int:
     print(f"  plain render          {rate0:10.4g} samples/s  ({plain.stats.seconds:.2f} s)")
     rates = {}
     for n in (1, 2):
-        st, overhead, units = on_cluster(n, args.scene, kw, cheap, cheap_kw, 64)
+        st, overhead, units, setup = on_cluster(n, args.scene, kw, cheap, cheap_kw, 64)
         rates[n] = st.paths / st.seconds
         print(f"  {n} local worker{'s' if n > 1 else ' '}       {rates[n]:10.4g} samples/s  "
               f"({st.seconds:.2f} s, {st.units} units, x{rates[n] / rate0:.2f} the plain "
               f"render; {_unit_bytes(st.kernel_table) / 1e6:.3g} MB back per unit)")
+        print(f"      first unit, set-up included {setup:6.3g} s (scene compiled and programs "
+              f"built on each worker, once per run)")
         print(f"      in units           {st.paths / _busy(st.kernel_table):10.4g} samples/s "
               f"of worker time (busy), per worker")
         print(f"      per-unit overhead {overhead * 1e3:8.3g} ms  (wall x workers - worker "
