@@ -120,6 +120,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--max-memory", type=_size, metavar="SIZE",
                    help="memory the render may use (e.g. 8G), instead of the estimate of "
                    "free memory it is checked against before rendering")
+    _add_cluster_option(r, "samples")
     sub.add_parser("devices", help="list OpenCL platforms and devices")
     _add_uq_parser(sub)
     _add_sample_parser(sub)
@@ -131,6 +132,13 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("output", help=".npz file to write")
     v.add_argument("--grid", help="grid name (default: the only grid, or 'density')")
     return ap
+
+
+def _add_cluster_option(p, what):
+    p.add_argument("--cluster", metavar="ADDRESS",
+                   help=f"render the {what} on a Dask cluster: a running scheduler "
+                   "(tcp://HOST:8786) or local:N (N worker processes for this run); the "
+                   "same image bit for bit (needs: pip install 'gpiscl[distributed]')")
 
 
 def _add_uq_parser(sub):
@@ -155,6 +163,7 @@ def _add_uq_parser(sub):
     u.add_argument("--batch-size", type=_batch_size, metavar="N",
                    help="the most paths in flight per batch")
     u.add_argument("--exposure", type=float, default=0.0, help="PNG preview exposure (stops)")
+    _add_cluster_option(u, "realizations")
 
 
 def _load(args):  # -> scene.loading.Scene (imported per command)
@@ -194,19 +203,29 @@ def cmd_render(args) -> int:
     aovs = aov_names(args.aov) if args.aov is not None else ()
     if aovs and output_paths(args.output)["exr"] is None:
         raise SceneError("<command line>", "--aov", "AOVs are EXR layers: use -o NAME.exr")
+    if aovs and args.cluster:
+        # cluster units ship each path's radiance only (commands/cluster.py)
+        raise SceneError("<command line>", "--aov", "not available with --cluster yet")
     device = Device(args.device)
     spp = data["render"]["spp"]
     w, h = data["camera"]["resolution"]
     integrator, _ = prepare_render(scene, device=device, batch_size=args.batch_size,
                              max_memory=args.max_memory, aov=bool(aovs))
     # after compiling, so that a scene refused there is still exactly one line
-    print(f"rendering {scene.source} at {w}x{h}, {spp} spp on {device.name}", file=sys.stderr)
+    where = f"the Dask cluster {args.cluster}" if args.cluster else device.name
+    print(f"rendering {scene.source} at {w}x{h}, {spp} spp on {where}", file=sys.stderr)
     # from here on a stop signal ends the render and the samples so far are written
     with signals.noting():
         bar = SppBar(spp, w * h, file=sys.stderr) if sys.stderr.isatty() else None
         try:
-            result = integrator.render(spp, time_limit=args.time_limit, progress=bar,
-                                       stop=signals.requested)
+            if args.cluster:
+                from .host.commands.cluster import render_on_cluster
+                result = render_on_cluster(args.cluster, integrator, scene, spp,
+                                           args.time_limit, bar, signals.requested,
+                                           arguments.CLI_SOURCE, "--cluster")
+            else:
+                result = integrator.render(spp, time_limit=args.time_limit, progress=bar,
+                                           stop=signals.requested)
         finally:
             if bar:
                 bar.close()
@@ -236,6 +255,8 @@ def cmd_render(args) -> int:
             print(st.kernel_table, file=sys.stderr)
         print("wrote " + ", ".join(str(p) for p in paths.values() if p is not None),
               file=sys.stderr)
+        if getattr(st, "lost", None):    # the cluster failed: the image is what it merged
+            return 1
         return 0 if stopped_by is None else signals.exit_code(stopped_by)
 
 
@@ -286,7 +307,8 @@ def cmd_uq(args) -> int:
     check_writable(uq_output_paths(args.output).values(), inputs=scene_inputs(scene))
     device = Device(args.device)
     n, k = args.realizations, args.spp
-    print(f"uq: {n} realizations x {k} spp of {scene.source} on {device.name}",
+    where = f"the Dask cluster {args.cluster}" if args.cluster else device.name
+    print(f"uq: {n} realizations x {k} spp of {scene.source} on {where}",
           file=sys.stderr)
     with signals.noting():
         return _uq_run(args, scene, device, n, k)
@@ -301,11 +323,19 @@ def _uq_run(args, scene, device, n, k) -> int:
         from tqdm import tqdm
         bar = tqdm(total=n, unit="realization", file=sys.stderr, desc="realizations")
     try:
-        run = render_realizations(scene, n, k, seed=args.seed, first=args.first,
-                                  resolution=args.resolution, device=device,
-                                  batch_size=args.batch_size,
-                                  progress=bar.update if bar else None,
-                                  stop=signals.requested)
+        if args.cluster:
+            from .host.commands.cluster import uq_on_cluster
+            run = uq_on_cluster(args.cluster, scene, n, k, seed=args.seed, first=args.first,
+                                resolution=args.resolution, batch_size=args.batch_size,
+                                progress=bar.update if bar else None,
+                                stop=signals.requested, source="<command line>",
+                                key="--cluster")
+        else:
+            run = render_realizations(scene, n, k, seed=args.seed, first=args.first,
+                                      resolution=args.resolution, device=device,
+                                      batch_size=args.batch_size,
+                                      progress=bar.update if bar else None,
+                                      stop=signals.requested)
     finally:
         if bar:
             bar.close()
@@ -320,6 +350,8 @@ def _uq_run(args, scene, device, n, k) -> int:
         return code or 1
     print(f"{n} realizations in {run.seconds:.2f} s ({n / run.seconds:.3g} realizations/s, "
           f"{run.paths / run.seconds:.4g} paths/s)", file=sys.stderr)
+    if args.cluster:
+        print(run.cluster.table(), file=sys.stderr)
     if n < 2:   # a batch to merge later: no variance yet
         from .host.io.output_files import write_atomically
         path = uq_output_paths(args.output)["sums"]

@@ -25,7 +25,8 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
                   resolution=None, device: Device | str | None = None,
                   batch_size: int | None = None, time_limit: float | None = None,
                   progress=None, realization: int | None = None,
-                  stop=None, max_memory: int | None = None, aov=None) -> RenderResult:
+                  stop=None, max_memory: int | None = None, aov=None,
+                  cluster=None) -> RenderResult:
     """Render a scene; the image with its standard errors, sample counts and statistics.
 
     Parameters
@@ -62,6 +63,10 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
         Also collect these first-hit AOVs: 'depth', 'normal', 'albedo', 'position' (or
         'depth,normal'); write_image adds them as EXR layers. How they are averaged over a
         pixel's samples: gpiscl.host.render.aov.
+    cluster : distributed.Client or str, optional
+        Trace the samples on a Dask cluster: a Client, a scheduler address
+        ('tcp://HOST:8786') or 'local:N' (N worker processes for this call); the image is
+        the local one bit for bit. Needs the extra: pip install 'gpiscl[distributed]'.
 
     Returns
     -------
@@ -79,6 +84,9 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
                               realization=realization, batch_size=batch_size,
                               time_limit=time_limit, max_memory=max_memory)
     aovs = aov_names(aov, "aov") if aov else ()
+    if aovs and cluster is not None:
+        # cluster units ship each path's radiance only (commands/cluster.py)
+        raise SceneError(arguments.API_SOURCE, "aov", "not available with cluster yet")
     integrator, scene = prepare_render(scene, device=device, aov=bool(aovs), **{
         k: v for k, v in checked.items() if k != "time_limit"})
     spp = scene.data["render"]["spp"]
@@ -90,8 +98,13 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
     elif progress is False:
         progress = None
     try:
-        result = integrator.render(spp, time_limit=checked.get("time_limit"),
-                                   progress=progress, stop=stop)
+        if cluster is not None:
+            from .host.commands.cluster import render_on_cluster
+            result = render_on_cluster(cluster, integrator, scene, spp,
+                                       checked.get("time_limit"), progress, stop)
+        else:
+            result = integrator.render(spp, time_limit=checked.get("time_limit"),
+                                       progress=progress, stop=stop)
     finally:
         if bar is not None:
             bar.close()
@@ -200,7 +213,8 @@ def write_image(path, result: RenderResult, exposure: float = 0.0) -> dict:
 
 def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
        first: int = 0, resolution=None, device: Device | str | None = None,
-       batch_size: int | None = None, output=None, exposure: float = 0.0, stop=None):
+       batch_size: int | None = None, output=None, exposure: float = 0.0, stop=None,
+       cluster=None):
     """Per-pixel mean and unbiased variance over GPIS realizations (as `gpiscl uq`).
 
     Parameters
@@ -223,6 +237,8 @@ def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
         N >= 2 in all.
     exposure : float
         Preview exposure in stops.
+    cluster : distributed.Client or str, optional
+        Render the realizations on a Dask cluster, as for render_result: the same sums.
 
     Returns
     -------
@@ -249,9 +265,16 @@ def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
     check_uq_scene(scene.data, scene.source)
     if output is not None:
         check_writable(uq_output_paths(output).values(), "output", inputs=scene_inputs(scene))
-    run = render_realizations(scene, realizations, spp, seed=checked.get("seed"), first=first,
-                              resolution=checked.get("resolution"), device=device,
-                              batch_size=checked.get("batch_size"), stop=stop)
+    if cluster is not None:
+        from .host.commands.cluster import uq_on_cluster
+        run = uq_on_cluster(cluster, scene, realizations, spp, seed=checked.get("seed"),
+                            first=first, resolution=checked.get("resolution"),
+                            batch_size=checked.get("batch_size"), stop=stop)
+    else:
+        run = render_realizations(scene, realizations, spp, seed=checked.get("seed"),
+                                  first=first, resolution=checked.get("resolution"),
+                                  device=device, batch_size=checked.get("batch_size"),
+                                  stop=stop)
     if output is not None:
         if run.sums.n < 2:
             raise SceneError(arguments.API_SOURCE, "output",

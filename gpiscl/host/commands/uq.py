@@ -304,15 +304,12 @@ def merge_partials(paths):
     return sums, meta
 
 
-def render_realizations(scene, realizations: int, spp: int, seed: int | None = None,
-                        first: int = 0, resolution=None, device=None, batch_size=None,
-                        progress=None, stop=None) -> UqRun:
-    """Render realizations first .. first+realizations-1 with spp samples each; stop()
-    (asked between bounces) or Ctrl-C ends it, keeping the completed realizations."""
-    from ..render.device import Device, shared_device
-    from ..render.integrator import WavefrontIntegrator
+def prepare_realizations(scene, realizations: int, spp: int, seed: int | None = None,
+                         first: int = 0, resolution=None):
+    """(scene, data, seed): the arguments checked, the scene loaded, its data with the
+    resolution applied and the seed resolved; what every realization of a run is rendered
+    from, here or on a cluster (commands/cluster.py)."""
     from ..scene.loading import load_scene
-    from ..compile.scene import compile_scene
 
     if spp < 2:
         raise SceneError("<command line>", "--spp", "must be >= 2: each realization needs a "
@@ -329,6 +326,36 @@ def render_realizations(scene, realizations: int, spp: int, seed: int | None = N
     if resolution is not None:
         data["camera"]["resolution"] = [int(resolution[0]), int(resolution[1])]
     seed = data["render"]["seed"] if seed is None else int(seed)
+    return scene, data, seed
+
+
+def render_realization(device, compiled, data: dict, spp: int, rid: int, rseed: int,
+                       batch_size=None, stop=None):
+    """The RenderResult of one realization: geometry id rid, path seed rseed."""
+    from ..render.integrator import WavefrontIntegrator
+
+    settings = dict(data["render"], spp=int(spp), seed=rseed, realization=rid)
+    return WavefrontIntegrator(device, compiled, settings, batch_size).render(int(spp),
+                                                                              stop=stop)
+
+
+def run_meta(data: dict, seed: int, spp: int, first: int, count: int) -> dict:
+    """The provenance of realizations first .. first+count-1 (see merge_partials)."""
+    w, h = data["camera"]["resolution"]
+    return {"scene": scene_digest(data), "seed": seed, "spp": int(spp), "resolution": [w, h],
+            "ranges": [[first, first + count]] if count else []}
+
+
+def render_realizations(scene, realizations: int, spp: int, seed: int | None = None,
+                        first: int = 0, resolution=None, device=None, batch_size=None,
+                        progress=None, stop=None) -> UqRun:
+    """Render realizations first .. first+realizations-1 with spp samples each; stop()
+    (asked between bounces) or Ctrl-C ends it, keeping the completed realizations."""
+    from ..render.device import Device, shared_device
+    from ..compile.scene import compile_scene
+
+    scene, data, seed = prepare_realizations(scene, realizations, spp, seed, first,
+                                             resolution)
     if not isinstance(device, Device):
         device = shared_device(device)
     compiled = compile_scene(data, scene.source)   # once: only the ids and seeds change
@@ -338,9 +365,8 @@ def render_realizations(scene, realizations: int, spp: int, seed: int | None = N
     start = time.perf_counter()
     try:
         for rid, rseed in iter_realizations(seed, first, realizations):
-            settings = dict(data["render"], spp=int(spp), seed=rseed, realization=rid)
-            integ = WavefrontIntegrator(device, compiled, settings, batch_size)
-            result = integ.render(int(spp), stop=stop)
+            result = render_realization(device, compiled, data, spp, rid, rseed, batch_size,
+                                        stop)
             if result.stats.interrupted:   # Ctrl-C: fewer than K samples, so not used
                 interrupted = True
                 break
@@ -351,8 +377,7 @@ def render_realizations(scene, realizations: int, spp: int, seed: int | None = N
                 progress(1)
     except KeyboardInterrupt:
         interrupted = True
-    meta = {"scene": scene_digest(data), "seed": seed, "spp": int(spp), "resolution": [w, h],
-            "ranges": [[first, first + len(done)]] if done else []}
+    meta = run_meta(data, seed, spp, first, len(done))
     return UqRun(sums, done, time.perf_counter() - start, paths, interrupted, meta)
 
 

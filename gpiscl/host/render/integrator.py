@@ -208,6 +208,22 @@ class WavefrontIntegrator:
         self.program.launch("accumulate", self.num_pixels, self.params, *self.paths.args,
                             self.counters, *self.film.args)
 
+    def batch_radiance(self, n: int) -> np.ndarray:
+        """(n, 4) float32: the radiance of the last batch's first n paths, as accumulate
+        reads it (what a cluster worker sends back: commands/cluster.py)."""
+        out = np.empty((n, 4), np.float32)
+        cl.enqueue_copy(self.device.queue, out, self.paths.buffers["radiance"])
+        return out
+
+    def accumulate_paths(self, path_base: int, radiance: np.ndarray) -> None:
+        """Add paths traced elsewhere to the film with the accumulate kernel itself, so the
+        film's arithmetic is the local render's by construction: radiance (n, 4) float32 of
+        paths path_base .. path_base+n-1 (global path indices, n <= self.batch)."""
+        cl.enqueue_copy(self.device.queue, self.paths.buffers["radiance"],
+                        np.ascontiguousarray(radiance, np.float32))
+        self._upload_params(path_base=path_base % self.num_pixels, num_paths=len(radiance))
+        self.accumulate()
+
     # --- the loop -------------------------------------------------------------------
 
     def render_batch(self, sample_base: int, path_base: int, num_paths: int,
