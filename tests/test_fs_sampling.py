@@ -34,13 +34,13 @@ __kernel void step_rule(__global const GpKernel* kp, __global const double* ray,
 /* Rays along one line, one per item; after a hit the ray goes straight on from the hit
  * (a continuation with the vertex record) up to `restarts` times. */
 __kernel void flight(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
-                     int samples, int memory, int cap, int refine, double c,
+                     int window, int memory, int cap, int refine, double c, double tol,
                      __global const double* ray, uint seed, int first, int restarts,
                      __global double* scratch, __global FsObs* rings, __global double* out)
 {
     int i = get_global_id(0);
     FsScratch S = fs_scratch(scratch, i);
-    FsParams prm = {samples, memory, cap, refine, c};
+    FsParams prm = {window, memory, cap, refine, c, tol};
     FsRay r = {vload3(0, ray), vload3(1, ray), ray[6], ray[7]};
     FsRng rng = {seed, (uint)(first + i), 0u, 0u, 0u};
     FsVertex v = {0};
@@ -50,10 +50,10 @@ __kernel void flight(__global const GpKernel* kp, __global const MeanNode* mean,
         rng.bounce = (uint)b;
         FsResult res = fs_free_flight(kp[0], mean, mc, prm, r, v, rings + (size_t)i * cap,
                                       rng, S);
-        o[7] += res.segments;
+        o[7] += res.samples;
         if (res.status) { o[5] = res.status; break; }
         if (!res.hit) break;
-        if (b == 0) { o[0] = res.t; vstore3(res.grad, 0, o + 1); o[6] = res.segments; }
+        if (b == 0) { o[0] = res.t; vstore3(res.grad, 0, o + 1); o[6] = res.samples; }
         o[4] += 1.0;
         v = fs_vertex_at_hit(prm, r, res, v, rings + (size_t)i * cap, S);
         r.o = r.o + res.t * r.d;
@@ -63,7 +63,7 @@ __kernel void flight(__global const GpKernel* kp, __global const MeanNode* mean,
 }
 """
 
-CAP_MAX, SAMPLES_MAX = 128, 32
+CAP_MAX, WINDOW_MAX = 128, 32
 SE = SquaredExponential(sigma=1.0, length_scale=1.0)
 RQ = RationalQuadratic(sigma=1.0, length_scale=1.0, alpha=1.0)
 
@@ -71,7 +71,7 @@ RQ = RationalQuadratic(sigma=1.0, length_scale=1.0, alpha=1.0)
 @functools.lru_cache(maxsize=None)
 def _program(ctx):
     p = cl.Program(ctx, FL.program_source(WRAPPERS)).build(
-        options=FL.build_options(SAMPLES_MAX, CAP_MAX))
+        options=FL.build_options(WINDOW_MAX, CAP_MAX))
     return {k.function_name: k for k in p.all_kernels()}
 
 
@@ -87,14 +87,17 @@ def _buf(device, a, rw=False):
                      hostbuf=np.ascontiguousarray(a))
 
 
-def flights(device, prg, kernel, mean, n, memory="global", samples=8, cap=64, refine=6,
-            c=0.9, o=(0, 0, 0), d=(1, 0, 0), t0=0.0, t1=6.0, seed=1, restarts=0):
-    """Per ray: first-hit t (-1: none), gradient, hits, status, first-hit segment, segments."""
+def flights(device, prg, kernel, mean, n, memory="global", window=0, cap=64, refine=6,
+            c=0.0, tol=FL.DEFAULT_MISS_TOLERANCE, o=(0, 0, 0), d=(1, 0, 0), t0=0.0, t1=6.0,
+            seed=1, restarts=0):
+    """Per ray: first-hit t (-1: none), gradient, hits, status, GP samples drawn on the
+    first flight, on all flights. c > 0: the uniform baseline step (correlation c),
+    else the adaptive rule with tolerance tol; window 0: the default."""
     q = device.queue
     mean_nodes = device_layout.pack_mean(mean)
     kp, mb = _buf(device, device_layout.pack_kernel(kernel)), _buf(device, mean_nodes)
     rb = _buf(device, np.array([*o, *d, t0, t1], np.float64))
-    stride = FL.scratch_doubles(FL.max_rows(SAMPLES_MAX, CAP_MAX))
+    stride = FL.scratch_doubles(FL.max_rows(WINDOW_MAX, CAP_MAX))
     chunk = max(1, min(n, (256 << 20) // (8 * stride)))
     scratch = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, 8 * stride * chunk)
     rings = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, FL.FS_OBS.dtype.itemsize * cap * chunk)
@@ -102,9 +105,9 @@ def flights(device, prg, kernel, mean, n, memory="global", samples=8, cap=64, re
     for first in range(0, n, chunk):
         m = min(chunk, n - first)
         ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 64 * m)
-        prg["flight"](q, (m,), None, kp, mb, np.int32(len(mean_nodes)), np.int32(samples),
+        prg["flight"](q, (m,), None, kp, mb, np.int32(len(mean_nodes)), np.int32(window),
                       np.int32(GPIS_MEMORIES[memory]), np.int32(cap), np.int32(refine),
-                      np.float64(c), rb, np.uint32(seed), np.int32(first), np.int32(restarts),
+                      np.float64(c), np.float64(tol), rb, np.uint32(seed), np.int32(first), np.int32(restarts),
                       scratch, rings, ob)
         cl.enqueue_copy(q, out[first:first + m], ob)
     assert np.all(out[:, 5] == 0), f"solver status {np.unique(out[:, 5])}"

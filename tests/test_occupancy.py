@@ -263,7 +263,7 @@ def scene(sampler, bsdf="diffuse", albedo=0.8, lights=None, occupancy=1e-4, spp=
 
 
 SAMPLERS = {"weight_space": {"type": "weight_space", "features": 128},
-            "function_space": {"type": "function_space", "samples": 16,
+            "function_space": {"type": "function_space",
                                "memory": "renewal_plus"}}
 
 

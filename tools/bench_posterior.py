@@ -130,7 +130,7 @@ def render_cost(sizes, resolution: int, spp: int, repeats: int):
             scene = sphere_scene(1.2, 0.6, spp, obs, res=resolution)
             scene["shapes"][0]["sampler"] = (
                 {"type": sampler} if sampler == "weight_space"
-                else {"type": "function_space", "samples": 16})
+                else {"type": "function_space"})
             variants[(sampler, n)] = load_scene(scene).data
     times, _ = time_variants(Device(), variants, spp, repeats)
     print(f"\nrenders, {resolution}^2 x {spp} spp, median of {repeats}:")

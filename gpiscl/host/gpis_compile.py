@@ -9,6 +9,7 @@ from statistics import NormalDist
 import numpy as np
 
 from . import layouts
+from .gp import function_space_layout as FSL
 from .gp import kernels as K
 from .gp import means as M
 from .gp.knob import knob_grid
@@ -177,8 +178,9 @@ def compile_gpis(shapes: list, material_of, source: str = "<scene>",
         if g["sampler"]["type"] == "function_space":
             fs = g["sampler"]
             o["memory"] = layouts.GPIS_MEMORIES[fs["memory"]]
-            for key in ("samples", "memory_cap", "refine", "step_corr"):
+            for key in ("memory_cap", "refine", "miss_tolerance"):
                 o[key] = fs[key]
+            o["window"] = FSL.DEFAULT_WINDOW
         o["material"] = material_of(g["bsdf"])
         o["tolerance"] = ROOT_TOLERANCE * kernel_length_scale(g["kernel"])
         built.append(build_kernel(g["kernel"], proxy))

@@ -16,7 +16,8 @@ from .device import Device, KernelTimings, Program
 from .gp import function_space_layout as FL
 
 STAGE_FILES = ("gpis_function_space.cl", "gpis_shadow_function_space.cl")
-HEADERS = ("gpis_proxy.h", "fs_linalg.h", "fs_sampling.h", "fs_posterior.h", "fs_objects.h")
+HEADERS = ("gpis_proxy.h", "fs_linalg.h", "fs_sampling.h", "fs_march.h", "fs_posterior.h",
+           "fs_objects.h")
 RING_BUDGET = 256 << 20      # bytes of global-model rings per batch: caps the batch size
 SCRATCH_BUDGET = 256 << 20   # bytes of scratch per launch: sets the chunk size
 
@@ -89,7 +90,7 @@ class FunctionSpaceStages:
         (fs_sampling.h, FsScratch.v) to every scratch slice."""
         fs = _fs_objects(self.objects)
         rows_cap = self.stride if self.stride > 1 else 2
-        defines = FL.defines(int(fs["samples"].max()), rows_cap, int(fs["refine"].max()))
+        defines = FL.defines(int(fs["window"].max()), rows_cap, int(fs["refine"].max()))
         self.post_rows = post_rows
         defines["FS_POST_MAX"] = self.post_rows
         defines["FS_SCRATCH_DOUBLES"] += defines["FS_MAX_ROWS"] * self.post_rows

@@ -137,13 +137,13 @@ GPIS_OBJECT = Struct("GpisObject", (
     ("int", "features"),       # weight space: number of random Fourier features M
     ("int", "material"),       # micro-BSDF
     ("int", "memory"),         # function space: GPIS_MEMORY_*
-    ("int", "samples"),        # function space: values per segment N
+    ("int", "window"),         # function space: samples conditioned on besides memory
     ("int", "order_first"),    # weight space: its periodic-order CDF in the order table
     ("int", "order_count"),
     ("float", "tolerance"),    # root refinement tolerance (world units)
     ("int", "memory_cap"),     # function space, global memory: observations kept
     ("int", "refine"),         # function space: bisection steps in a crossing bracket
-    ("float", "step_corr"),    # function space: correlation of neighbouring samples
+    ("float", "step_corr"),    # function space: > 0 the uniform baseline step (benchmarks)
     ("int", "color_field"),    # albedo multiplier: its MeanNode record, 0 = none (gpis_fields.py)
     ("int", "emission_field"), # emitted radiance: its MeanNode record, 0 = none
     ("float", "occupancy_level"),  # z sigma_max: mean above it = occupancy below the
@@ -151,6 +151,7 @@ GPIS_OBJECT = Struct("GpisObject", (
     ("float", "occupancy_step"),   # world length: the bound's marches stop below it
     ("int", "proxy_first"),    # mesh proxy: its face planes (float4 n, w: n.x <= w) start
     ("int", "proxy_count"),    # at this record of the mean-node array; how many planes
+    ("float", "miss_tolerance"),   # function space: expected missed crossings per l_d
 ))
 
 # Per-launch constants of the integrator.

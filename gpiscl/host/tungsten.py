@@ -18,8 +18,9 @@ Mapping (../shared/design/REFERENCE-ALGORITHMS.md section 8 describes their form
           infinite_sphere_cap {cap_angle, power, transform} -> directional light towards
             the rotated +y axis with radiance power / (2 pi (1 - cos cap)) inside the cap
   media   function_space_gaussian_process / gaussian_process -> sampler function_space
-            {samples: sample_points, memory: elephant -> global, goldfish -> renewal_plus,
-             dori -> renewal, none -> none; step_corr: step_size_cov when > 0}
+            {memory: elephant -> global, goldfish -> renewal_plus, dori -> renewal,
+             none -> none; sample_points and step_size_cov (segments, fixed step) have no
+             counterpart: the step is adaptive}
           weight_space_gaussian_process -> weight_space {features: basis_functions};
             single_realization -> render.realization 0 (a fixed realization; the authors'
             seed is not reproducible)
@@ -357,13 +358,14 @@ class _Converter:
     def sampler(self, med: dict, key: str) -> dict:
         kind = med.get("type")
         if kind in FS_MEDIA:
-            s = {"type": "function_space", "samples": med.get("sample_points", 32),
+            # sample_points and step_size_cov set the reference's segments and fixed step;
+            # gpiscl samples online with an adaptive step (fs_march.h), so they have no
+            # counterpart and the default miss tolerance applies
+            s = {"type": "function_space",
                  "memory": MEMORIES.get(med.get("correlation_context", "goldfish"))}
             if s["memory"] is None:
                 self.fail(f"{key}.correlation_context",
                           f"unknown memory model (expected one of: {', '.join(MEMORIES)})")
-            if med.get("step_size_cov", 0) > 0:
-                s["step_corr"] = med["step_size_cov"]
             return s
         if kind in WS_MEDIA:
             return {"type": "weight_space", "features": med.get("basis_functions", 300)}

@@ -27,7 +27,8 @@ inline FsResult fs_object_flight(__constant RenderParams* params,
         || !gpis_proxy_clip(g, means, o.xyz, d.xyz, &t0, &t1)
         || !gpis_occupancy_clip(g, means, o.xyz, d.xyz, &t0, &t1, !v.valid))
         return none;
-    FsParams pr = {g->samples, g->memory, g->memory_cap, g->refine, (double)g->step_corr};
+    FsParams pr = {g->window, g->memory, g->memory_cap, g->refine, (double)g->step_corr,
+                   (double)g->miss_tolerance};
     FsRay r = {convert_double3(o.xyz), convert_double3(d.xyz), (double)t0, (double)t1};
     S.post = fs_posterior_of(means, g->mean_first);   /* none: the prior */
     FsRng rng = {fs_object_seed(params->seed, k), (uint)pixel, (uint)sample,

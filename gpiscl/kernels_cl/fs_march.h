@@ -1,0 +1,260 @@
+/* Function-space free flight: online conditional sampling along a ray with an adaptive
+ * step whose chance of skipping a crossing is bounded. Needs fs_sampling.h (the
+ * conditioning rows, start conditions, memory models, random numbers and the normal at a
+ * hit are defined there); gpiscl/host/gp/function_space.py is its numpy reference.
+ *
+ * Online sampling. Each new value f(t_{i+1}) is drawn from its law given the memory rows
+ * (fs_begin: the vertex record or the start value) and the ray's previous samples: one
+ * row is appended to the packed factor (fs_factor on one row: k(X, x), a forward solve,
+ * the Schur complement, O(n^2)), then fs_sample_row. A window keeps the last FS_WINDOW
+ * samples besides the memory rows: when it is full the older half is dropped and the
+ * newer half refactored once (amortised O(n^2) per step, n = memory + window). Why 16:
+ * for SE at the steps this rule takes (~0.4-1 l along the ray) the next value's
+ * conditional variance given the last 8 samples is within 1e-4 relative of the whole
+ * history's (tools/bench_adaptive_marching.py --window prints it; RQ alpha = 1 too), and
+ * the window always holds at least 8. All memory models condition on the window inside a
+ * ray; they differ only at a vertex (fs_begin). Segments, their N and the 256 cap are gone.
+ *
+ * Step rule. Given f(t) >= 0 (the ray is outside), a step to t + h misses a crossing
+ * only if the path crosses down and back up inside it, so it needs an up-crossing:
+ *   P(miss) <= E[# up-crossings in (t, t + h)] = int_t^{t+h} nu+(s) ds,
+ * the expected number by Rice's formula for the non-stationary Gaussian process f given
+ * the rows so far. With the conditional moments at s, m = E f, m1 = E f', v = Var f,
+ * c = Cov(f, f'), w = Var f' (derivatives per unit length along the ray):
+ *   nu+(s) = phi(m / sqrt v) / sqrt v * [g phi(b / g) + b Phi(b / g)],
+ *   b = m1 - (c / v) m   (the slope's mean given f(s) = 0),
+ *   g^2 = w - c^2 / v    (its variance given f(s) = 0).
+ * Inside (after an up-crossing has been seen, or a ray starting inside) the missed event
+ * is up-then-down, bounded by the down-crossings: the same with m, m1 -> -m, -m1. The
+ * integral is Simpson's rule on (t, t + h); nu(t) = 0 because f(t) is a row (its
+ * conditional variance is the jitter), so only s = t + h/2 and t + h are evaluated, the
+ * end last so that its value row is already factored when it is accepted. A step is
+ * accepted when the bound is at most tol h / l_d, i.e. the mean miss rate over the step is
+ * at most `miss_tolerance` expected misses per along-ray length scale l_d (SE: l /
+ * sqrt(d'Ad); others: the lag of correlation e^-1/2, fs_step with an l(x) field's
+ * smallest l on the ray). The search starts at 1.5x the last step (capped at
+ * FS_H_MAX l_d and at the ray's end) and halves until accepted (floor FS_H_MIN l_d). So a
+ * ray's expected misses are at most tol * (its length / l_d), and the crossing rate's
+ * relative bias at most tol / (l_d * Rice's rate) = 2 pi tol e^(mu^2 / 2 sigma^2): the
+ * default 1e-5 gives < 0.06% for mu / sigma <= 3 (the bound is within ~2x of the
+ * measured miss rate). The bound is small where the mean heads down (a likely crossing
+ * is bracketed anyway) and large where f hovers near 0 with an uncertain slope (grazing
+ * pairs), which is exactly the event to control. Cost per step: two conditional
+ * (value, slope) pairs, i.e. 4 rows instead of 1 for a fixed step.
+ * FsParams.step_corr > 0 replaces the rule by the fixed step of fs_step (correlation c
+ * between neighbours, first step u dt, u uniform in (0, 1]): the old uniform grid, kept
+ * as the benchmarks' baseline only (scenes cannot select it).
+ *
+ * Hit. The first sample f < 0 after f >= 0 brackets the crossing; `refine` bisection
+ * points are drawn conditioned on everything; t_hit is linear in the final bracket. The
+ * slope along the ray there is drawn from its exact law at a down-crossing given all rows
+ * and f(x_h) = 0: s < 0 with density |s| N(s; b, g^2) (Rice: crossings are met in
+ * proportion to |f'|), by inverting its CDF (fs_downcrossing_slope). Negative by
+ * construction, so no normal faces away under any memory model, and it no longer
+ * depends on the bracket width (the secant's jitter noise tilted normals at refine >= 12).
+ * The tangential components follow given f(x_h) = 0 and s (fs_sampling.h's closed form
+ * for isotropic kernels without a posterior or global memory, else two appended rows).
+ * The global ring keeps the genuine rows: values, bisection points, s and the tangential
+ * components, not the interpolated f(x_h) = 0 (see fs_sampling.h).
+ *
+ * Random numbers: the step index takes fs_uniform2's segment field (16 bits, hence
+ * FS_MAX_STEPS; a ray needing more is counted as failed): block 0 the value at the
+ * step, the bisection and normal slots of fs_sampling.h at the hit's step, FS_U_SLOPE its
+ * slope. */
+#ifndef FS_WINDOW
+#define FS_WINDOW 16
+#endif
+#define FS_MAX_STEPS 65535
+#define FS_H_MAX 2.0               /* l_d: Simpson's two nodes resolve the mean's dips */
+#define FS_H_MIN 1e-3              /* l_d: a floor for degenerate starts (f = 0 exactly) */
+#define FS_H_GROW 1.5
+#define FS_ELL_CORR 0.6065306597126334   /* e^-1/2: SE's lag is exactly l / sqrt(d'Ad) */
+#define FS_U_SLOPE 1100
+
+typedef struct { double m, m1, s, r, g; } FsMoments;   /* v = s^2, c = r s, g as above */
+
+/* Conditional moments of f and its slope along dn at ray parameter t given rows [0, n):
+ * factoring rows n (value) and n + 1 (slope) is the forward solve and Schur complement. */
+inline int fs_moments(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
+                      int n, FsRay ray, double3 dn, double t, FsMoments* M)
+{
+    double3 x = ray.o + t * ray.d;
+    S.rows[n] = fs_obs(x, dn, FS_OBS_VALUE, t);
+    S.rows[n + 1] = fs_obs(x, dn, FS_OBS_DERIV, 0.0);
+    int st = fs_factor(p, mean, mc, S, n, n + 2);
+    if (st) return st;
+    __global const double* L1 = S.L + fs_tri(n + 1);
+    M->m = S.mu[n] + fs_row_dot(S.L, n, S.e, n);
+    M->m1 = S.mu[n + 1] + fs_row_dot(S.L, n + 1, S.e, n);
+    M->s = fs_diag(S.L, n);
+    M->r = L1[n];
+    M->g = L1[n + 1];
+    return FS_STATUS_OK;
+}
+
+inline double fs_phi(double x) { return 0.3989422804014327 * exp(-0.5 * x * x); }
+
+/* Rice's rate (per unit length) of crossings from the side `outside` says back across 0:
+ * up-crossings when outside, down-crossings inside. */
+inline double fs_return_rate(FsMoments M, int outside)
+{
+    double m = outside ? M.m : -M.m, m1 = outside ? M.m1 : -M.m1;
+    if (!(M.s > 0.0) || !(M.g > 0.0)) return 0.0;
+    double b = m1 - M.r / M.s * m, a = b / M.g;
+    /* phi(a) + a Phi(a) cancels for a << 0: its asymptotic phi(a) / a^2 (1 - 3 / a^2) */
+    double e = a < -8.0 ? fs_phi(a) / (a * a) * (1.0 - 3.0 / (a * a))
+                        : fs_phi(a) + a * fs_q(-a);
+    return fs_phi(m / M.s) / M.s * M.g * e;
+}
+
+/* The slope at a down-crossing: s < 0 with density proportional to |s| N(s; mean, sd^2).
+ * In y = -s / sd, a = mean / sd the density is y phi(y + a) on y > 0, with tail
+ * S(y) = phi(y + a) - a Q(y + a); y solves S(y) = u S(0) by bisection in double (S
+ * loses ~2 log10(a) digits to cancellation, a few at a <= 30). Beyond a = 30 (a slope
+ * mean 30 sd on the wrong side: a grazing hit) y phi(y + a) ~ y e^{-a y}: Gamma(2, 1/a). */
+inline double fs_crossing_tail(double x, double a) { return fs_phi(x) - a * fs_q(x); }
+
+inline double fs_downcrossing_slope(double mean, double sd, double2 u)
+{
+    if (!(sd > 0.0)) return fmin(mean, -DBL_MIN);
+    double a = mean / sd;
+    if (a > 30.0) return sd * log((1.0 - u.x) * (1.0 - u.y)) / a;
+    double target = (1.0 - u.x) * fs_crossing_tail(a, a);   /* (1 - u) in (0, 1] */
+    double lo = 0.0, hi = fmax(-a, 0.0) + 12.0;
+    for (int k = 0; k < 64; ++k) {
+        double mid = 0.5 * (lo + hi);
+        if (fs_crossing_tail(mid + a, a) > target) lo = mid; else hi = mid;
+    }
+    return -sd * fmax(0.5 * (lo + hi), DBL_MIN);
+}
+
+/* Drop the older half of the window: rows [n - keep, n) move to [fixed, fixed + keep)
+ * and are refactored and whitened (their values are known); returns the new row count. */
+inline int fs_slide(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
+                    int fixed, int n, int keep, int* status)
+{
+    for (int i = 0; i < keep; ++i) S.rows[fixed + i] = S.rows[n - keep + i];
+    int st = fs_factor(p, mean, mc, S, fixed, fixed + keep);
+    if (st) { *status = st; return n; }
+    for (int i = fixed; i < fixed + keep; ++i)
+        fs_whiten_row(S.L, S.e, i, S.rows[i].value, S.mu[i]);
+    return fixed + keep;
+}
+
+/* Free flight along [ray.t0, ray.t1] inside one GPIS object: the first crossing, or none.
+ * Shadow rays and continuation rays alike; only the continuation then calls
+ * fs_vertex_at_hit. ray.d need not be unit (t is the ray parameter). */
+inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc,
+                               FsParams prm, FsRay ray, FsVertex v,
+                               __global const FsObs* ring, FsRng rng, FsScratch S)
+{
+    FsResult res = {0, 0, ray.t1, (double3)(0.0), 0, 0, 0, 0, 0};
+    if (S.post.n > FS_POST_MAX) { res.status = FS_STATUS_ROWS; return res; }   /* no v cache */
+    double fa;
+    int outside, n_old;
+    int fixed = fs_begin(p, mean, mc, prm, ray, v, ring, rng, S, &fa, &outside, &n_old);
+    int window = clamp(prm.window > 0 ? prm.window : FS_WINDOW, 2, FS_MAX_WINDOW);
+    double dlen = length(ray.d), ell = fs_step(p, ray, FS_ELL_CORR);
+    double dt = prm.step_corr > 0.0 ? fs_step(p, ray, prm.step_corr) : 0.0;
+    double3 dn = ray.d / dlen;
+    if (!(ell > 0.0) || !isfinite(ell) || !isfinite(dt)) { res.status = FS_STATUS_NAN; return res; }
+    if (fixed + window + prm.refine + FS_HIT_ROWS + 2 > FS_MAX_ROWS) {
+        res.status = FS_STATUS_ROWS;
+        return res;
+    }
+    int st = fs_factor(p, mean, mc, S, 0, fixed);
+    if (st) { res.status = st; return res; }
+    for (int i = 0; i < fixed; ++i) fs_whiten_row(S.L, S.e, i, S.rows[i].value, S.mu[i]);
+    int n = fixed;
+    double ta = ray.t0, tb = 0.0, fb = 0.0;
+    double h = dt > 0.0 ? (1.0 - fs_uniform2(rng, 0, FS_U_GRID).x) * dt : 0.25 * ell;
+    double tol = (double)prm.miss_tol;
+    int step = 0;
+    for (;; ++step) {
+        if (ta >= ray.t1) return res;
+        if (step >= FS_MAX_STEPS) { res.status = FS_STATUS_STEPS; return res; }
+        if (n - fixed >= window) {
+            n = fs_slide(p, mean, mc, S, fixed, n, window / 2, &res.status);
+            if (res.status) return res;
+            res.windows++;
+        }
+        if (dt > 0.0) {                        /* uniform baseline: one row per step */
+            tb = fmin(ta + h, ray.t1);
+            S.rows[n] = fs_obs(ray.o + tb * ray.d, dn, FS_OBS_VALUE, tb);
+            st = fs_factor(p, mean, mc, S, n, n + 1);
+            h = dt;
+        } else {
+            h = fmin(FS_H_GROW * h, FS_H_MAX * ell);
+            for (;;) {
+                int clipped = ta + h >= ray.t1;
+                double hs = clipped ? ray.t1 - ta : h;
+                FsMoments M;
+                st = fs_moments(p, mean, mc, S, n, ray, dn, ta + 0.5 * hs, &M);
+                if (st) break;
+                double mid = fs_return_rate(M, outside);
+                st = fs_moments(p, mean, mc, S, n, ray, dn, ta + hs, &M);
+                if (st) break;
+                res.evals += 2;
+                /* Simpson with nu(ta) = 0: the mean rate (per length) times l_d (per t) */
+                double rate = (4.0 * mid + fs_return_rate(M, outside)) / 6.0;
+                if (rate * dlen * ell <= tol || h <= FS_H_MIN * ell) {
+                    tb = ta + hs;
+                    if (clipped) tb = ray.t1;
+                    break;
+                }
+                h *= 0.5;
+            }
+        }
+        if (st) { res.status = st; return res; }
+        fb = fs_sample_row(S.L, S.e, n, S.mu[n], fs_normal(rng, step, 0));
+        S.rows[n].value = fb;
+        res.samples++;
+        if (isnan(fb)) { res.status = FS_STATUS_NAN; return res; }
+        ++n;
+        if (outside && fb < 0.0) break;
+        outside = fb >= 0.0;
+        ta = tb;
+        fa = fb;
+    }
+
+    /* a crossing in (ta, tb]: bisection conditioned on everything */
+    for (int k = 0; k < prm.refine; ++k, ++n) {
+        double tm = 0.5 * (ta + tb);
+        double f = fs_append(p, mean, mc, S, n, fs_obs(ray.o + tm * ray.d, dn, FS_OBS_VALUE, 0.0),
+                             0, fs_normal(rng, step, FS_SLOT_REFINE + k), &res.status);
+        if (res.status) return res;
+        res.samples++;
+        if (f >= 0.0) { ta = tm; fa = f; } else { tb = tm; fb = f; }
+    }
+    res.hit = 1;
+    res.t = ta + (tb - ta) * fa / (fa - fb);
+    double3 x = ray.o + res.t * ray.d, T, B;
+    /* the slope's law given the rows and f(x_h) = 0, at a down-crossing */
+    fs_append(p, mean, mc, S, n, fs_obs(x, dn, FS_OBS_VALUE, 0.0), 1, 0.0, &res.status);
+    if (res.status) return res;
+    S.rows[n + 1] = fs_obs(x, dn, FS_OBS_DERIV, 0.0);
+    st = fs_factor(p, mean, mc, S, n + 1, n + 2);
+    if (st) { res.status = st; return res; }
+    double sd = fs_downcrossing_slope(S.mu[n + 1] + fs_row_dot(S.L, n + 1, S.e, n + 1),
+                                      fs_diag(S.L, n + 1), fs_uniform2(rng, step, FS_U_SLOPE));
+    fs_whiten_row(S.L, S.e, n + 1, sd, S.mu[n + 1]);
+    S.rows[n + 1].value = sd;
+    fs_frame(dn, &T, &B);
+    double z1 = fs_normal(rng, step, FS_SLOT_NORMAL), z2 = fs_normal(rng, step, FS_SLOT_NORMAL + 1);
+    double q1, q2;
+    if (fs_isotropic_radial(p) && !S.post.n && prm.memory != GPIS_MEMORY_GLOBAL) {
+        /* every row on the ray: d_T f(x_h) is independent of them (fs_sampling.h) */
+        q1 = fs_prior_mean(mean, mc, x, T, FS_OBS_DERIV) + sqrt(gp_cov(p, x, T, 1, x, T, 1)) * z1;
+        q2 = fs_prior_mean(mean, mc, x, B, FS_OBS_DERIV) + sqrt(gp_cov(p, x, B, 1, x, B, 1)) * z2;
+    } else {
+        q1 = fs_append(p, mean, mc, S, n + 2, fs_obs(x, T, FS_OBS_DERIV, 0.0), 0, z1, &res.status);
+        q2 = fs_append(p, mean, mc, S, n + 3, fs_obs(x, B, FS_OBS_DERIV, 0.0), 0, z2, &res.status);
+        if (res.status) return res;
+    }
+    res.grad = T * q1 + B * q2 + dn * sd;
+    /* global: the ring takes this ray's rows without the interpolated f(x_h) = 0 */
+    for (int i = n; i < n + 3; ++i) S.rows[i] = S.rows[i + 1];
+    res.new_first = n_old;
+    res.new_end = n + 3;
+    return res;
+}
