@@ -61,6 +61,49 @@ __kernel void flight(__global const GpKernel* kp, __global const MeanNode* mean,
         r.t0 = 0.0;
     }
 }
+
+/* The slope at a down-crossing (fs_march.h), one draw per item. */
+__kernel void slope_draw(double mean, double sd, uint seed, __global double* out)
+{
+    int i = get_global_id(0);
+    FsRng rng = {seed, (uint)i, 0u, 0u, 0u};
+    out[i] = fs_downcrossing_slope(mean, sd, fs_uniform2(rng, 0u, FS_U_SLOPE));
+}
+
+/* A ray going straight on through every hit (continuations from the vertex record) over
+ * [0, ray[7]]: per item hits, the sums of the along-ray slope and its square over hits
+ * after the first (far from the start condition), GP samples, moment evaluations and
+ * the status. */
+__kernel void crossings(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
+                        int memory, int cap, int refine, double c, double tol,
+                        __global const double* ray, uint seed, int first,
+                        __global double* scratch, __global FsObs* rings, __global double* out)
+{
+    int i = get_global_id(0);
+    FsScratch S = fs_scratch(scratch, i);
+    FsParams prm = {0, memory, cap, refine, c, tol};
+    FsRay r = {vload3(0, ray), vload3(1, ray), 0.0, ray[7]};
+    FsRng rng = {seed, (uint)(first + i), 0u, 0u, 0u};
+    FsVertex v = {0};
+    __global double* o = out + 6 * i;
+    for (int k = 0; k < 6; ++k) o[k] = 0.0;
+    for (int b = 0; b < 100000; ++b) {
+        rng.bounce = (uint)b;
+        FsResult res = fs_free_flight(kp[0], mean, mc, prm, r, v, rings + (size_t)i * cap,
+                                      rng, S);
+        o[3] += res.samples;
+        o[4] += res.evals;
+        if (res.status) { o[5] = res.status; break; }
+        if (!res.hit) break;
+        o[0] += 1.0;
+        double s = dot(res.grad, r.d) / length(r.d);
+        if (b > 0) { o[1] += s; o[2] += s * s; }
+        v = fs_vertex_at_hit(prm, r, res, v, rings + (size_t)i * cap, S);
+        r.o = r.o + res.t * r.d;
+        r.t1 -= res.t;
+        r.t0 = 0.0;
+    }
+}
 """
 
 CAP_MAX, WINDOW_MAX = 128, 32

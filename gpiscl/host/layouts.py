@@ -214,8 +214,11 @@ LIGHT_KINDS = {"environment": 0, "environment_map": 1, "point": 2, "sphere": 3,
                "rectangle": 4, "directional": 5}
 # Device-side counters; the host reads only rays_out between bounces.
 COUNTERS = {"rays_out": 0, "hits": 1, "escaped": 2, "shadow": 3, "nan_paths": 4,
-            "killed": 5, "gpis_failed": 6}
-NUM_COUNTERS = 8
+            "killed": 5, "gpis_failed": 6, "depth_cut": 7,
+            # function-space work: flights (one object along one ray), GP values drawn,
+            # step-rule moment evaluations (fs_march.h); int32, per render
+            "fs_flights": 8, "fs_samples": 9, "fs_evals": 10}
+NUM_COUNTERS = 11
 GPIS_PROXIES = {"box": 0, "sphere": 1, "mesh": 2}
 GPIS_SAMPLERS = {"weight_space": 0, "function_space": 1}
 GPIS_MEMORIES = {"none": 0, "renewal": 1, "renewal_plus": 2, "global": 3}

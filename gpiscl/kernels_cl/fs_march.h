@@ -8,11 +8,13 @@
  * row is appended to the packed factor (fs_factor on one row: k(X, x), a forward solve,
  * the Schur complement, O(n^2)), then fs_sample_row. A window keeps the last FS_WINDOW
  * samples besides the memory rows: when it is full the older half is dropped and the
- * newer half refactored once (amortised O(n^2) per step, n = memory + window). Why 16:
- * for SE at the steps this rule takes (~0.4-1 l along the ray) the next value's
- * conditional variance given the last 8 samples is within 1e-4 relative of the whole
- * history's (tools/bench_adaptive_marching.py --window prints it; RQ alpha = 1 too), and
- * the window always holds at least 8. All memory models condition on the window inside a
+ * newer half refactored once (amortised O(n^2) per step, n = memory + window). Why 16
+ * (so at least 8 kept): the next value's conditional variance given the last 8 samples
+ * against 40 (numpy, tools/bench_adaptive_marching.py's docstring has the table): SE at
+ * spacing 0.8 l (typical steps) +0.7%, at 1.2 l +3e-6; at 0.5 l +63% but of a variance
+ * that is 0.7% of sigma^2 (given 16: +7%); RQ alpha = 1: +2% at 0.3 l, +4e-4 at 0.5 l.
+ * Rice's crossing rate with it is exact within 0.3% (tests/test_fs_adaptive.py). All
+ * memory models condition on the window inside a
  * ray; they differ only at a vertex (fs_begin). Segments, their N and the 256 cap are gone.
  *
  * Step rule. Given f(t) >= 0 (the ray is outside), a step to t + h misses a crossing
@@ -32,44 +34,56 @@
  * accepted when the bound is at most tol h / l_d, i.e. the mean miss rate over the step is
  * at most `miss_tolerance` expected misses per along-ray length scale l_d (SE: l /
  * sqrt(d'Ad); others: the lag of correlation e^-1/2, fs_step with an l(x) field's
- * smallest l on the ray). The search starts at 1.5x the last step (capped at
- * FS_H_MAX l_d and at the ray's end) and halves until accepted (floor FS_H_MIN l_d). So a
+ * smallest l on the ray). The first try grows the last step by 2, 1.5 or 1.1 as its
+ * bound was below 5%, 30% or 100% of the tolerance (capped at FS_H_MAX l_d and at the
+ * ray's end); a rejected try halves, its middle becoming the new end (one node
+ * evaluation per rejection; floor FS_H_MIN l_d). So a
  * ray's expected misses are at most tol * (its length / l_d), and the crossing rate's
  * relative bias at most tol / (l_d * Rice's rate) = 2 pi tol e^(mu^2 / 2 sigma^2): the
- * default 1e-5 gives < 0.06% for mu / sigma <= 3 (the bound is within ~2x of the
- * measured miss rate). The bound is small where the mean heads down (a likely crossing
+ * default 1e-5 gives < 0.06% for mu / sigma <= 3 (measured misses are ~1/4 of the
+ * bound at tol 3e-2). The bound is small where the mean heads down (a likely crossing
  * is bracketed anyway) and large where f hovers near 0 with an uncertain slope (grazing
  * pairs), which is exactly the event to control. Cost per step: two conditional
- * (value, slope) pairs, i.e. 4 rows instead of 1 for a fixed step.
+ * (value, slope) pairs, i.e. 4 rows instead of 1 for a fixed step, and 2 per rejection;
+ * steps are ~0.8 l_d at mu = 0 and longer away from 0, against 0.46 l_d (c = 0.9) and
+ * 0.14 l_d (c = 0.99) for the uniform grid.
  * FsParams.step_corr > 0 replaces the rule by the fixed step of fs_step (correlation c
  * between neighbours, first step u dt, u uniform in (0, 1]): the old uniform grid, kept
  * as the benchmarks' baseline only (scenes cannot select it).
  *
- * Hit. The first sample f < 0 after f >= 0 brackets the crossing; `refine` bisection
- * points are drawn conditioned on everything; t_hit is linear in the final bracket. The
- * slope along the ray there is drawn from its exact law at a down-crossing given all rows
- * and f(x_h) = 0: s < 0 with density |s| N(s; b, g^2) (Rice: crossings are met in
- * proportion to |f'|), by inverting its CDF (fs_downcrossing_slope). Negative by
- * construction, so no normal faces away under any memory model, and it no longer
- * depends on the bracket width (the secant's jitter noise tilted normals at refine >= 12).
+ * Hit. The first sample f < 0 after f >= 0 brackets the crossing. Bisection points are
+ * drawn conditioned on everything: `refine` of them, and more until the bracket is below
+ * FS_ROOT_WIDTH = 1e-2 l_d (at most 8 from a 2 l_d step), so the linear root is off by
+ * ~1e-5 sigma, the jitter's size, and every `refine` gives the same laws (refine only
+ * adds bisections). The slope along the ray at x_h is drawn from its exact law at a
+ * down-crossing given all rows and f(x_h) = 0: s < 0 with density |s| N(s; b, g^2)
+ * (Kac-Rice: crossings are met in proportion to |f'|), by inverting its CDF
+ * (fs_downcrossing_slope). Negative by construction, so no normal faces away under any
+ * memory model. Why the narrow bracket: at a wide one (refine 0-2 alone) the linear root
+ * is off by O(width^2 f''), and conditioning the slope on f = 0 there biased it (E[-s]
+ * +8-25% at refine 2, measured); sampling the root's location from the conditional
+ * crossing density on a fixed grid of cells did worse where the density peaks at a
+ * bracket end (f(ta) ~ 0). The old secant slope's jitter noise (tilted normals at
+ * refine >= 12) is gone too: s is drawn from the jittered model's own conditional.
  * The tangential components follow given f(x_h) = 0 and s (fs_sampling.h's closed form
  * for isotropic kernels without a posterior or global memory, else two appended rows).
- * The global ring keeps the genuine rows: values, bisection points, s and the tangential
- * components, not the interpolated f(x_h) = 0 (see fs_sampling.h).
+ * The global ring keeps this ray's rows: values, bisection points, f(x_h) = 0, s and the
+ * tangential components.
  *
  * Random numbers: the step index takes fs_uniform2's segment field (16 bits, hence
  * FS_MAX_STEPS; a ray needing more is counted as failed): block 0 the value at the
- * step, the bisection and normal slots of fs_sampling.h at the hit's step, FS_U_SLOPE its
- * slope. */
+ * step, the bisection and normal slots of fs_sampling.h at the hit's step, FS_U_SLOPE
+ * its slope. */
 #ifndef FS_WINDOW
 #define FS_WINDOW 16
 #endif
 #define FS_MAX_STEPS 65535
 #define FS_H_MAX 2.0               /* l_d: Simpson's two nodes resolve the mean's dips */
 #define FS_H_MIN 1e-3              /* l_d: a floor for degenerate starts (f = 0 exactly) */
-#define FS_H_GROW 1.5
 #define FS_ELL_CORR 0.6065306597126334   /* e^-1/2: SE's lag is exactly l / sqrt(d'Ad) */
 #define FS_U_SLOPE 1100
+#define FS_ROOT_WIDTH 1e-2         /* l_d: final bracket, see "Hit" above */
+#define FS_MIN_BISECT 8            /* rows reserved for bisection: 2 l_d 2^-8 < FS_ROOT_WIDTH */
 
 typedef struct { double m, m1, s, r, g; } FsMoments;   /* v = s^2, c = r s, g as above */
 
@@ -158,7 +172,7 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
     double dt = prm.step_corr > 0.0 ? fs_step(p, ray, prm.step_corr) : 0.0;
     double3 dn = ray.d / dlen;
     if (!(ell > 0.0) || !isfinite(ell) || !isfinite(dt)) { res.status = FS_STATUS_NAN; return res; }
-    if (fixed + window + prm.refine + FS_HIT_ROWS + 2 > FS_MAX_ROWS) {
+    if (fixed + window + max(prm.refine, FS_MIN_BISECT) + FS_HIT_ROWS + 2 > FS_MAX_ROWS) {
         res.status = FS_STATUS_ROWS;
         return res;
     }
@@ -167,8 +181,8 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
     for (int i = 0; i < fixed; ++i) fs_whiten_row(S.L, S.e, i, S.rows[i].value, S.mu[i]);
     int n = fixed;
     double ta = ray.t0, tb = 0.0, fb = 0.0;
-    double h = dt > 0.0 ? (1.0 - fs_uniform2(rng, 0, FS_U_GRID).x) * dt : 0.25 * ell;
-    double tol = (double)prm.miss_tol;
+    double h = dt > 0.0 ? (1.0 - fs_uniform2(rng, 0, FS_U_GRID).x) * dt : 0.5 * ell;
+    double tol = (double)prm.miss_tol, grow = 1.0;
     int step = 0;
     for (;; ++step) {
         if (ta >= ray.t1) return res;
@@ -184,7 +198,12 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
             st = fs_factor(p, mean, mc, S, n, n + 1);
             h = dt;
         } else {
-            h = fmin(FS_H_GROW * h, FS_H_MAX * ell);
+            /* Simpson's nodes: the middle first, then the end, so that an accepted end's
+             * value row is the one factored last; a rejected step halves and its middle
+             * becomes the new end, whose rate is known (only the value row is factored
+             * again, at acceptance). */
+            h = fmin(grow * h, FS_H_MAX * ell);
+            double nu_end = -1.0;
             for (;;) {
                 int clipped = ta + h >= ray.t1;
                 double hs = clipped ? ray.t1 - ta : h;
@@ -192,17 +211,29 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
                 st = fs_moments(p, mean, mc, S, n, ray, dn, ta + 0.5 * hs, &M);
                 if (st) break;
                 double mid = fs_return_rate(M, outside);
-                st = fs_moments(p, mean, mc, S, n, ray, dn, ta + hs, &M);
-                if (st) break;
-                res.evals += 2;
-                /* Simpson with nu(ta) = 0: the mean rate (per length) times l_d (per t) */
-                double rate = (4.0 * mid + fs_return_rate(M, outside)) / 6.0;
-                if (rate * dlen * ell <= tol || h <= FS_H_MIN * ell) {
-                    tb = ta + hs;
-                    if (clipped) tb = ray.t1;
+                res.evals++;
+                int fresh = nu_end < 0.0;
+                if (fresh) {
+                    st = fs_moments(p, mean, mc, S, n, ray, dn, ta + hs, &M);
+                    if (st) break;
+                    nu_end = fs_return_rate(M, outside);
+                    res.evals++;
+                }
+                /* Simpson with nu(ta) = 0: the mean rate (per length) times l_d (per t),
+                 * relative to the tolerance */
+                double r = (4.0 * mid + nu_end) / 6.0 * dlen * ell / tol;
+                if (r <= 1.0 || h <= FS_H_MIN * ell) {
+                    tb = clipped ? ray.t1 : ta + hs;
+                    if (!fresh) {
+                        S.rows[n] = fs_obs(ray.o + tb * ray.d, dn, FS_OBS_VALUE, tb);
+                        st = fs_factor(p, mean, mc, S, n, n + 1);
+                    }
+                    /* the next step's first try: grow where the bound is slack */
+                    grow = r < 0.05 ? 2.0 : (r < 0.3 ? 1.5 : 1.1);
                     break;
                 }
-                h *= 0.5;
+                h = 0.5 * hs;
+                nu_end = mid;
             }
         }
         if (st) { res.status = st; return res; }
@@ -217,8 +248,10 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
         fa = fb;
     }
 
-    /* a crossing in (ta, tb]: bisection conditioned on everything */
-    for (int k = 0; k < prm.refine; ++k, ++n) {
+    /* a crossing in (ta, tb]: bisection conditioned on everything, `refine` steps and
+     * then on while the bracket is wider than FS_ROOT_WIDTH l_d */
+    for (int k = 0; (k < prm.refine || tb - ta > FS_ROOT_WIDTH * ell)
+                    && n + FS_HIT_ROWS + 2 <= FS_MAX_ROWS; ++k, ++n) {
         double tm = 0.5 * (ta + tb);
         double f = fs_append(p, mean, mc, S, n, fs_obs(ray.o + tm * ray.d, dn, FS_OBS_VALUE, 0.0),
                              0, fs_normal(rng, step, FS_SLOT_REFINE + k), &res.status);
@@ -251,10 +284,15 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
         q2 = fs_append(p, mean, mc, S, n + 3, fs_obs(x, B, FS_OBS_DERIV, 0.0), 0, z2, &res.status);
         if (res.status) return res;
     }
-    res.grad = T * q1 + B * q2 + dn * sd;
-    /* global: the ring takes this ray's rows without the interpolated f(x_h) = 0 */
-    for (int i = n; i < n + 3; ++i) S.rows[i] = S.rows[i + 1];
+    /* s < 0 always; |s| below 1e-5 of the tangential part (probability ~1e-10: the law's
+     * density vanishes like |s| at 0) is raised to it so that the normal still faces the
+     * ray after rounding to float (the scatter stage kills a normal that does not) */
+    res.grad = T * q1 + B * q2 + dn * fmin(sd, -1e-5 * sqrt(q1 * q1 + q2 * q2));
+    /* global: the ring takes this ray's rows, f(x_h) = 0 included: x_h is a draw of the
+     * root's location, so f(x_h) = 0 is an observation of the realization (the old
+     * interpolated root contradicted the bracket values by O(width^2 f'')), and the next
+     * ray's step rule needs f known at its start (Simpson's nu(t) = 0) */
     res.new_first = n_old;
-    res.new_end = n + 3;
+    res.new_end = n + 4;
     return res;
 }

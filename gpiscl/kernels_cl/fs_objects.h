@@ -35,6 +35,9 @@ inline FsResult fs_object_flight(__constant RenderParams* params,
                  (uint)params->bounce, stream};
     FsResult res = fs_free_flight(kernels[k], means + g->mean_first, g->mean_count, pr, r, v,
                                   ring, rng, S);
+    atomic_inc(&counters[COUNT_FS_FLIGHTS]);
+    atomic_add(&counters[COUNT_FS_SAMPLES], res.samples);
+    atomic_add(&counters[COUNT_FS_EVALS], res.evals);
     if (res.status) {
         atomic_inc(&counters[COUNT_GPIS_FAILED]);
         return none;

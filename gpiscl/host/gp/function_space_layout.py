@@ -44,6 +44,7 @@ DEFAULT_MISS_TOLERANCE = 1e-5   # expected missed crossings per along-ray length
 DEFAULT_REFINE = 6        # bisection steps in a crossing bracket: width step / 64
 DEFAULT_GLOBAL_CAP = 64   # observations the global model keeps
 HIT_ROWS = 4              # f(x_h), d_d f, d_T f, d_B f appended at a hit
+MIN_BISECT = 8            # FS_MIN_BISECT of fs_march.h
 
 
 def c_declarations() -> str:
@@ -58,8 +59,9 @@ def c_declarations() -> str:
 
 def max_rows(window: int, memory_cap: int, refine: int = DEFAULT_REFINE) -> int:
     """Rows of the largest system (fs_march.h): memory (<= max(cap, 2)), the window, the
-    refinement bisection, the hit rows and the step rule's two temporary rows."""
-    return max(memory_cap, 2) + window + refine + HIT_ROWS + 2
+    refinement bisection (at least MIN_BISECT: fs_march.h narrows every bracket), the hit
+    rows and the step rule's two temporary rows."""
+    return max(memory_cap, 2) + window + max(refine, MIN_BISECT) + HIT_ROWS + 2
 
 
 def scratch_doubles(rows: int) -> int:
