@@ -198,3 +198,34 @@ def test06_slope_law_at_crossings_does_not_depend_on_refine(device, prg, refine)
         print(f"refine {refine}: {int(M.sum())} crossings, moment {j}: {est:.4f} +- "
               f"{se:.4f} (expect {expect:.4f})")
         assert abs(est - expect) < z * se, (refine, j, est, expect, se)
+
+
+@pytest.fixture(scope="module")
+def dense_se():
+    """Cholesky factor of SE (l = 1) at spacing 0.01 over [0, 20] along a unit ray."""
+    from gpiscl.host.gp.kernels import covariance_matrix
+    ts = np.arange(2001) * 0.01
+    K = FS.jittered(covariance_matrix(SE, ts[:, None] * np.array([1.0, 0.0, 0.0])))
+    return ts, np.linalg.cholesky(K)
+
+
+@pytest.mark.parametrize("tol, mu", [(1e-1, 0.0), (3e-2, 0.0), (1e-2, 0.0), (3e-2, 2.0)])
+def test07_missed_crossings_of_the_same_realizations_stay_below_the_tolerance(dense_se, tol,
+                                                                             mu):
+    """The rule (numpy twin of fs_march.h) marched along dense joint samples (spacing
+    l / 100) that it reads where it samples: the down-crossings of the dense path that it
+    skips, per length scale, stay below the tolerance (one-sided Poisson bound, Bonferroni
+    over the cases); the misses are counted, not inferred from a rate."""
+    ts, C = dense_se
+    rng = np.random.default_rng(int(1000 * tol) + int(mu))
+    Z = C @ rng.standard_normal((len(ts), 500)) + mu
+    Z = Z[:, Z[0] >= 0.0][:, :300]
+    missed = steps = 0
+    for F in Z.T:
+        idx, m = FS.march_realization(SE, Constant(mu), (0, 0, 0), (1, 0, 0), ts, F, tol)
+        missed, steps = missed + m, steps + len(idx) - 1
+    length = Z.shape[1] * ts[-1]
+    allowed = tol * length
+    print(f"tol {tol} mu {mu}: {missed} missed over {length:.0f} l ({missed / length:.2e} "
+          f"per l, bound {tol:g}), {steps / length:.2f} steps per l")
+    assert missed < allowed + z_threshold(4) * math.sqrt(allowed)
