@@ -78,7 +78,9 @@
 #define FS_WINDOW 16
 #endif
 #define FS_MAX_STEPS 65535
+#ifndef FS_H_MAX
 #define FS_H_MAX 2.0               /* l_d: Simpson's two nodes resolve the mean's dips */
+#endif
 #define FS_H_MIN 1e-3              /* l_d: a floor for degenerate starts (f = 0 exactly) */
 #define FS_ELL_CORR 0.6065306597126334   /* e^-1/2: SE's lag is exactly l / sqrt(d'Ad) */
 #define FS_U_SLOPE 1100

@@ -74,8 +74,7 @@ typedef char fs_gp_real_must_be_double[sizeof(GP_REAL) == 8 ? 1 : -1];
 #endif
 #define FS_PHILOX_KEY 0x3c6ef372u
 #define FS_TN_TAIL 30.0            /* beyond: exact rejection tail, erfc would underflow */
-#define FS_SLOT_REFINE 512         /* normal slots: targets 0..511, then these */
-#define FS_SLOT_END 576
+#define FS_SLOT_REFINE 512         /* normal slots: a step's value is 0, bisection these */
 #define FS_SLOT_NORMAL 578
 #define FS_U_GRID 1024             /* uniform blocks */
 #define FS_U_START 1025            /* and the 16 after it (tail rejection retries) */

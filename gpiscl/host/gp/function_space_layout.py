@@ -2,7 +2,7 @@
 
 FsObs is one Gaussian observation: a value f(x) or a directional derivative u . grad f(x),
 each derivative with its own direction (the reference shared one direction, the Elephant
-bug). Rows of a segment's joint system and the per-path ring of the `global` memory model
+bug). Rows of a ray's conditioning system and the per-path ring of the `global` memory model
 both hold FsObs.
 
 FsVertex is the immutable record of a GPIS vertex (a hit). Every outgoing ray (the
