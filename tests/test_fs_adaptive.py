@@ -229,3 +229,18 @@ def test07_missed_crossings_of_the_same_realizations_stay_below_the_tolerance(de
     print(f"tol {tol} mu {mu}: {missed} missed over {length:.0f} l ({missed / length:.2e} "
           f"per l, bound {tol:g}), {steps / length:.2f} steps per l")
     assert missed < allowed + z_threshold(4) * math.sqrt(allowed)
+
+
+def test08_thin_features_of_the_mean_are_not_stepped_over(device, prg):
+    """A slab 0.1 thick (mean -5 sigma at its middle) under a smooth, small-sigma kernel
+    (l = 1.4, sigma = 0.01, the knob's): the rate's quadrature sees the process only at
+    its nodes, so steps of 2 l went over the slab; the mean's Lipschitz cap
+    (fs_mean_step) makes every ray hit it, at its entry face (within a few sigma)."""
+    from gpiscl.host.gp import Box
+    kern = SquaredExponential(sigma=0.01, length_scale=1.4)
+    slab = Box(half_extents=(0.05, 10.0, 10.0), center=(3.0, 0.0, 0.0))
+    out = flights(device, prg, kern, slab, 2000, memory="renewal_plus", t1=6.0, seed=4)
+    t = out[:, 0]
+    print(f"hit fraction {np.mean(t >= 0):.4f}, hit t in [{t.min():.4f}, {t.max():.4f}]")
+    assert np.all(t >= 0)
+    assert np.all(np.abs(t - 2.95) < 0.05)
