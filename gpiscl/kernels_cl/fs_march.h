@@ -83,7 +83,7 @@
 #define FS_H_MAX 2.0               /* l_d: Simpson's two nodes resolve the mean's dips */
 #endif
 #ifndef FS_MEAN_KAPPA
-#define FS_MEAN_KAPPA 2.0          /* fs_mean_step */
+#define FS_MEAN_KAPPA 6.0          /* fs_mean_step */
 #endif
 #define FS_MEAN_Z 6.0
 #define FS_H_MIN 1e-3              /* l_d: a floor for degenerate starts (f = 0 exactly) */
@@ -154,9 +154,11 @@ inline double fs_downcrossing_slope(double mean, double sd, double2 u)
  * step, with sigma << l: the knob's l = 1.4, sigma = 0.01) hides the rate's peak, and
  * steps of 2 l_d went through such features (the knob 6% too bright). With the mean's
  * Lipschitz bound `lip` (per unit t, gp_mean_lipschitz_on over the ray) the mean moves by
- * at most FS_MEAN_KAPPA = 2 sd over a step near its zero set (1 sd between Simpson's
- * nodes; the knob's brightness is the same at 1, 2, 3 and 6 and at steps capped to
- * 0.035 l, while the cost falls from 21 to 8 samples per flight), and far from it the step is
+ * at most FS_MEAN_KAPPA = 6 sd over a step near its zero set, so Simpson's nodes are at
+ * most 3 sd of mean apart: a mean that descends from 6 sd to 0 (anything it reaches
+ * through) puts a node where it is <= 3 sd, whose rate rejects the step (the knob's
+ * brightness is the same at 1, 2, 3 and 6 and with steps capped to 0.035 l, while the
+ * cost falls from 21 to 8 samples per flight), and far from it the step is
  * the sphere-tracing distance to |mean| = FS_MEAN_Z sd (a crossing there needs a
  * residual of that size: rate ~ e^{-Z^2/2} / l, far below any tolerance). sd is the
  * prior's at x (sigma(x) fields and a posterior included); a posterior's mean correction
