@@ -14,8 +14,8 @@
  * spacing 0.8 l (typical steps) +0.7%, at 1.2 l +3e-6; at 0.5 l +63% but of a variance
  * that is 0.7% of sigma^2 (given 16: +7%); RQ alpha = 1: +2% at 0.3 l, +4e-4 at 0.5 l.
  * Rice's crossing rate with it (tests/test_fs_adaptive.py --long, 2e6 length scales):
- * SE within 0.4% at mu/sigma = 0, 1; RQ alpha = 1 +0.6% at mu = sigma (3 sd; possibly the
- * window cutting RQ's long-range correlation, not resolved). All memory models condition
+ * SE within 0.4% at mu/sigma = 0, 1; RQ alpha = 1 at mu = sigma +0.6 +- 0.2% there,
+ * -0.3 +- 0.26% with another seed (window 32: -0.5 +- 0.26%). All memory models condition
  * on the window inside a ray; they differ only at a vertex (fs_begin). Segments, their N
  * and the 256 cap are gone.
  *
