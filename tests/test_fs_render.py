@@ -28,7 +28,7 @@ def gpis_scene(sampler, bsdf, albedo, lights, spp, seed=3, max_depth=256, rr_sta
 
 
 def fs(memory, **kw):
-    return {"type": "function_space", "samples": 16, "memory": memory, "memory_cap": 48, **kw}
+    return {"type": "function_space", "memory": memory, "memory_cap": 48, **kw}
 
 
 def run(scene, device, **kw):
@@ -92,16 +92,18 @@ def test03_global_memory_agrees_with_weight_space(device):
 
 
 def test04_failed_free_flights_are_counted_and_reported(device):
-    """A length scale far below the proxy size needs more than FS_MAX_SEGMENTS segments
-    of N = 2: each such ray is counted in gpis_failed and the summary says so."""
-    scene = gpis_scene(fs("renewal_plus", samples=2), "diffuse", 0.8,
+    """A length scale far below the proxy size needs more than FS_MAX_STEPS steps (at
+    most 2 length scales each, fs_march.h): each such ray is counted in gpis_failed and
+    the summary says so."""
+    scene = gpis_scene(fs("renewal_plus"), "diffuse", 0.8,
                        [{"type": "environment", "radiance": 1.0}], spp=1)
     g = scene["shapes"][0]
-    g["kernel"]["length_scale"] = 1e-4
+    g["kernel"]["length_scale"] = 1e-5
     g["mean"] = {"type": "constant", "value": 10.0}
     g["bounds"] = {"occupancy": None}   # the bound would skip the whole far-outside proxy
+    scene["camera"]["resolution"] = [6, 6]   # each failing ray costs FS_MAX_STEPS steps
     res = render_result(scene, device=device)
-    assert res.stats.gpis_failed > 0.5 * 16 * 16 * 0.4   # rays through the proxy
+    assert res.stats.gpis_failed > 0.5 * 6 * 6 * 0.4   # rays through the proxy
     assert "undecided GPIS" in res.stats.summary()
     np.testing.assert_allclose(res.image.mean, 1.0, rtol=1e-6)   # failed: no hit
 

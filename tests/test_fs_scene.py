@@ -18,22 +18,23 @@ def scene(sampler, kernel=None):
 def test01_defaults_are_filled_and_compiled():
     s = load_scene(scene({"type": "function_space"}))
     assert s.data["shapes"][0]["sampler"] == {
-        "type": "function_space", "samples": 32, "memory": "renewal_plus", "memory_cap": 64,
-        "step_corr": 0.9, "refine": 6}
+        "type": "function_space", "memory": "renewal_plus", "memory_cap": 64,
+        "miss_tolerance": 1e-5, "refine": 6}
     o = compile_scene(s.data).gpis.objects[0]
     assert o["sampler"] == layouts.GPIS_SAMPLERS["function_space"]
-    assert (o["samples"], o["memory_cap"], o["refine"]) == (32, 64, 6)
+    assert (o["window"], o["memory_cap"], o["refine"]) == (16, 64, 6)
     assert o["memory"] == layouts.GPIS_MEMORIES["renewal_plus"]
-    assert abs(o["step_corr"] - 0.9) < 1e-7
+    assert abs(o["miss_tolerance"] - 1e-5) < 1e-12 and o["step_corr"] == 0   # adaptive
 
 
 @pytest.mark.parametrize("memory", ["none", "renewal", "renewal_plus", "global"])
 def test02_memory_models_compile(memory):
-    s = load_scene(scene({"type": "function_space", "memory": memory, "samples": 8,
-                          "memory_cap": 16, "step_corr": 0.99, "refine": 3}))
+    s = load_scene(scene({"type": "function_space", "memory": memory,
+                          "memory_cap": 16, "miss_tolerance": 1e-3, "refine": 3}))
     o = compile_scene(s.data).gpis.objects[0]
     assert o["memory"] == layouts.GPIS_MEMORIES[memory]
-    assert (o["samples"], o["memory_cap"], o["refine"]) == (8, 16, 3)
+    assert (o["memory_cap"], o["refine"]) == (16, 3)
+    assert abs(o["miss_tolerance"] - 1e-3) < 1e-10
 
 
 def test03_thin_plate_is_allowed_in_function_space_only():
@@ -52,12 +53,11 @@ def test04_thin_plate_radius_must_span_the_proxy():
 
 
 @pytest.mark.parametrize("sampler, key, reason", [
-    ({"samples": 257}, "samples", "must be <= 256"),
-    ({"samples": 1}, "samples", "must be >= 2"),
-    ({"samples": 8.5}, "samples", "integer"),
+    ({"samples": 32}, "samples", "removed: values are sampled one at a time"),
+    ({"step_corr": 0.9}, "step_corr", "removed: the step is adaptive now; use miss_tolerance"),
+    ({"miss_tolerance": 0.0}, "miss_tolerance", "must be >= 1e-09"),
     ({"memory": "elephant"}, "memory", "one of"),
     ({"memory_cap": 4}, "memory_cap", "must be >= 8"),
-    ({"step_corr": 1.0}, "step_corr", "must be <= 0.999"),
     ({"refine": -1}, "refine", "must be >= 0"),
     ({"features": 64}, "features", "unknown key"),
 ])

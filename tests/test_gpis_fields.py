@@ -169,7 +169,7 @@ def test04_grid_colour_equals_its_constant_and_gradient_equivalents(device, tmp_
 
 
 @pytest.mark.parametrize("sampler", [{"type": "weight_space", "features": 64},
-                                     {"type": "function_space", "samples": 16}],
+                                     {"type": "function_space"}],
                          ids=["weight_space", "function_space"])
 def test05_emission_times_coverage(device, sampler):
     """A black-albedo emissive GPIS in a black world: every pixel is exactly E times the

@@ -263,7 +263,7 @@ def scene(sampler, bsdf="diffuse", albedo=0.8, lights=None, occupancy=1e-4, spp=
 
 
 SAMPLERS = {"weight_space": {"type": "weight_space", "features": 128},
-            "function_space": {"type": "function_space", "samples": 16,
+            "function_space": {"type": "function_space",
                                "memory": "renewal_plus"}}
 
 
@@ -298,8 +298,10 @@ def test08_furnace_with_bounds(device, sampler):
     sc = scene(SAMPLERS[sampler], bsdf="mirror", albedo=1.0,
                lights=[{"type": "environment", "radiance": 1.0}], spp=8)
     res = run(sc, device)
-    killed = res.stats.killed_paths   # a path killed at a grazing crossing loses its 1
+    # a path killed at a grazing crossing or ended by max_depth (32: a rare trap between
+    # close crossings) loses its 1; both are counted
+    killed = res.stats.killed_paths + res.stats.depth_cut_paths
     assert killed <= 2, res.stats.summary()
     assert np.all(np.abs(res.image.mean - 1.0) <= killed / 8 + 1e-5)
-    assert np.sum(np.abs(res.image.mean - 1.0) > 1e-5) <= killed
+    assert np.sum(np.any(np.abs(res.image.mean - 1.0) > 1e-5, axis=-1)) <= killed   # pixels
     assert res.stats.rays > 1.3 * res.stats.paths

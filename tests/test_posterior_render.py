@@ -238,7 +238,7 @@ def sphere_scene(mean_radius, sigma, spp, observations=None, seed=5, res=16):
     g = {"type": "gpis", "proxy": {"type": "box", "min": [-1.6] * 3, "max": [1.6] * 3},
          "mean": {"type": "sphere", "radius": mean_radius},
          "kernel": {"type": "squared_exponential", "sigma": sigma, "length_scale": 0.5},
-         "sampler": {"type": "function_space", "samples": 16},
+         "sampler": {"type": "function_space"},
          "bsdf": {"type": "diffuse", "albedo": 0.8}}
     if observations is not None:
         g["observations"] = observations

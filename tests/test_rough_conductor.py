@@ -151,7 +151,7 @@ def _metal_scene(nee, spp, gpis=False):
     ball = ({"type": "gpis", "proxy": {"type": "sphere", "radius": 0.9},
              "mean": {"type": "sphere", "radius": 0.6},
              "kernel": {"type": "squared_exponential", "sigma": 0.05, "length_scale": 0.3},
-             "sampler": {"type": "function_space", "samples": 16}, "bsdf": metal}
+             "sampler": {"type": "function_space"}, "bsdf": metal}
             if gpis else {"type": "sphere", "center": [0, 0, 0], "radius": 0.6, "bsdf": metal})
     return {"camera": {"position": [0, 0.4, 2.6], "look_at": [0, 0, 0], "fov": 40,
                        "resolution": [16, 16]},

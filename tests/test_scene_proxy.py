@@ -16,7 +16,7 @@ def _scene(proxy, kernel=None, sampler=None):
                                  "scale": 0.3},
                         "kernel": kernel or {"type": "squared_exponential", "sigma": 0.5,
                                              "length_scale": 0.3},
-                        "sampler": sampler or {"type": "function_space", "samples": 16},
+                        "sampler": sampler or {"type": "function_space"},
                         "bsdf": {"type": "diffuse", "albedo": 0.8}}],
             "lights": [{"type": "environment", "radiance": 1.0},
                        {"type": "point", "position": [0, 3, 0], "intensity": 2.0}],

@@ -6,9 +6,10 @@
    on a value and a slope at the ray origin (the renewal_plus memory at a vertex): build
    the (N + 2)^2 covariance, Cholesky, whiten, sample. numpy does the same systems batched
    (covariances vectorised over the batch, np.linalg.cholesky on the stack).
-2. Free-flight samples/s: fs_free_flight over long rays that rarely hit (mean 3 sigma), so
-   nearly every segment is a full one; renewal_plus and global (cap 64) memory. The numpy
-   column is the batched segment pipeline's rate times N (no numpy free flight is faster).
+2. Free-flight samples/s: fs_free_flight (fs_march.h, adaptive step, window N) over long
+   rays that rarely hit (mean 3 sigma); renewal_plus and global (cap 64) memory; evals/s
+   counts the step rule's moment evaluations. The numpy column is the batched segment
+   pipeline's rate times N (for scale).
 3. Paths/s of a small full render (tests/test_fs_render.py's rough ball, 32x32, 16 spp)
    per memory model, and weight space for scale; then renewal_plus with sigma(x), l(x)
    fields, analytic and sampled on grids (the cost of the fields and of the grid reads).
@@ -65,13 +66,13 @@ __kernel void flight(__global const GpKernel* kp, __global const MeanNode* mean,
                      __global double* scratch, __global int* out)
 {
     int s = get_global_id(0);
-    FsParams prm = {n, memory, cap, 6, 0.9};
+    FsParams prm = {n, memory, cap, 6, 0.0, 1e-5};
     FsRay r = {(double3)(0.001 * s, 0.0, 0.0), (double3)(0.0, 0.0, 1.0), 0.0, t1};
     FsRng rng = {seed, (uint)s, 0u, 0u, 0u};
     FsVertex v = {0};
     FsResult res = fs_free_flight(kp[0], mean, mc, prm, r, v, 0, rng, fs_scratch(scratch, s));
     out[2 * s] = res.status ? -1 : res.samples;
-    out[2 * s + 1] = res.segments;
+    out[2 * s + 1] = res.evals;
 }
 """
 KERNEL = SquaredExponential(sigma=1.0, length_scale=1.0)
@@ -198,9 +199,9 @@ def main():
               f"{n * batch / t_dev:>19.4g}")
 
     print("\nfree flight (fresh rays, 60 length scales, mean 3 sigma: few hits)")
-    print(f"{'N':>5}{'memory':>14}{'rays':>7}{'samples/s':>13}{'segments/s':>13}"
+    print(f"{'N':>5}{'memory':>14}{'rays':>7}{'samples/s':>13}{'evals/s':>13}"
           f"{'numpy samples/s':>17}{'ratio':>8}")
-    for n in (8, 32, 128):
+    for n in (8, 16):
         for memory in ("renewal_plus", "global"):
             rays = args.batch // 4 if n <= 32 else args.batch // 16
             scratch = cl.Buffer(dev.ctx, mf.READ_WRITE, 8 * stride * rays)

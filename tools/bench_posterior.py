@@ -16,7 +16,7 @@ seconds and the ratio to the same sampler's prior.
 
 Device (--device-sizes, 0 = the prior): function-space free flight through a posterior
 GPIS (fs_sampling.h with the observations of compile/posterior.py), rays through a
-sphere of observed points; microseconds per segment and per conditioned row (one row:
+sphere of observed points; microseconds per step-rule evaluation and per GP sample (one row:
 n kernel evaluations, an n x n triangular solve, and its covariance entries).
 """
 from __future__ import annotations
@@ -48,13 +48,13 @@ __kernel void flight(__global const GpKernel* kp, __global const MeanNode* means
     int i = get_global_id(0);
     FsScratch S = fs_scratch(scratch, i);
     S.post = fs_posterior_of(means, first);
-    FsParams prm = {16, GPIS_MEMORY_RENEWAL_PLUS, 8, 6, 0.9};
+    FsParams prm = {16, GPIS_MEMORY_RENEWAL_PLUS, 8, 6, 0.0, 1e-5};
     double3 d = vload3(i, dirs);
     FsRay r = {-2.0 * d, d, 0.0, 4.0};
     FsRng rng = {1u, (uint)i, 0u, 0u, 0u};
     FsVertex v = {0};
     FsResult res = fs_free_flight(kp[0], means + first, mc, prm, r, v, 0, rng, S);
-    out[3 * i] = res.segments;
+    out[3 * i] = res.evals;
     out[3 * i + 1] = res.samples;
     out[3 * i + 2] = res.status;
 }
@@ -77,7 +77,7 @@ def device_cost(sizes, rays: int):
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     src = fs_sampler_source(kernel_source("fs_posterior.h") + FLIGHT)
     print(f"\ndevice ({dev.name}), {rays} rays, N = 16, renewal_plus:")
-    print(f"{'n obs':>8}{'segments':>10}{'rows':>8}{'us/segment':>12}{'us/row':>9}")
+    print(f"{'n obs':>8}{'evals':>10}{'samples':>8}{'us/eval':>12}{'us/sample':>9}")
     for n in sizes:
         prog = gp_records.pack_mean(mean)
         nodes, first = prog, 0
@@ -132,7 +132,7 @@ def render_cost(sizes, resolution: int, spp: int, repeats: int):
             scene = sphere_scene(1.2, 0.6, spp, obs, res=resolution)
             scene["shapes"][0]["sampler"] = (
                 {"type": sampler} if sampler == "weight_space"
-                else {"type": "function_space", "samples": 16})
+                else {"type": "function_space"})
             variants[(sampler, n)] = load_scene(scene).data
     times, _ = time_variants(Device(), variants, spp, repeats)
     print(f"\nrenders, {resolution}^2 x {spp} spp, median of {repeats}:")

@@ -20,6 +20,7 @@ from ..scene.gpis import FIELD_KEYS, field_minimum
 from .colour_fields import pack_field
 from ..errors import SceneError
 from .posterior import build_posterior, pack_posterior
+from ..layout import function_space_records as FSL
 
 _KERNELS = {"squared_exponential": K.SquaredExponential, "rational_quadratic": K.RationalQuadratic,
             "periodic": K.Periodic, "locally_periodic": K.LocallyPeriodic,
@@ -182,8 +183,9 @@ def compile_gpis(shapes: list, material_of, source: str = "<scene>",
         if g["sampler"]["type"] == "function_space":
             fs = g["sampler"]
             o["memory"] = layouts.GPIS_MEMORIES[fs["memory"]]
-            for key in ("samples", "memory_cap", "refine", "step_corr"):
+            for key in ("memory_cap", "refine", "miss_tolerance"):
                 o[key] = fs[key]
+            o["window"] = FSL.DEFAULT_WINDOW
         o["material"] = material_of(g["bsdf"])
         o["tolerance"] = ROOT_TOLERANCE * kernel_length_scale(g["kernel"])
         built.append(build_kernel(g["kernel"], proxy))

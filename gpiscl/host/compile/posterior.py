@@ -11,7 +11,7 @@ so this is the points' scatter across the surface); with "normals": true the fil
 normals are observed as the gradient (three derivative rows per point, standard
 deviation `normal_noise`), which also tells inside from outside.
 
-Function space: the observations join every segment's conditioning set exactly
+Function space: the observations join every ray's conditioning set exactly
 (fs_sampling.h, FsPost). Cost on the device: for each conditioned row, n kernel
 evaluations and an n x n triangular solve (n = observation rows: points, times 4 with
 normals), so a segment of R rows costs ~R n^2 / 2 multiply-adds; tools/bench_posterior.py

@@ -1,14 +1,13 @@
 """numpy reference of the function-space sampler (fs_linalg.h, fs_sampling.h).
 
-Same conventions as the device code (its header comment pins them): relative jitter
-JITTER * K_ii on every observation, the truncated-normal start condition, the step rule
-corr = c, segments of N samples at t_s + (i + u) dt with the last squeezed onto t1,
-bisection refinement of the crossing bracket, and the memory models none / renewal /
-renewal_plus / global. Used by the tests and tools/bench_function_space.py; one ray at a
+Same conventions as the device code (its header comments pin them): relative jitter
+JITTER * K_ii on every observation, the truncated-normal start condition, the fixed step
+of correlation c (the uniform baseline, and the length scale l_d of the adaptive rule),
+and the adaptive step rule of fs_march.h (march_realization: applied to a given dense
+realization, so that its misses can be counted). Used by the tests and tools; one ray at a
 time with np.linalg.cholesky (and a dense joint sample along a ray as the ground truth).
-Not mirrored: the device's global model draws all three gradient components at a hit
-(the normal here conditions on f(x_h) = 0 and the secant slope); the two laws agree
-(tests/test_fs_free_flight.py), only the global ring needs genuine draws.
+Not mirrored: the device's bisection, hit slope and memory models (tested on the device
+against Rice's formula and dense joint samples, tests/test_fs_adaptive.py).
 """
 from __future__ import annotations
 
@@ -111,7 +110,7 @@ def _qinv(q):
     return x
 
 
-# --- step rule and segment grid ---------------------------------------------------------
+# --- fixed step -------------------------------------------------------------------------
 
 def correlation(kernel, d, t):
     return float(kernel.value(t * np.asarray(d, float)) / kernel.value(np.zeros(3)))
@@ -140,87 +139,71 @@ def step_size(kernel, d, c):
     return 0.5 * (lo + hi)
 
 
-def segment_grid(t_start, t1, dtc, n_max, u):
-    """Sample parameters of one segment (u in (0, 1]) and whether it is the last."""
-    rem = t1 - t_start
-    if (n_max - 1 + u) * dtc < rem:
-        return t_start + (np.arange(n_max) + u) * dtc, False
-    n = int(min(max(math.ceil(rem / dtc + 1.0 - u), 1), n_max))
-    ts = t_start + (np.arange(n) + u) * (rem / (n - 1 + u))
-    ts[-1] = t1
-    return ts, True
+# --- the adaptive march (fs_march.h) ----------------------------------------------------
+
+H_MAX, H_MIN, ELL_CORR, WINDOW = 2.0, 1e-3, math.exp(-0.5), 16
 
 
-# --- one ray ----------------------------------------------------------------------------
+def return_rate(m, m1, s, r, g, outside):
+    """Rice's rate of crossings back across 0 from the side `outside` says (up-crossings
+    when outside) of a Gaussian process with, at one point, E f = m, E f' = m1,
+    sd f = s, cov(f, f') = r s and sd(f' | f) = g (fs_return_rate)."""
+    if not outside:
+        m, m1 = -m, -m1
+    if not (s > 0.0 and g > 0.0):
+        return 0.0
+    a = (m1 - r / s * m) / g
+    e = (math.exp(-0.5 * a * a) / _SQRT2PI / (a * a) * (1 - 3 / (a * a)) if a < -8.0
+         else math.exp(-0.5 * a * a) / _SQRT2PI + a * (1.0 - _q(a)))
+    return math.exp(-0.5 * (m / s) ** 2) / _SQRT2PI / s * g * e
 
-def free_flight(kernel, mean, o, d, t0, t1, rng, samples=32, memory="global",
-                step_corr=0.9, refine=6, cap=64):
-    """First crossing along a fresh ray (start condition f(t0) >= 0), or None.
 
-    Returns (t_hit or None, gradient at the hit or None, number of segments)."""
+def _moments(kernel, mean, x_rows, y_rows, x, d):
+    """(m, m1, s, r, g) of f and its slope along d at x given values y at x_rows."""
+    n = len(x_rows)
+    K, mu = observation_matrix(kernel, mean, list(x_rows) + [x, x], [d] * (n + 2),
+                               [False] * (n + 1) + [True])
+    L = np.linalg.cholesky(jittered(K))
+    e = np.linalg.solve(L[:n, :n], np.asarray(y_rows) - mu[:n])
+    return (mu[n] + L[n, :n] @ e, mu[n + 1] + L[n + 1, :n] @ e, L[n, n], L[n + 1, n],
+            L[n + 1, n + 1])
+
+
+def march_realization(kernel, mean, o, d, ts, F, tol, window=WINDOW):
+    """The step rule of fs_march.h applied to one realization F sampled densely at the
+    equally spaced ts along the unit ray o + t d (F[0] >= 0): the march reads F where it
+    samples (steps rounded down to the grid, at least one cell), conditions on its last
+    `window` samples and goes on through every crossing. Returns the sampled grid indices
+    and the missed down-crossings: those of the dense path inside a step whose ends do
+    not show them (the event the tolerance bounds)."""
     o, d = np.asarray(o, float), np.asarray(d, float)
-    dn = d / np.linalg.norm(d)
-    sd0 = math.sqrt(kernel.variance)
-    v0 = truncnorm_sample(float(mean.value(o + t0 * d)), sd0, [rng.random()])[0]
-    X, U, D, Y = [o + t0 * d], [dn], [False], [v0]     # conditioning rows
-    t, t_prev, f_prev, outside = t0, t0, v0, True
-    dtc = step_size(kernel, d, step_corr)
-    for seg in range(1, 100000):
-        if t >= t1:
-            return None, None, seg - 1
-        ts, last = segment_grid(t, t1, dtc, samples, 1.0 - rng.random())
-        x = list(X) + [o + ti * d for ti in ts]
-        u = list(U) + [dn] * len(ts)
-        der = list(D) + [False] * len(ts)
-        K, mu = observation_matrix(kernel, mean, x, u, der)
-        m = len(X)
-        mc, cov = conditional(K, mu, np.array(Y), m)
-        F = mc + np.linalg.cholesky(cov) @ rng.standard_normal(len(ts))
-        hit = None
-        for i in range(len(ts)):
-            if outside and F[i] < 0.0:
-                hit = i
+    dt = ts[1] - ts[0]
+    ell = step_size(kernel, d, ELL_CORR)
+    down = (F[:-1] >= 0.0) & (F[1:] < 0.0)          # dense down-crossings per cell
+    idx, i, h, grow, missed = [0], 0, 0.5 * ell, 1.0, 0
+    while i < len(ts) - 1:
+        rows = idx[-window:]
+        xr, yr = [o + ts[j] * d for j in rows], F[rows]
+        outside = F[i] >= 0.0
+        h = min(grow * h, H_MAX * ell)
+        nu_end = None
+        while True:
+            k = max(1, min(int(h / dt), len(ts) - 1 - i))
+            hs = k * dt
+            mid = return_rate(*_moments(kernel, mean, xr, yr, o + (ts[i] + 0.5 * hs) * d, d),
+                              outside)
+            if nu_end is None:
+                nu_end = return_rate(*_moments(kernel, mean, xr, yr, o + ts[i + k] * d, d),
+                                     outside)
+            ratio = (4.0 * mid + nu_end) / 6.0 * ell / tol
+            if ratio <= 1.0 or h <= H_MIN * ell or k == 1:
+                grow = 2.0 if ratio < 0.05 else (1.5 if ratio < 0.3 else 1.1)
                 break
-            outside = F[i] >= 0.0
-        if hit is not None:
-            ta, fa = (t_prev, f_prev) if hit == 0 else (ts[hit - 1], F[hit - 1])
-            tb, fb = ts[hit], F[hit]
-            ox, ou, od = x[:m + hit + 1], u[:m + hit + 1], der[:m + hit + 1]
-            oy = list(Y) + list(F[:hit + 1])
-            for _ in range(refine):
-                tm = 0.5 * (ta + tb)
-                K, mu = observation_matrix(kernel, mean, ox + [o + tm * d], ou + [dn],
-                                           od + [False])
-                cm, cv = conditional(K, mu, np.array(oy), len(oy))
-                fm = cm[0] + math.sqrt(max(cv[0, 0], 0.0)) * rng.standard_normal()
-                ox, ou, od, oy = ox + [o + tm * d], ou + [dn], od + [False], oy + [fm]
-                ta, fa, tb, fb = (tm, fm, tb, fb) if fm >= 0.0 else (ta, fa, tm, fm)
-            th = ta + (tb - ta) * fa / (fa - fb)
-            slope = (fb - fa) / ((tb - ta) * np.linalg.norm(d))
-            xh = o + th * d
-            T, B = _frame(dn)
-            K, mu = observation_matrix(kernel, mean, ox + [xh] * 4, ou + [dn, dn, T, B],
-                                       od + [False, True, True, True])
-            cm, cv = conditional(K, mu, np.array(oy + [0.0, slope]), len(oy) + 2)
-            q = cm + np.linalg.cholesky(cv) @ rng.standard_normal(2)
-            return th, T * q[0] + B * q[1] + dn * slope, seg
-        if last:
-            return None, None, seg
-        t = t_prev = ts[-1]
-        f_prev, xe = F[-1], o + ts[-1] * d
-        if memory == "global":
-            X, U, D, Y = (x[-cap:], u[-cap:], der[-cap:], (list(Y) + list(F))[-cap:])
-        elif memory == "renewal_plus":
-            K, mu = observation_matrix(kernel, mean, x + [xe], u + [dn], der + [True])
-            cm, cv = conditional(K, mu, np.array(list(Y) + list(F)), len(x))
-            s = cm[0] + math.sqrt(max(cv[0, 0], 0.0)) * rng.standard_normal()
-            X, U, D, Y = [xe, xe], [dn, dn], [False, True], [f_prev, s]
-        else:
-            if memory == "none":
-                f_prev = truncnorm_sample(float(mean.value(xe)), sd0, [rng.random()])[0]
-                outside = True
-            X, U, D, Y = [xe], [dn], [False], [f_prev]
-    raise RuntimeError("segment cap")
+            h, nu_end = 0.5 * hs, mid
+        missed += int(down[i:i + k].sum()) - int(F[i] >= 0.0 > F[i + k])
+        i += k
+        idx.append(i)
+    return np.array(idx), missed
 
 
 def _frame(n):

@@ -2,7 +2,7 @@
 
 FsObs is one Gaussian observation: a value f(x) or a directional derivative u . grad f(x),
 each derivative with its own direction (the reference shared one direction, the Elephant
-bug). Rows of a segment's joint system and the per-path ring of the `global` memory model
+bug). Rows of a ray's conditioning system and the per-path ring of the `global` memory model
 both hold FsObs.
 
 FsVertex is the immutable record of a GPIS vertex (a hit). Every outgoing ray (the
@@ -36,15 +36,15 @@ FS_VERTEX = Struct("FsVertex", (
 ))
 
 OBS_KINDS = {"value": 0, "deriv": 1}
-STATUS = {"ok": 0, "not_pd": 1, "nan": 2, "rows": 3, "segments": 4}
+STATUS = {"ok": 0, "not_pd": 1, "nan": 2, "rows": 3, "steps": 4}
 STRUCTS = (FS_OBS, FS_VERTEX)
 
-DEFAULT_SAMPLES = 32      # N per segment
-MAX_SAMPLES = 256
-DEFAULT_STEP_CORR = 0.9   # c: correlation between neighbouring samples
-DEFAULT_REFINE = 6        # bisection steps in a crossing bracket: width dt / 64
+DEFAULT_WINDOW = 16       # samples conditioned on besides the memory (fs_march.h)
+DEFAULT_MISS_TOLERANCE = 1e-5   # expected missed crossings per along-ray length scale
+DEFAULT_REFINE = 6        # bisection steps in a crossing bracket: width step / 64
 DEFAULT_GLOBAL_CAP = 64   # observations the global model keeps
 HIT_ROWS = 4              # f(x_h), d_d f, d_T f, d_B f appended at a hit
+MIN_BISECT = 8            # FS_MIN_BISECT of fs_march.h
 
 
 def c_declarations() -> str:
@@ -57,11 +57,11 @@ def c_declarations() -> str:
     return "\n".join(lines) + "\n" + "\n".join(s.c_declaration() for s in STRUCTS)
 
 
-def max_rows(samples: int, memory_cap: int, refine: int = DEFAULT_REFINE) -> int:
-    """Rows of the largest joint system: conditioning (<= max(cap, 2) and, for the global
-    model, the ring plus this ray's earlier segments trimmed to cap), N targets, the
-    refinement bisection, one segment-end slope, and the hit rows."""
-    return max(memory_cap, 2) + samples + refine + 1 + HIT_ROWS
+def max_rows(window: int, memory_cap: int, refine: int = DEFAULT_REFINE) -> int:
+    """Rows of the largest system (fs_march.h): memory (<= max(cap, 2)), the window, the
+    refinement bisection (at least MIN_BISECT: fs_march.h narrows every bracket), the hit
+    rows and the step rule's two temporary rows."""
+    return max(memory_cap, 2) + window + max(refine, MIN_BISECT) + HIT_ROWS + 2
 
 
 def scratch_doubles(rows: int) -> int:
@@ -71,8 +71,8 @@ def scratch_doubles(rows: int) -> int:
     return 8 * rows + rows * (rows + 1) // 2 + 2 * rows + 8 * rows
 
 
-def defines(samples_max: int, memory_cap: int, refine: int = DEFAULT_REFINE) -> dict:
+def defines(window_max: int, memory_cap: int, refine: int = DEFAULT_REFINE) -> dict:
     """-D options of a program that includes fs_sampling.h."""
-    rows = max_rows(samples_max, memory_cap, refine)
-    return {"GP_REAL": "double", "FS_MAX_ROWS": rows,
+    rows = max_rows(window_max, memory_cap, refine)
+    return {"GP_REAL": "double", "FS_MAX_ROWS": rows, "FS_MAX_WINDOW": window_max,
             "FS_SCRATCH_DOUBLES": scratch_doubles(rows)}

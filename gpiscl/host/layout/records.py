@@ -73,13 +73,13 @@ GPIS_OBJECT = Struct("GpisObject", (
     ("int", "features"),       # weight space: number of random Fourier features M
     ("int", "material"),       # micro-BSDF
     ("int", "memory"),         # function space: GPIS_MEMORY_*
-    ("int", "samples"),        # function space: values per segment N
+    ("int", "window"),         # function space: samples conditioned on besides memory
     ("int", "order_first"),    # weight space: its periodic-order CDF in the order table
     ("int", "order_count"),
     ("float", "tolerance"),    # root refinement tolerance (world units)
     ("int", "memory_cap"),     # function space, global memory: observations kept
     ("int", "refine"),         # function space: bisection steps in a crossing bracket
-    ("float", "step_corr"),    # function space: correlation of neighbouring samples
+    ("float", "step_corr"),    # function space: > 0 the uniform baseline step (benchmarks)
     ("int", "color_field"),    # albedo multiplier: its MeanNode record, 0 = none (scene/colour_fields.py)
     ("int", "emission_field"), # emitted radiance: its MeanNode record, 0 = none
     ("float", "occupancy_level"),  # z sigma_max: mean above it = occupancy below the
@@ -87,6 +87,7 @@ GPIS_OBJECT = Struct("GpisObject", (
     ("float", "occupancy_step"),   # world length: the bound's marches stop below it
     ("int", "proxy_first"),    # mesh proxy: its face planes (float4 n, w: n.x <= w) start
     ("int", "proxy_count"),    # at this record of the mean-node array; how many planes
+    ("float", "miss_tolerance"),   # function space: expected missed crossings per l_d
 ))
 
 # Per-launch constants of the integrator.
@@ -154,8 +155,11 @@ LIGHT_KINDS = {"environment": 0, "environment_map": 1, "point": 2, "sphere": 3,
                "rectangle": 4, "directional": 5}
 # Device-side counters; the host reads only rays_out between bounces.
 COUNTERS = {"rays_out": 0, "hits": 1, "escaped": 2, "shadow": 3, "nan_paths": 4,
-            "killed": 5, "gpis_failed": 6}
-NUM_COUNTERS = 8
+            "killed": 5, "gpis_failed": 6, "depth_cut": 7,
+            # function-space work: flights (one object along one ray), GP values drawn,
+            # step-rule moment evaluations (fs_march.h); int32, per render
+            "fs_flights": 8, "fs_samples": 9, "fs_evals": 10}
+NUM_COUNTERS = 11
 GPIS_PROXIES = {"box": 0, "sphere": 1, "mesh": 2}
 GPIS_SAMPLERS = {"weight_space": 0, "function_space": 1}
 GPIS_MEMORIES = {"none": 0, "renewal": 1, "renewal_plus": 2, "global": 3}

@@ -88,7 +88,7 @@ class FunctionSpaceStages:
         (fs_sampling.h, FsScratch.v) to every scratch slice."""
         fs = _fs_objects(self.objects)
         rows_cap = self.stride if self.stride > 1 else 2
-        defines = FL.defines(int(fs["samples"].max()), rows_cap, int(fs["refine"].max()))
+        defines = FL.defines(int(fs["window"].max()), rows_cap, int(fs["refine"].max()))
         self.post_rows = post_rows
         defines["FS_POST_MAX"] = self.post_rows
         defines["FS_SCRATCH_DOUBLES"] += defines["FS_MAX_ROWS"] * self.post_rows

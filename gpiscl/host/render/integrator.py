@@ -47,6 +47,10 @@ class RenderStats:
     truncated_paths: int = 0
     killed_paths: int = 0      # GPIS hits whose sampled normal faced away from the ray
     gpis_failed: int = 0       # GPIS root searches that could not decide (counted, no hit)
+    depth_cut_paths: int = 0   # paths that would have scattered again but reached max_depth
+    fs_flights: int = 0        # function space: free flights through one object
+    fs_samples: int = 0        # ... GP values they drew, and step-rule moment evaluations
+    fs_evals: int = 0
     seconds: float = 0.0
     interrupted: bool = False
     time_limited: bool = False   # stopped by the time limit
@@ -65,9 +69,11 @@ class RenderStats:
         rate = self.paths / self.seconds if self.seconds > 0 else 0.0
         lines = [f"paths: {self.paths}  rays: {self.rays}  shadow rays: {self.shadow_rays}  "
                  f"time: {self.seconds:.2f} s  paths/s: {rate:.4g}"]
-        if self.nan_paths or self.truncated_paths or self.killed_paths or self.gpis_failed:
+        if (self.nan_paths or self.truncated_paths or self.killed_paths or self.gpis_failed
+                or self.depth_cut_paths):
             lines.append(f"failed paths: {self.nan_paths} non-finite (recorded as 0), "
-                         f"{self.truncated_paths} cut at the bounce limit, "
+                         f"{self.truncated_paths} cut at the wavefront iteration limit, "
+                         f"{self.depth_cut_paths} ended by max_depth, "
                          f"{self.killed_paths} killed at a GPIS normal facing away; "
                          f"{self.gpis_failed} undecided GPIS root searches")
         return "\n".join(lines)
@@ -315,6 +321,10 @@ class WavefrontIntegrator:
         self.stats.nan_paths = count("nan_paths")
         self.stats.killed_paths = count("killed")
         self.stats.gpis_failed = count("gpis_failed")
+        self.stats.depth_cut_paths = count("depth_cut")
+        self.stats.fs_flights = count("fs_flights")
+        self.stats.fs_samples = count("fs_samples")
+        self.stats.fs_evals = count("fs_evals")
         self.stats.seconds = time.perf_counter() - start
         self.stats.kernel_table = self.program.timings.table()
         return RenderResult(self.film.read(), self.stats)

@@ -28,11 +28,11 @@ GPIS_HEADERS = ("gpis_proxy.h", "ws_features.h", "ws_posterior.h", "ws_intersect
                 "ws_objects.h", "gpis_fields.h")
 # The function-space stages (a second program, built only for scenes that use them).
 FS_STAGE_FILES = ("gpis_function_space.cl", "gpis_shadow_function_space.cl")
-FS_HEADERS = ("gpis_proxy.h", "fs_linalg.h", "fs_sampling.h", "fs_posterior.h",
+FS_HEADERS = ("gpis_proxy.h", "fs_linalg.h", "fs_sampling.h", "fs_march.h", "fs_posterior.h",
               "fs_objects.h")
 # The function-space sampler alone, for tests and benchmarks.
 FS_SAMPLER_HEADERS = ("compat.h", "rng.h", "gp_kernel.h", "gp_mean.h", "fs_linalg.h",
-                      "fs_sampling.h")
+                      "fs_sampling.h", "fs_march.h")
 
 
 def kernel_source(name: str) -> str:
@@ -60,8 +60,8 @@ def fs_sampler_source(wrappers: str = "") -> str:
     return "\n".join(parts) + '\n#line 1 "wrappers"\n' + wrappers
 
 
-def fs_sampler_options(samples_max: int, memory_cap: int, refine: int | None = None) -> list:
+def fs_sampler_options(window_max: int, memory_cap: int, refine: int | None = None) -> list:
     """Build options of fs_sampler_source."""
-    d = defines(samples_max, memory_cap) if refine is None else \
-        defines(samples_max, memory_cap, refine)
+    d = defines(window_max, memory_cap) if refine is None else \
+        defines(window_max, memory_cap, refine)
     return [f"-I{PYOPENCL_CL_DIR}"] + [f"-D{k}={v}" for k, v in sorted(d.items())]

@@ -2,8 +2,8 @@
 
     {"type": "gpis", "proxy": {...}, "mean": {...}, "kernel": {...},
      "sampler": {"type": "weight_space", "features": null}, "bsdf": {...}}
-    sampler alternative: {"type": "function_space", "samples": 32, "memory": "renewal_plus",
-                          "memory_cap": 64, "step_corr": 0.9, "refine": 6}
+    sampler alternative: {"type": "function_space", "memory": "renewal_plus",
+                          "memory_cap": 64, "miss_tolerance": 1e-5, "refine": 6}
 
 The proxy must bound the object: a realization is only searched inside it, and a ray
 that enters the proxy where f < 0 counts as starting inside (it must first come back out),
@@ -18,7 +18,7 @@ from ..io.meshes import mesh_problem
 from .records import ALBEDO, ROUGH_CONDUCTOR, SHAPES, TRANSFORM, VEC3, box_extent
 from ..layout import function_space_records as FSL
 from .schema import (Bool, Enum, Field, File, Int, Nullable, Number, Record, Tagged,
-                           Vector)
+                     Vector, child)
 from .proxies import bounding_proxy, mesh_proxy_problem
 from ..io.grids import load_field_grid, load_grid, problem_of
 from ..io.points import EXTENSIONS as POINT_FILES
@@ -162,16 +162,33 @@ def field_minimum(field: dict, proxy: dict) -> float:
 DEFAULT_FEATURES = {"rational_quadratic": 1024}
 DEFAULT_FEATURES_OTHER = 256
 
+class _FunctionSpaceSampler(Record):
+    """Keys of the segment sampler that are gone fail with what replaces them (a silent
+    alias would change old scenes' meaning without a word)."""
+    REMOVED = {
+        "step_corr": "removed: the step is adaptive now; use miss_tolerance (expected missed "
+                     f"crossings per length scale, default {FSL.DEFAULT_MISS_TOLERANCE:g})",
+        "samples": "removed: values are sampled one at a time along the ray, with no "
+                   "segments; delete the key",
+    }
+
+    def resolve(self, value, path, ctx, extra_keys=()):
+        for key, why in self.REMOVED.items():
+            if isinstance(value, dict) and key in value:
+                ctx.fail(child(path, key), why)
+        return super().resolve(value, path, ctx, extra_keys)
+
+
 SAMPLERS = Tagged("sampler", {
     "weight_space": Record({"features": Field(Nullable(Int(ge=1, le=65536)), None)}),
-    # Values of f sampled jointly along rays (fs_sampling.h pins the conventions):
-    # samples N per segment, the memory model, the global model's observation cap, the
-    # correlation between neighbouring samples (step rule) and crossing bisection steps.
-    "function_space": Record({
-        "samples": Field(Int(ge=2, le=FSL.MAX_SAMPLES), FSL.DEFAULT_SAMPLES),
+    # Values of f sampled one at a time along rays, each conditioned on the memory and the
+    # ray's previous samples, with an adaptive step (fs_march.h pins the rule): the memory
+    # model, the global model's observation cap, the expected missed crossings per
+    # along-ray length scale, and crossing bisection steps.
+    "function_space": _FunctionSpaceSampler({
         "memory": Field(Enum("none", "renewal", "renewal_plus", "global"), "renewal_plus"),
         "memory_cap": Field(Int(ge=8, le=512), FSL.DEFAULT_GLOBAL_CAP),
-        "step_corr": Field(Number(ge=0.5, le=0.999), FSL.DEFAULT_STEP_CORR),
+        "miss_tolerance": Field(Number(ge=1e-9, le=0.1), FSL.DEFAULT_MISS_TOLERANCE),
         "refine": Field(Int(ge=0, le=20), FSL.DEFAULT_REFINE),
     }),
 })

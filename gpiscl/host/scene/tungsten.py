@@ -25,8 +25,9 @@ Mapping (../shared/design/REFERENCE-ALGORITHMS.md section 8 describes their form
             (1 - cos cap computed as 2 sin^2(cap / 2), which keeps its digits for a 0.1
             degree sun)
   media   function_space_gaussian_process / gaussian_process -> sampler function_space
-            {samples: sample_points, memory: elephant -> global, goldfish -> renewal_plus,
-             dori -> renewal, none -> none; step_corr: step_size_cov when > 0}
+            {memory: elephant -> global, goldfish -> renewal_plus, dori -> renewal,
+             none -> none; sample_points and step_size_cov (segments, fixed step) have no
+             counterpart: the step is adaptive}
           weight_space_gaussian_process -> weight_space {features: basis_functions};
             single_realization -> render.realization 0 (a fixed realization; the authors'
             seed is not reproducible)
@@ -527,19 +528,17 @@ class _Converter:
     def sampler(self, med: dict, key: str) -> dict:
         kind = med.get("type")
         if kind in FS_MEDIA:
+            # sample_points and step_size_cov set the reference's segments and fixed step;
+            # gpiscl samples online with an adaptive step (fs_march.h), so they have no
+            # counterpart and the default miss tolerance applies (still checked: a
+            # malformed value is a mistake in their file, said at its key)
+            self.number(med, "sample_points", key, 32, integer=True, ge=2)
+            self.number(med, "step_size_cov", key, 0.0, ge=0, lt=1)
             s = {"type": "function_space",
-                 "samples": self.number(med, "sample_points", key, 32, integer=True, ge=2),
                  "memory": MEMORIES.get(med.get("correlation_context", "goldfish"))}
             if s["memory"] is None:
                 self.fail(f"{key}.correlation_context",
                           f"unknown memory model (expected one of: {', '.join(MEMORIES)})")
-            step_cov = self.number(med, "step_size_cov", key, 0.0, ge=0, lt=1)
-            if step_cov > 0:
-                s["step_corr"] = step_cov
-            else:
-                self.notes.append(f"{key}.step_size_cov: 0 lets their {s['samples']} samples "
-                                  "spread over the whole chord; gpiscl caps the step at its "
-                                  "default correlation (sampler.step_corr), which is finer")
             return s
         if kind in WS_MEDIA:
             return {"type": "weight_space",

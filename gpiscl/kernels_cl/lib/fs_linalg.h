@@ -7,13 +7,13 @@
  * and the factorisation below is row-oriented, so an appended row is factored by the
  * same code in O(n^2). Private arrays are not used: PoCL's CPU device segfaulted on
  * private double arrays of 512 entries (4 KiB) at its automatic work-group size (256
- * and 384 worked; 8192 worked only with local size 1), far below the 100-300 rows a
- * global-memory segment needs.
+ * and 384 worked; 8192 worked only with local size 1), far below the ~100 rows of a
+ * global-memory ray (ring, window, bisection, hit rows).
  *
- * Precision: double. Along a ray the values are strongly correlated on purpose (the step
- * rule puts neighbours at correlation c = 0.9): 32 SE values at that spacing have
- * lambda_min / lambda_max ~ 1e-10, and bisection points dt/64 apart or a value and a
- * slope at nearly the same point push it further. Cholesky loses ~log10(cond) digits, so
+ * Precision: double. Along a ray the values are strongly correlated (steps of ~0.5-1
+ * length scales, fs_march.h: neighbours at correlation 0.6-0.9): 32 SE values at
+ * correlation 0.9 have lambda_min / lambda_max ~ 1e-10, and bisection points 1e-2 l apart
+ * or a value and a slope at nearly the same point push it further. Cholesky loses ~log10(cond) digits, so
  * float (7 digits) fails outright on such systems, while double keeps >= 5 digits after
  * the jitter below bounds the condition number by ~1/jitter.
  *

@@ -27,13 +27,17 @@ inline FsResult fs_object_flight(__constant RenderParams* params,
         || !gpis_proxy_clip(g, means, o.xyz, d.xyz, &t0, &t1)
         || !gpis_occupancy_clip(g, means, o.xyz, d.xyz, &t0, &t1, !v.valid))
         return none;
-    FsParams pr = {g->samples, g->memory, g->memory_cap, g->refine, (double)g->step_corr};
+    FsParams pr = {g->window, g->memory, g->memory_cap, g->refine, (double)g->step_corr,
+                   (double)g->miss_tolerance};
     FsRay r = {convert_double3(o.xyz), convert_double3(d.xyz), (double)t0, (double)t1};
     S.post = fs_posterior_of(means, g->mean_first);   /* none: the prior */
     FsRng rng = {fs_object_seed(params->seed, k), (uint)pixel, (uint)sample,
                  (uint)params->bounce, stream};
     FsResult res = fs_free_flight(kernels[k], means + g->mean_first, g->mean_count, pr, r, v,
                                   ring, rng, S);
+    atomic_inc(&counters[COUNT_FS_FLIGHTS]);
+    atomic_add(&counters[COUNT_FS_SAMPLES], res.samples);
+    atomic_add(&counters[COUNT_FS_EVALS], res.evals);
     if (res.status) {
         atomic_inc(&counters[COUNT_GPIS_FAILED]);
         return none;

@@ -1,73 +1,59 @@
-/* Function-space GPIS free flight: progressive conditioned segments along a ray.
+/* Function-space GPIS free flight: conditioning rows, start conditions, memory models.
  * Needs gp_kernel.h built with -DGP_REAL=double, gp_mean.h, fs_linalg.h, philox (rng.h),
  * and the declarations of function_space_records.c_declarations(); FS_MAX_ROWS and
  * FS_SCRATCH_DOUBLES come from function_space_records.defines().
+ * fs_march.h (included after this) marches along the ray.
  * gpiscl/host/gp/function_space.py is the numpy reference of everything here.
  *
  * Conventions (sign as everywhere: f > 0 outside; a hit is the first f >= 0 -> f < 0):
- *  - Step rule: neighbouring samples have correlation c (FsParams.step_corr, default
- *    0.9): dt = l sqrt(-2 ln c) / sqrt(d'Ad) for SE, l sqrt(2a (c^(-1/a) - 1) / d'Ad) for
- *    RQ, bisection on k(t d)/k(0) = c otherwise (a kernel whose correlation never drops
- *    to c, e.g. a periodic one with large l, gets the curvature lag sqrt(2(1-c)/lambda2)).
- *    At c = 0.9 one down-crossing in ~55 falls between two samples together with an
- *    up-crossing and is missed (Rice vs the grid's arccos(c)/(2 pi dt)); c = 0.99: 1 in 600.
- *    Spatially varying kernels (gp_kernel.h): a sigma(x) field keeps the rule exact; an
- *    l(x) field uses the smallest l on the ray's segment (fs_step), a conservative step.
- *  - Placement: segment k starts at the previous segment's last sample t_s (the ray's t0
- *    for the first) and samples t_i = t_s + (i + u) dt, i < N, with one fresh offset
- *    u in (0, 1] per segment, so no gap exceeds dt and grids of different rays never
- *    align. The last segment squeezes dt so that its final sample is exactly t1.
- *  - Crossing: the first sample with f < 0 whose predecessor (the start point for the
- *    first) was >= 0 brackets the hit; `refine` bisection steps sample the midpoint
- *    conditioned on everything (an exact draw of the same realization), then t_hit is
- *    linear in the final bracket (error O((dt 2^-refine)^2 f'')).
- *  - Start condition (a ray entering from free space or a surface, and every segment
- *    start under `none`): f(x(t0)) = v0 with v0 ~ N(mu, k(0)) truncated to [0, inf)
+ *  - Stepping, online sampling, the crossing bracket, the slope at a hit: fs_march.h
+ *    (fs_free_flight). The fixed step of fs_step below (neighbours at correlation c: dt =
+ *    l sqrt(-2 ln c) / sqrt(d'Ad) for SE, l sqrt(2a (c^(-1/a) - 1) / d'Ad) for RQ,
+ *    bisection on k(t d)/k(0) = c otherwise) gives fs_march.h its length scale l_d
+ *    (c = e^-1/2) and the benchmarks their uniform baseline.
+ *  - Start condition (a ray entering from free space or a surface, and every ray
+ *    from a vertex under `none`): f(x(t0)) = v0 with v0 ~ N(mu, k(0)) truncated to [0, inf)
  *    (the authors' convention: the ray starts outside; k(0) is k(x, x) under a sigma(x)
  *    field). Exact inverse-CDF sampler, so a ray whose mean at t0 is far inside gets
  *    v0 ~ s/|a| just above 0, not an atom at 0.
- *  - Memory models at a new ray from a vertex / at a segment end without a hit:
+ *  - Memory models at a new ray from a vertex (inside a ray every model conditions on
+ *    the ray's window of samples, fs_march.h):
  *      none          fresh start condition at the start point (forgets everything);
- *      renewal       f(x) = 0 (vertex) or f(end) (segment end); at a vertex the slope
+ *      renewal       f(x) = 0; the slope
  *                    along the new direction is free, and we draw it from its prior law
  *                    truncated to >= 0: the ray leaves to the outside. Consequence: no
  *                    re-hit atom at t = 0+ (a free slope would send ~half the rays
  *                    straight back inside, i.e. an immediate second scattering at the
  *                    vertex, which is what the reference's `dori` does), and the slope is
  *                    independent of the vertex's sampled normal;
- *      renewal_plus  value and the slope along the new direction: g . d_new at a vertex
- *                    (g . d_new < 0, e.g. transmission, starts the ray inside), the
- *                    conditioned d_d f at a segment end;
- *      global        every draw of the path so far (values along all segments up to
- *                    each hit's first negative sample, the bisection points, and at
- *                    each hit the three gradient components, each derivative with its
- *                    own direction), the most recent `cap` of them; the path's
+ *      renewal_plus  value and the slope along the new direction: g . d_new
+ *                    (g . d_new < 0, e.g. transmission, starts the ray inside);
+ *      global        the draws of the path so far (each ray's window up to its hit's
+ *                    first negative sample, the bisection points, and at each hit the
+ *                    three gradient components, each derivative with its own
+ *                    direction), the most recent `cap` of them; the path's
  *                    observations live in a per-path ring of capacity cap
  *                    (FsVertex.obs_end/obs_count). The ring holds only genuine draws,
  *                    never the interpolated f(x_h) = 0 or the secant slope (see the hit).
- *  - Normal at a hit (none/renewal/renewal_plus): the slope along d is the final
- *    bracket's difference quotient (< 0 by construction); the tangential components are
- *    drawn from their conditional law given all rows, f(x_h) = 0 and that slope.
- *    Isotropic radial kernels (SE, RQ, thin-plate with equal aniso) have every row on the
- *    ray, and cov(d_T f(x_h), anything on the ray) = 0, so the closed form
- *    N(T . grad mu(x_h), -2k'(0) I_2) is used; anisotropic/product kernels take the
- *    general conditional (four appended rows), and so do kernels with sigma(x) or l(x)
- *    fields (grad sigma, grad l correlate d_T f(x_h) with the ray's values), and so does a
- *    posterior (observations correlate d_T f(x_h) with everything). Global: all
- *    three components are drawn given every row (three appended rows); the slope is then
- *    a draw that is < 0 except at grazing hits (probability ~ the bracket's relative
- *    width), whose normal faces away and which the integrator kills and counts.
+ *  - Normal at a hit: the slope along d is drawn from its law at a down-crossing
+ *    (fs_march.h); the tangential components from their conditional law given all rows,
+ *    f(x_h) = 0 and that slope. Isotropic radial kernels (SE, RQ, thin-plate with equal
+ *    aniso) without global memory have every row on the ray, and cov(d_T f(x_h),
+ *    anything on the ray) = 0, so the closed form N(T . grad mu(x_h), -2k'(0) I_2) is
+ *    used; anisotropic/product kernels take the general conditional (two appended rows),
+ *    and so do kernels with sigma(x) or l(x) fields (grad sigma, grad l correlate
+ *    d_T f(x_h) with the ray's values), a posterior (observations correlate d_T f(x_h)
+ *    with everything) and global memory (the ring's rows lie off the ray).
  *  - Posterior GPIS (FsPost, S.post; fs_posterior.h finds an object's): every mean and
  *    covariance above is the posterior's, m + k alpha and k - v.v, so start values,
- *    renewal slopes, segments, bisection and normals are all conditioned on the
+ *    renewal slopes, the march, bisection and normals are all conditioned on the
  *    observations exactly. Cost per conditioned row O(n^2) (a triangular solve; v is
  *    cached per row in S.v, FS_POST_MAX n per row), so n stays at a few hundred.
  *    The step rule keeps the prior's: the mean correction varies on the kernel's scale and
  *    the residual's derivative variances never exceed the prior's.
  *  - Random numbers: philox4x32, key (seed, FS_PHILOX_KEY) (rng.h uses another key
- *    word), counter (pixel, sample, bounce, stream << 28 | segment << 12 | block): one
- *    block = two 53-bit uniforms; fixed block numbers per draw (targets by their index in
- *    the segment, so all memory models share a fresh ray's first segment), so results
+ *    word), counter (pixel, sample, bounce, stream << 28 | step << 12 | block): one
+ *    block = two 53-bit uniforms; fixed block numbers per draw (fs_march.h), so results
  *    are independent of batching and queue order. `stream` separates the rays traced
  *    from one vertex (e.g. 0 continuation, 1 light-sample shadow, 2 BSDF-sample shadow).
  */
@@ -83,27 +69,28 @@ typedef char fs_gp_real_must_be_double[sizeof(GP_REAL) == 8 ? 1 : -1];
 #define FS_SCRATCH_DOUBLES (18 * FS_MAX_ROWS + FS_MAX_ROWS * (FS_MAX_ROWS + 1) / 2 \
                             + FS_MAX_ROWS * FS_POST_MAX)
 #endif
-#ifndef FS_MAX_SEGMENTS
-#define FS_MAX_SEGMENTS 4096
+#ifndef FS_MAX_WINDOW
+#define FS_MAX_WINDOW 16           /* the largest FsParams.window of the program */
 #endif
 #define FS_PHILOX_KEY 0x3c6ef372u
 #define FS_TN_TAIL 30.0            /* beyond: exact rejection tail, erfc would underflow */
-#define FS_SLOT_REFINE 512         /* normal slots: targets 0..511, then these */
-#define FS_SLOT_END 576
+#define FS_SLOT_REFINE 512         /* normal slots: a step's value is 0, bisection these */
 #define FS_SLOT_NORMAL 578
 #define FS_U_GRID 1024             /* uniform blocks */
 #define FS_U_START 1025            /* and the 16 after it (tail rejection retries) */
 
 typedef struct { uint seed, pixel, sample, bounce, stream; } FsRng;
-typedef struct { int samples, memory, cap, refine; double step_corr; } FsParams;
+/* window: samples kept besides the memory (0: FS_WINDOW); step_corr > 0: the uniform
+ * baseline step (benchmarks), else the adaptive rule with miss_tol (fs_march.h). */
+typedef struct { int window, memory, cap, refine; double step_corr, miss_tol; } FsParams;
 typedef struct { double3 o, d; double t0, t1; } FsRay;
 /* A posterior GPIS (gpiscl/host/gp/posterior.py; packed by compile/posterior.py): the
  * prior conditioned on n observation rows X (values and directional derivatives, with
  * noise). Every prior mean and covariance below becomes
  *   m'(x) = m(x) + k(x, X) alpha,            alpha = K^-1 (y - m(X)),
  *   k'(a, b) = k(a, b) - v_a . v_b,          v_a = L^-1 k(X, a),  K + noise = L L^T,
- * which is exact: the observations join every segment's conditioning set, with their
- * factor computed once on the host instead of per segment. n = 0: the prior. */
+ * which is exact: the observations join every ray's conditioning set, with their
+ * factor computed once on the host instead of per ray. n = 0: the prior. */
 typedef struct {
     __global const FsObs* obs;
     __global const double* alpha;
@@ -130,7 +117,8 @@ typedef struct {
     int status, hit;
     double t;               /* hit distance, or t1 */
     double3 grad;           /* sampled gradient of f at the hit (outward, grad . d < 0) */
-    int segments, samples;  /* work done */
+    int samples, evals;     /* work done: GP values drawn, step-rule moment evaluations */
+    int windows;            /* window slides (fs_march.h) */
     int new_first, new_end;  /* global: rows [new_first, new_end) join the memory */
 } FsResult;
 
@@ -477,152 +465,6 @@ inline int fs_begin(GpKernel p, __global const MeanNode* mean, int mc, FsParams 
     *f0 = fs_truncnorm_pos(m0, sqrt(var), rng, 0, FS_U_START);
     S.rows[0] = fs_obs(x, d, FS_OBS_VALUE, *f0);
     return 1;
-}
-
-/* Free flight along [ray.t0, ray.t1] inside one GPIS object: the first crossing, or none.
- * Shadow rays and continuation rays alike; only the continuation then calls
- * fs_vertex_at_hit. ray.d need not be unit (t is the ray parameter). */
-inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc,
-                               FsParams prm, FsRay ray, FsVertex v,
-                               __global const FsObs* ring, FsRng rng, FsScratch S)
-{
-    FsResult res = {0, 0, ray.t1, (double3)(0.0), 0, 0, 0, 0};
-    if (S.post.n > FS_POST_MAX) { res.status = FS_STATUS_ROWS; return res; }   /* no v cache */
-    double f_prev;
-    int outside, n_old, factored = 0;
-    int m = fs_begin(p, mean, mc, prm, ray, v, ring, rng, S, &f_prev, &outside, &n_old);
-    double dlen = length(ray.d), dtc = fs_step(p, ray, prm.step_corr);
-    double3 dn = ray.d / dlen;
-    if (!(dtc > 0.0) || !isfinite(dtc)) { res.status = FS_STATUS_NAN; return res; }
-    double t = ray.t0, t_prev = ray.t0;
-    int seg = 0;
-    for (; seg < FS_MAX_SEGMENTS && t < ray.t1; ++seg) {
-        double rem = ray.t1 - t, u = 1.0 - fs_uniform2(rng, seg, FS_U_GRID).x, dt = dtc;
-        int n = prm.samples, last = (n - 1 + u) * dtc >= rem;
-        if (last) {
-            n = clamp((int)ceil(rem / dtc + 1.0 - u), 1, prm.samples);
-            dt = rem / (n - 1 + u);
-        }
-        if (m + n + prm.refine + 1 + FS_HIT_ROWS > FS_MAX_ROWS) {
-            res.status = FS_STATUS_ROWS;
-            return res;
-        }
-        for (int i = 0; i < n; ++i) {
-            double ti = (last && i == n - 1) ? ray.t1 : t + (i + u) * dt;
-            S.rows[m + i] = fs_obs(ray.o + ti * ray.d, dn, FS_OBS_VALUE, ti);
-        }
-        int st = fs_factor(p, mean, mc, S, factored, m + n);
-        if (st) { res.status = st; return res; }
-        for (int i = factored; i < m; ++i) fs_whiten_row(S.L, S.e, i, S.rows[i].value, S.mu[i]);
-        res.segments++;
-        int hit = -1;
-        double ta = t_prev, fa = f_prev, tb = 0.0, fb = 0.0;
-        for (int i = 0; i < n; ++i) {
-            double ti = S.rows[m + i].value;     /* t parked in value until sampled */
-            double f = fs_sample_row(S.L, S.e, m + i, S.mu[m + i], fs_normal(rng, seg, i));
-            S.rows[m + i].value = f;
-            res.samples++;
-            if (isnan(f)) { res.status = FS_STATUS_NAN; return res; }
-            if (outside && f < 0.0) { hit = i; tb = ti; fb = f; break; }
-            outside = f >= 0.0;
-            ta = ti;
-            fa = f;
-        }
-        if (hit >= 0) {
-            int row = m + hit + 1;               /* unsampled targets are overwritten */
-            for (int k = 0; k < prm.refine; ++k, ++row) {
-                double tm = 0.5 * (ta + tb);
-                double f = fs_append(p, mean, mc, S, row,
-                                     fs_obs(ray.o + tm * ray.d, dn, FS_OBS_VALUE, 0.0), 0,
-                                     fs_normal(rng, seg, FS_SLOT_REFINE + k), &res.status);
-                if (res.status) return res;
-                if (f >= 0.0) { ta = tm; fa = f; } else { tb = tm; fb = f; }
-            }
-            res.hit = 1;
-            res.t = ta + (tb - ta) * fa / (fa - fb);
-            double sd = (fb - fa) / ((tb - ta) * dlen);   /* slope per unit length */
-            double3 x = ray.o + res.t * ray.d, T, B;
-            fs_frame(dn, &T, &B);
-            double z1 = fs_normal(rng, seg, FS_SLOT_NORMAL);
-            double z2 = fs_normal(rng, seg, FS_SLOT_NORMAL + 1);
-            double q1, q2;
-            res.new_first = n_old;
-            if (prm.memory == GPIS_MEMORY_GLOBAL) {
-                /* The memory keeps only genuine joint draws: the values up to the first
-                 * negative sample, the bisection points, and all three gradient
-                 * components at x_h sampled from their conditional given those. The
-                 * interpolated root and the bracket's difference quotient are not draws
-                 * (f(x_h) = 0 is off by O(width^2 f''), the quotient is a secant whose
-                 * jitter noise grows as the bracket shrinks); kept next to the values
-                 * they were computed from, as exact observations, they contradict them,
-                 * and continued rays lost ~5% of Rice's crossings (refine 6; 20% at 12). */
-                sd = fs_append(p, mean, mc, S, row, fs_obs(x, dn, FS_OBS_DERIV, 0.0), 0,
-                               fs_normal(rng, seg, FS_SLOT_NORMAL + 2), &res.status);
-                q1 = fs_append(p, mean, mc, S, row + 1, fs_obs(x, T, FS_OBS_DERIV, 0.0), 0,
-                               z1, &res.status);
-                q2 = fs_append(p, mean, mc, S, row + 2, fs_obs(x, B, FS_OBS_DERIV, 0.0), 0,
-                               z2, &res.status);
-                res.grad = T * q1 + B * q2 + dn * sd;
-                res.new_end = row + 3;
-                return res;
-            }
-            if (fs_isotropic_radial(p) && !S.post.n) {   /* observations break isotropy */
-                q1 = fs_prior_mean(mean, mc, x, T, FS_OBS_DERIV)
-                   + sqrt(gp_cov(p, x, T, 1, x, T, 1)) * z1;
-                q2 = fs_prior_mean(mean, mc, x, B, FS_OBS_DERIV)
-                   + sqrt(gp_cov(p, x, B, 1, x, B, 1)) * z2;
-            } else {
-                fs_append(p, mean, mc, S, row, fs_obs(x, dn, FS_OBS_VALUE, 0.0), 1, 0.0,
-                          &res.status);
-                fs_append(p, mean, mc, S, row + 1, fs_obs(x, dn, FS_OBS_DERIV, sd), 1, 0.0,
-                          &res.status);
-                q1 = fs_append(p, mean, mc, S, row + 2, fs_obs(x, T, FS_OBS_DERIV, 0.0), 0,
-                               z1, &res.status);
-                q2 = fs_append(p, mean, mc, S, row + 3, fs_obs(x, B, FS_OBS_DERIV, 0.0), 0,
-                               z2, &res.status);
-            }
-            res.grad = T * q1 + B * q2 + dn * sd;
-            res.new_end = m + hit;
-            return res;
-        }
-        if (last) { t = ray.t1; break; }
-        /* no crossing: the next segment starts at this one's last sample */
-        int e = m + n - 1;
-        double3 xe = fs_pos(S.rows + e);
-        t = t_prev = t + (n - 1 + u) * dt;
-        f_prev = S.rows[e].value;
-        if (prm.memory == GPIS_MEMORY_GLOBAL) {
-            int drop = max(m + n - prm.cap, 0);
-            for (int i = drop; i < m + n; ++i) S.rows[i - drop] = S.rows[i];
-            n_old = max(n_old - drop, 0);
-            m = m + n - drop;
-            factored = drop ? 0 : m;   /* a kept prefix keeps its factor; e of a target is z */
-        } else if (prm.memory == GPIS_MEMORY_RENEWAL_PLUS) {
-            double s = fs_append(p, mean, mc, S, e + 1, fs_obs(xe, dn, FS_OBS_DERIV, 0.0), 0,
-                                 fs_normal(rng, seg, FS_SLOT_END), &res.status);
-            if (res.status) return res;
-            S.rows[0] = fs_obs(xe, dn, FS_OBS_VALUE, f_prev);
-            S.rows[1] = fs_obs(xe, dn, FS_OBS_DERIV, s);
-            m = 2;
-            factored = 0;
-        } else {
-            if (prm.memory != GPIS_MEMORY_RENEWAL) {   /* none: a fresh start condition */
-                GpFieldsAt fe = gp_kernel_nonstationary(p) ? fs_row_fields(S, e)
-                                                           : fs_fields(p, mean, xe);
-                double var = gp_cov_at(p, xe, dn, 0, fe, xe, dn, 0, fe);
-                if (S.post.n) var = fmax(var - fs_post_dot(fs_post_v(S, e), fs_post_v(S, e),
-                                                           S.post.n), 0.0);
-                f_prev = fs_truncnorm_pos(S.mu[e], sqrt(var), rng, seg + 1,
-                                          FS_U_START);
-                outside = 1;
-            }
-            S.rows[0] = fs_obs(xe, dn, FS_OBS_VALUE, f_prev);
-            m = 1;
-            factored = 0;
-        }
-    }
-    if (t < ray.t1) res.status = FS_STATUS_SEGMENTS;
-    return res;
 }
 
 /* The vertex record of a continuation ray's hit. For the global model it appends this

@@ -61,7 +61,11 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
 
     int depth = path_depth[p];
     float3 beta = path_beta[p].xyz;
-    if (depth >= params->max_depth || max3(albedo) <= 0.0f) return;
+    if (max3(albedo) <= 0.0f) return;
+    if (depth >= params->max_depth) {   /* ended by the bounce limit: a bias, reported */
+        atomic_inc(&counters[COUNT_DEPTH_CUT]);
+        return;
+    }
     int pixel = path_pixel[p], sample = path_sample[p], bounce = params->bounce;
     float3 n = (dot(ng, wo) < 0.0f) ? ng : -ng;  /* shading normal on the side of wo */
     float3 xo = x + eps * n;                      /* origin for rays leaving that side */

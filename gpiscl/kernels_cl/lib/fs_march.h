@@ -1,0 +1,334 @@
+/* Function-space free flight: online conditional sampling along a ray with an adaptive
+ * step whose chance of skipping a crossing is bounded. Needs fs_sampling.h (the
+ * conditioning rows, start conditions, memory models, random numbers and the normal at a
+ * hit are defined there); gpiscl/host/gp/function_space.py is its numpy reference.
+ *
+ * Online sampling. Each new value f(t_{i+1}) is drawn from its law given the memory rows
+ * (fs_begin: the vertex record or the start value) and the ray's previous samples: one
+ * row is appended to the packed factor (fs_factor on one row: k(X, x), a forward solve,
+ * the Schur complement, O(n^2)), then fs_sample_row. A window keeps the last FS_WINDOW
+ * samples besides the memory rows: when it is full the older half is dropped and the
+ * newer half refactored once (amortised O(n^2) per step, n = memory + window). Why 16
+ * (so at least 8 kept): the next value's conditional variance given the last 8 samples
+ * against 40 (numpy, tools/bench_adaptive_marching.py's docstring has the table): SE at
+ * spacing 0.8 l (typical steps) +0.7%, at 1.2 l +3e-6; at 0.5 l +63% but of a variance
+ * that is 0.7% of sigma^2 (given 16: +7%); RQ alpha = 1: +2% at 0.3 l, +4e-4 at 0.5 l.
+ * Rice's crossing rate with it (tests/test_fs_adaptive.py --long, 2e6 length scales):
+ * SE within 0.4% at mu/sigma = 0, 1; RQ alpha = 1 at mu = sigma +0.6 +- 0.2% there,
+ * -0.3 +- 0.26% with another seed (window 32: -0.5 +- 0.26%). All memory models condition
+ * on the window inside a ray; they differ only at a vertex (fs_begin). Segments, their N
+ * and the 256 cap are gone.
+ *
+ * Step rule. Given f(t) >= 0 (the ray is outside), a step to t + h misses a crossing
+ * only if the path crosses down and back up inside it, so it needs an up-crossing:
+ *   P(miss) <= E[# up-crossings in (t, t + h)] = int_t^{t+h} nu+(s) ds,
+ * the expected number by Rice's formula for the non-stationary Gaussian process f given
+ * the rows so far. With the conditional moments at s, m = E f, m1 = E f', v = Var f,
+ * c = Cov(f, f'), w = Var f' (derivatives per unit length along the ray):
+ *   nu+(s) = phi(m / sqrt v) / sqrt v * [g phi(b / g) + b Phi(b / g)],
+ *   b = m1 - (c / v) m   (the slope's mean given f(s) = 0),
+ *   g^2 = w - c^2 / v    (its variance given f(s) = 0).
+ * Inside (after an up-crossing has been seen, or a ray starting inside) the missed event
+ * is up-then-down, bounded by the down-crossings: the same with m, m1 -> -m, -m1. The
+ * integral is Simpson's rule on (t, t + h); nu(t) = 0 because f(t) is a row (its
+ * conditional variance is the jitter), so only s = t + h/2 and t + h are evaluated, the
+ * end last so that its value row is already factored when it is accepted. A step is
+ * accepted when the bound is at most tol h / l_d, i.e. the mean miss rate over the step is
+ * at most `miss_tolerance` expected misses per along-ray length scale l_d (SE: l /
+ * sqrt(d'Ad); others: the lag of correlation e^-1/2, fs_step with an l(x) field's
+ * smallest l on the ray). The first try grows the last step by 2, 1.5 or 1.1 as its
+ * bound was below 5%, 30% or 100% of the tolerance (capped at FS_H_MAX l_d and at the
+ * ray's end, and at fs_mean_step: the prior mean must not change faster than the two
+ * nodes can see); a rejected try halves, its middle becoming the new end (one node
+ * evaluation per rejection; floor FS_H_MIN l_d). So a
+ * ray's expected misses are at most tol * (its length / l_d), and the crossing rate's
+ * relative bias at most tol / (l_d * Rice's rate) = 2 pi tol e^(mu^2 / 2 sigma^2): the
+ * default 1e-5 gives < 0.06% for mu / sigma <= 3 (measured misses are ~1/4 of the
+ * bound at tol 3e-2). The bound is small where the mean heads down (a likely crossing
+ * is bracketed anyway) and large where f hovers near 0 with an uncertain slope (grazing
+ * pairs), which is exactly the event to control. Cost per step: two conditional
+ * (value, slope) pairs, i.e. 4 rows instead of 1 for a fixed step, and 2 per rejection;
+ * steps are ~0.8 l_d at mu = 0 and longer away from 0, against 0.46 l_d (c = 0.9) and
+ * 0.14 l_d (c = 0.99) for the uniform grid.
+ * FsParams.step_corr > 0 replaces the rule by the fixed step of fs_step (correlation c
+ * between neighbours, first step u dt, u uniform in (0, 1]): the old uniform grid, kept
+ * as the benchmarks' baseline only (scenes cannot select it).
+ *
+ * Hit. The first sample f < 0 after f >= 0 brackets the crossing. Bisection points are
+ * drawn conditioned on everything: `refine` of them, and more until the bracket is below
+ * FS_ROOT_WIDTH = 1e-2 l_d (at most 8 from a 2 l_d step), so the linear root is off by
+ * ~1e-5 sigma, the jitter's size, and every `refine` gives the same laws (refine only
+ * adds bisections). The slope along the ray at x_h is drawn from its exact law at a
+ * down-crossing given all rows and f(x_h) = 0: s < 0 with density |s| N(s; b, g^2)
+ * (Kac-Rice: crossings are met in proportion to |f'|), by inverting its CDF
+ * (fs_downcrossing_slope). Negative by construction, so no normal faces away under any
+ * memory model. Why the narrow bracket: at a wide one (refine 0-2 alone) the linear root
+ * is off by O(width^2 f''), and conditioning the slope on f = 0 there biased it (E[-s]
+ * +8-25% at refine 2, measured); sampling the root's location from the conditional
+ * crossing density on a fixed grid of cells did worse where the density peaks at a
+ * bracket end (f(ta) ~ 0). The old secant slope's jitter noise (tilted normals at
+ * refine >= 12) is gone too: s is drawn from the jittered model's own conditional.
+ * The tangential components follow given f(x_h) = 0 and s (fs_sampling.h's closed form
+ * for isotropic kernels without a posterior or global memory, else two appended rows).
+ * The global ring keeps this ray's rows: values, bisection points, f(x_h) = 0, s and the
+ * tangential components.
+ *
+ * Random numbers: the step index takes fs_uniform2's segment field (16 bits, hence
+ * FS_MAX_STEPS; a ray needing more is counted as failed): block 0 the value at the
+ * step, the bisection and normal slots of fs_sampling.h at the hit's step, FS_U_SLOPE
+ * its slope. */
+#ifndef FS_WINDOW
+#define FS_WINDOW 16
+#endif
+#define FS_MAX_STEPS 65535
+#ifndef FS_H_MAX
+#define FS_H_MAX 2.0               /* l_d: Simpson's two nodes resolve the mean's dips */
+#endif
+#ifndef FS_MEAN_KAPPA
+#define FS_MEAN_KAPPA 6.0          /* fs_mean_step */
+#endif
+#define FS_MEAN_Z 6.0
+#define FS_H_MIN 1e-3              /* l_d: a floor for degenerate starts (f = 0 exactly) */
+#define FS_ELL_CORR 0.6065306597126334   /* e^-1/2: SE's lag is exactly l / sqrt(d'Ad) */
+#define FS_U_SLOPE 1100
+#define FS_ROOT_WIDTH 1e-2         /* l_d: final bracket, see "Hit" above */
+#define FS_MIN_BISECT 8            /* rows reserved for bisection: 2 l_d 2^-8 < FS_ROOT_WIDTH */
+
+typedef struct { double m, m1, s, r, g; } FsMoments;   /* v = s^2, c = r s, g as above */
+
+/* Conditional moments of f and its slope along dn at ray parameter t given rows [0, n):
+ * factoring rows n (value) and n + 1 (slope) is the forward solve and Schur complement. */
+inline int fs_moments(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
+                      int n, FsRay ray, double3 dn, double t, FsMoments* M)
+{
+    double3 x = ray.o + t * ray.d;
+    S.rows[n] = fs_obs(x, dn, FS_OBS_VALUE, t);
+    S.rows[n + 1] = fs_obs(x, dn, FS_OBS_DERIV, 0.0);
+    int st = fs_factor(p, mean, mc, S, n, n + 2);
+    if (st) return st;
+    __global const double* L1 = S.L + fs_tri(n + 1);
+    M->m = S.mu[n] + fs_row_dot(S.L, n, S.e, n);
+    M->m1 = S.mu[n + 1] + fs_row_dot(S.L, n + 1, S.e, n);
+    M->s = fs_diag(S.L, n);
+    M->r = L1[n];
+    M->g = L1[n + 1];
+    return FS_STATUS_OK;
+}
+
+inline double fs_phi(double x) { return 0.3989422804014327 * exp(-0.5 * x * x); }
+
+/* Rice's rate (per unit length) of crossings from the side `outside` says back across 0:
+ * up-crossings when outside, down-crossings inside. */
+inline double fs_return_rate(FsMoments M, int outside)
+{
+    double m = outside ? M.m : -M.m, m1 = outside ? M.m1 : -M.m1;
+    if (!(M.s > 0.0) || !(M.g > 0.0)) return 0.0;
+    double b = m1 - M.r / M.s * m, a = b / M.g;
+    /* phi(a) + a Phi(a) cancels for a << 0: its asymptotic phi(a) / a^2 (1 - 3 / a^2) */
+    double e = a < -8.0 ? fs_phi(a) / (a * a) * (1.0 - 3.0 / (a * a))
+                        : fs_phi(a) + a * fs_q(-a);
+    return fs_phi(m / M.s) / M.s * M.g * e;
+}
+
+/* The slope at a down-crossing: s < 0 with density proportional to |s| N(s; mean, sd^2).
+ * In y = -s / sd, a = mean / sd the density is y phi(y + a) on y > 0, with tail
+ * S(y) = phi(y + a) - a Q(y + a); y solves S(y) = u S(0) by bisection in double (S
+ * loses ~2 log10(a) digits to cancellation, a few at a <= 30). Beyond a = 30 (a slope
+ * mean 30 sd on the wrong side: a grazing hit) y phi(y + a) ~ y e^{-a y}: Gamma(2, 1/a). */
+inline double fs_crossing_tail(double x, double a) { return fs_phi(x) - a * fs_q(x); }
+
+inline double fs_downcrossing_slope(double mean, double sd, double2 u)
+{
+    if (!(sd > 0.0)) return fmin(mean, -DBL_MIN);
+    double a = mean / sd;
+    if (a > 30.0) return sd * log((1.0 - u.x) * (1.0 - u.y)) / a;
+    double target = (1.0 - u.x) * fs_crossing_tail(a, a);   /* (1 - u) in (0, 1] */
+    double lo = 0.0, hi = fmax(-a, 0.0) + 12.0;
+    for (int k = 0; k < 64; ++k) {
+        double mid = 0.5 * (lo + hi);
+        if (fs_crossing_tail(mid + a, a) > target) lo = mid; else hi = mid;
+    }
+    return -sd * fmax(0.5 * (lo + hi), DBL_MIN);
+}
+
+/* The longest step the prior mean allows: Simpson's two nodes see the process only
+ * where they are, so a mean that dips to 0 between them (a feature thinner than the
+ * step, with sigma << l: the knob's l = 1.4, sigma = 0.01) hides the rate's peak, and
+ * steps of 2 l_d went through such features (the knob 6% too bright). With the mean's
+ * Lipschitz bound `lip` (per unit t, gp_mean_lipschitz_on over the ray) the mean moves by
+ * at most FS_MEAN_KAPPA = 6 sd over a step near its zero set, so Simpson's nodes are at
+ * most 3 sd of mean apart: a mean that descends from 6 sd to 0 (anything it reaches
+ * through) puts a node where it is <= 3 sd, whose rate rejects the step (the knob's
+ * brightness is the same at 1, 2, 3 and 6 and with steps capped to 0.035 l, while the
+ * cost falls from 21 to 8 samples per flight), and far from it the step is
+ * the sphere-tracing distance to |mean| = FS_MEAN_Z sd (a crossing there needs a
+ * residual of that size: rate ~ e^{-Z^2/2} / l, far below any tolerance). sd is the
+ * prior's at x (sigma(x) fields and a posterior included); a posterior's mean correction
+ * varies on the kernel's scale, which the l_d cap covers. */
+inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
+                           int n, double3 x, double3 dn, double lip)
+{
+    if (!(lip > 0.0)) return INFINITY;
+    double var, m = fs_mean_var(p, mean, mc, S, x, dn, FS_OBS_VALUE, n, &var), sd = sqrt(var);
+    return fmax(FS_MEAN_KAPPA * sd, fabs(m) - FS_MEAN_Z * sd) / lip;
+}
+
+/* Drop the older half of the window: rows [n - keep, n) move to [fixed, fixed + keep)
+ * and are refactored and whitened (their values are known); returns the new row count. */
+inline int fs_slide(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
+                    int fixed, int n, int keep, int* status)
+{
+    for (int i = 0; i < keep; ++i) S.rows[fixed + i] = S.rows[n - keep + i];
+    int st = fs_factor(p, mean, mc, S, fixed, fixed + keep);
+    if (st) { *status = st; return n; }
+    for (int i = fixed; i < fixed + keep; ++i)
+        fs_whiten_row(S.L, S.e, i, S.rows[i].value, S.mu[i]);
+    return fixed + keep;
+}
+
+/* Free flight along [ray.t0, ray.t1] inside one GPIS object: the first crossing, or none.
+ * Shadow rays and continuation rays alike; only the continuation then calls
+ * fs_vertex_at_hit. ray.d need not be unit (t is the ray parameter). */
+inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc,
+                               FsParams prm, FsRay ray, FsVertex v,
+                               __global const FsObs* ring, FsRng rng, FsScratch S)
+{
+    FsResult res = {0, 0, ray.t1, (double3)(0.0), 0, 0, 0, 0, 0};
+    if (S.post.n > FS_POST_MAX) { res.status = FS_STATUS_ROWS; return res; }   /* no v cache */
+    double fa;
+    int outside, n_old;
+    int fixed = fs_begin(p, mean, mc, prm, ray, v, ring, rng, S, &fa, &outside, &n_old);
+    int window = clamp(prm.window > 0 ? prm.window : FS_WINDOW, 2, FS_MAX_WINDOW);
+    double dlen = length(ray.d), ell = fs_step(p, ray, FS_ELL_CORR);
+    double dt = prm.step_corr > 0.0 ? fs_step(p, ray, prm.step_corr) : 0.0;
+    double3 dn = ray.d / dlen;
+    if (!(ell > 0.0) || !isfinite(ell) || !isfinite(dt)) { res.status = FS_STATUS_NAN; return res; }
+    if (fixed + window + max(prm.refine, FS_MIN_BISECT) + FS_HIT_ROWS + 2 > FS_MAX_ROWS) {
+        res.status = FS_STATUS_ROWS;
+        return res;
+    }
+    int st = fs_factor(p, mean, mc, S, 0, fixed);
+    if (st) { res.status = st; return res; }
+    for (int i = 0; i < fixed; ++i) fs_whiten_row(S.L, S.e, i, S.rows[i].value, S.mu[i]);
+    int n = fixed;
+    double ta = ray.t0, tb = 0.0, fb = 0.0;
+    double h = dt > 0.0 ? (1.0 - fs_uniform2(rng, 0, FS_U_GRID).x) * dt : 0.5 * ell;
+    double tol = (double)prm.miss_tol, grow = 1.0;
+    /* the prior mean's slope bound along the ray, per unit t (fs_mean_step) */
+    double lip = dt > 0.0 ? 0.0
+        : (double)gp_mean_lipschitz_on(mean, mc, convert_float3(ray.o + ray.t0 * ray.d),
+                                       convert_float3(ray.o + ray.t1 * ray.d)) * dlen;
+    int step = 0;
+    for (;; ++step) {
+        if (ta >= ray.t1) return res;
+        if (step >= FS_MAX_STEPS) { res.status = FS_STATUS_STEPS; return res; }
+        if (n - fixed >= window) {
+            n = fs_slide(p, mean, mc, S, fixed, n, window / 2, &res.status);
+            if (res.status) return res;
+            res.windows++;
+        }
+        if (dt > 0.0) {                        /* uniform baseline: one row per step */
+            tb = fmin(ta + h, ray.t1);
+            S.rows[n] = fs_obs(ray.o + tb * ray.d, dn, FS_OBS_VALUE, tb);
+            st = fs_factor(p, mean, mc, S, n, n + 1);
+            h = dt;
+        } else {
+            /* Simpson's nodes: the middle first, then the end, so that an accepted end's
+             * value row is the one factored last; a rejected step halves and its middle
+             * becomes the new end, whose rate is known (only the value row is factored
+             * again, at acceptance). */
+            h = fmin(fmin(grow * h, FS_H_MAX * ell),
+                     fs_mean_step(p, mean, mc, S, n, ray.o + ta * ray.d, dn, lip));
+            double nu_end = -1.0;
+            for (;;) {
+                int clipped = ta + h >= ray.t1;
+                double hs = clipped ? ray.t1 - ta : h;
+                FsMoments M;
+                st = fs_moments(p, mean, mc, S, n, ray, dn, ta + 0.5 * hs, &M);
+                if (st) break;
+                double mid = fs_return_rate(M, outside);
+                res.evals++;
+                int fresh = nu_end < 0.0;
+                if (fresh) {
+                    st = fs_moments(p, mean, mc, S, n, ray, dn, ta + hs, &M);
+                    if (st) break;
+                    nu_end = fs_return_rate(M, outside);
+                    res.evals++;
+                }
+                /* Simpson with nu(ta) = 0: the mean rate (per length) times l_d (per t),
+                 * relative to the tolerance */
+                double r = (4.0 * mid + nu_end) / 6.0 * dlen * ell / tol;
+                if (r <= 1.0 || h <= FS_H_MIN * ell) {
+                    tb = clipped ? ray.t1 : ta + hs;
+                    if (!fresh) {
+                        S.rows[n] = fs_obs(ray.o + tb * ray.d, dn, FS_OBS_VALUE, tb);
+                        st = fs_factor(p, mean, mc, S, n, n + 1);
+                    }
+                    /* the next step's first try: grow where the bound is slack */
+                    grow = r < 0.05 ? 2.0 : (r < 0.3 ? 1.5 : 1.1);
+                    break;
+                }
+                h = 0.5 * hs;
+                nu_end = mid;
+            }
+        }
+        if (st) { res.status = st; return res; }
+        fb = fs_sample_row(S.L, S.e, n, S.mu[n], fs_normal(rng, step, 0));
+        S.rows[n].value = fb;
+        res.samples++;
+        if (isnan(fb)) { res.status = FS_STATUS_NAN; return res; }
+        ++n;
+        if (outside && fb < 0.0) break;
+        outside = fb >= 0.0;
+        ta = tb;
+        fa = fb;
+    }
+
+    /* a crossing in (ta, tb]: bisection conditioned on everything, `refine` steps and
+     * then on while the bracket is wider than FS_ROOT_WIDTH l_d */
+    for (int k = 0; (k < prm.refine || tb - ta > FS_ROOT_WIDTH * ell)
+                    && n + FS_HIT_ROWS + 2 <= FS_MAX_ROWS; ++k, ++n) {
+        double tm = 0.5 * (ta + tb);
+        double f = fs_append(p, mean, mc, S, n, fs_obs(ray.o + tm * ray.d, dn, FS_OBS_VALUE, 0.0),
+                             0, fs_normal(rng, step, FS_SLOT_REFINE + k), &res.status);
+        if (res.status) return res;
+        res.samples++;
+        if (f >= 0.0) { ta = tm; fa = f; } else { tb = tm; fb = f; }
+    }
+    res.hit = 1;
+    res.t = ta + (tb - ta) * fa / (fa - fb);
+    double3 x = ray.o + res.t * ray.d, T, B;
+    /* the slope's law given the rows and f(x_h) = 0, at a down-crossing */
+    fs_append(p, mean, mc, S, n, fs_obs(x, dn, FS_OBS_VALUE, 0.0), 1, 0.0, &res.status);
+    if (res.status) return res;
+    S.rows[n + 1] = fs_obs(x, dn, FS_OBS_DERIV, 0.0);
+    st = fs_factor(p, mean, mc, S, n + 1, n + 2);
+    if (st) { res.status = st; return res; }
+    double sd = fs_downcrossing_slope(S.mu[n + 1] + fs_row_dot(S.L, n + 1, S.e, n + 1),
+                                      fs_diag(S.L, n + 1), fs_uniform2(rng, step, FS_U_SLOPE));
+    fs_whiten_row(S.L, S.e, n + 1, sd, S.mu[n + 1]);
+    S.rows[n + 1].value = sd;
+    fs_frame(dn, &T, &B);
+    double z1 = fs_normal(rng, step, FS_SLOT_NORMAL), z2 = fs_normal(rng, step, FS_SLOT_NORMAL + 1);
+    double q1, q2;
+    if (fs_isotropic_radial(p) && !S.post.n && prm.memory != GPIS_MEMORY_GLOBAL) {
+        /* every row on the ray: d_T f(x_h) is independent of them (fs_sampling.h) */
+        q1 = fs_prior_mean(mean, mc, x, T, FS_OBS_DERIV) + sqrt(gp_cov(p, x, T, 1, x, T, 1)) * z1;
+        q2 = fs_prior_mean(mean, mc, x, B, FS_OBS_DERIV) + sqrt(gp_cov(p, x, B, 1, x, B, 1)) * z2;
+    } else {
+        q1 = fs_append(p, mean, mc, S, n + 2, fs_obs(x, T, FS_OBS_DERIV, 0.0), 0, z1, &res.status);
+        q2 = fs_append(p, mean, mc, S, n + 3, fs_obs(x, B, FS_OBS_DERIV, 0.0), 0, z2, &res.status);
+        if (res.status) return res;
+    }
+    /* s < 0 always; |s| below 1e-5 of the tangential part (probability ~1e-10: the law's
+     * density vanishes like |s| at 0) is raised to it so that the normal still faces the
+     * ray after rounding to float (the scatter stage kills a normal that does not) */
+    res.grad = T * q1 + B * q2 + dn * fmin(sd, -1e-5 * sqrt(q1 * q1 + q2 * q2));
+    /* global: the ring takes this ray's rows, f(x_h) = 0 included: x_h is a draw of the
+     * root's location, so f(x_h) = 0 is an observation of the realization (the old
+     * interpolated root contradicted the bracket values by O(width^2 f'')), and the next
+     * ray's step rule needs f known at its start (Simpson's nu(t) = 0) */
+    res.new_first = n_old;
+    res.new_end = n + 4;
+    return res;
+}

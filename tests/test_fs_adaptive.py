@@ -1,0 +1,247 @@
+"""The adaptive march of fs_march.h: crossing counts against Rice's formula (exact
+expectation for the truncated start, any level), the bias left by a coarse tolerance
+against its bound, first passage against a dense joint sample, the slope law at a
+down-crossing (drawn directly, and along continued rays at refine 2..20).
+
+Tests marked `long` run a short form by default (sizes from their sample counts; they
+still fail on the old uniform step's bias at low levels) and the full form with --long."""
+import math
+
+import numpy as np
+import pyopencl as cl
+import pytest
+from scipy import special
+
+from gpiscl.host.gp import Constant, RationalQuadratic, SquaredExponential
+from gpiscl.host.gp import function_space as FS
+from gpiscl.host.layout import function_space_records as FL
+from gpiscl.host.layout import gp_records
+from gpiscl.host.layout.records import GPIS_MEMORIES
+from stats import z_threshold
+from test_fs_sampling import CAP_MAX, WINDOW_MAX, _buf, flights, ks_two_sample, prg  # noqa: F401
+
+SE = SquaredExponential(sigma=1.0, length_scale=1.0)
+RQ = RationalQuadratic(sigma=1.0, length_scale=1.0, alpha=1.0)
+# covariance along a unit ray and its derivative (sigma = l = 1, so lambda2 = 1 for both)
+COV_1D = {"se": (lambda t: np.exp(-0.5 * t * t), lambda t: -t * np.exp(-0.5 * t * t)),
+          "rq": (lambda t: 1.0 / (1.0 + 0.5 * t * t), lambda t: -t / (1.0 + 0.5 * t * t) ** 2)}
+KERNELS = {"se": SE, "rq": RQ}
+
+
+def expected_crossings(kind, mu, L, nt=6000, nz=600):
+    """E[down-crossings of 0 in (0, L]] of f ~ GP(mu, k) on a unit-speed ray given the
+    start condition f(0) >= 0: the integral over t of Rice's rate conditioned on it,
+      nu(t) = p_f(t)(0) E[(-f'(t))+ 1{f(0) >= 0} | f(t) = 0] / P(f(0) >= 0),
+    where given f(t) = 0, f(0) ~ N(mu (1 - k), 1 - k^2) and f'(t) | f(0) is Gaussian with
+    cov(f(0), f'(t)) = k'(t) (cov(f(t), f'(t)) = 0). Tends to Rice's rate as k -> 0."""
+    k, dk = COV_1D[kind]
+    t = (np.arange(nt) + 0.5) * (L / nt)
+    kt, dkt = k(t)[:, None], dk(t)[:, None]
+    ma, va = mu * (1.0 - kt), 1.0 - kt * kt
+    sa = np.sqrt(va)
+    zlo = -ma / sa
+    w = np.linspace(0.0, 1.0, nz)[None, :]
+    z = zlo + (np.maximum(10.0, zlo + 10.0) - zlo) * w     # a = ma + sa z >= 0
+    dz = (np.maximum(10.0, zlo + 10.0) - zlo) / (nz - 1)
+    mc, vc = dkt / sa * z, 1.0 - dkt * dkt / va            # f'(t) | f(0), f(t) = 0
+    sc = np.sqrt(np.maximum(vc, 1e-300))
+    neg = sc * np.exp(-0.5 * (mc / sc) ** 2) / math.sqrt(2 * math.pi) \
+        - mc * 0.5 * special.erfc(mc / sc / math.sqrt(2))   # E[(-c)+], c ~ N(mc, sc^2)
+    g = np.exp(-0.5 * z * z) / math.sqrt(2 * math.pi) * neg
+    inner = np.trapezoid(g, dx=dz, axis=1)
+    p0 = 0.5 * special.erfc(-mu / math.sqrt(2))             # P(f(0) >= 0)
+    nu = math.exp(-0.5 * mu * mu) / math.sqrt(2 * math.pi) * inner / p0
+    return float(nu.sum() * (L / nt))
+
+
+def run_crossings(device, prg, kernel, mu, n, L, memory="global", refine=6, c=0.0,
+                  tol=FL.DEFAULT_MISS_TOLERANCE, seed=1, cap=64):
+    """Per ray (out of n): hits, sum and sum of squares of slopes after the first hit,
+    GP samples, moment evaluations (crossings wrapper of test_fs_sampling)."""
+    q = device.queue
+    mean_nodes = gp_records.pack_mean(Constant(mu))
+    kp, mb = _buf(device, gp_records.pack_kernel(kernel)), _buf(device, mean_nodes)
+    rb = _buf(device, np.array([0, 0, 0, 1, 0, 0, 0, L], np.float64))
+    stride = FL.scratch_doubles(FL.max_rows(WINDOW_MAX, CAP_MAX))
+    chunk = max(1, min(n, 4096))
+    scratch = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, 8 * stride * chunk)
+    rings = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, FL.FS_OBS.dtype.itemsize * cap * chunk)
+    out = np.zeros((n, 6))
+    for first in range(0, n, chunk):
+        m = min(chunk, n - first)
+        ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 48 * m)
+        prg["crossings"](q, (m,), None, kp, mb, np.int32(len(mean_nodes)),
+                         np.int32(GPIS_MEMORIES[memory]), np.int32(cap), np.int32(refine),
+                         np.float64(c), np.float64(tol), rb, np.uint32(seed), np.int32(first),
+                         scratch, rings, ob)
+        cl.enqueue_copy(q, out[first:first + m], ob)
+    assert np.all(out[:, 5] == 0), f"solver status {np.unique(out[:, 5])}"
+    return out
+
+
+def test01_the_oracle_is_rice_plus_the_start():
+    """The expectation used below: level 0 gives Rice's L / 2 pi plus 1/4 (f -> -f
+    symmetry), and its rate far from the start is Rice's at every level."""
+    for kind in ("se", "rq"):
+        assert abs(expected_crossings(kind, 0.0, 60.0) - (60 / (2 * math.pi) + 0.25)) < 2e-3
+        for mu in (1.0, 2.5):
+            far = expected_crossings(kind, mu, 80.0) - expected_crossings(kind, mu, 40.0)
+            rice = FS.downcrossing_rate(KERNELS[kind], mu, (1, 0, 0)) * 40.0
+            assert abs(far / rice - 1) < (1e-4 if kind == "se" else 3e-3), (kind, mu, far, rice)
+
+
+LEVELS = (0.0, 1.0, 2.0, 2.5)
+
+
+@pytest.mark.long
+@pytest.mark.parametrize("memory", ["global", "renewal_plus"])
+@pytest.mark.parametrize("kind", ["se", "rq"])
+def test02_crossing_rate_matches_rice_at_every_level(device, prg, long_run, kind, memory):
+    """Rays continued through every hit count down-crossings over L; their mean agrees
+    with the exact expectation at mu / sigma = 0, 1, 2, 2.5 (z-test, Bonferroni over the
+    whole parametrisation). Long form: also within 0.5% where its standard error allows
+    deciding that (< 0.15%)."""
+    n, L = (20000, 100.0) if long_run else (400, 40.0)
+    z = z_threshold(4 * len(LEVELS))
+    for mu in LEVELS:
+        out = run_crossings(device, prg, KERNELS[kind], mu, n, L, memory=memory, seed=7)
+        cnt = out[:, 0]
+        expect = expected_crossings(kind, mu, L)
+        se = cnt.std(ddof=1) / math.sqrt(n)
+        rel = cnt.mean() / expect - 1
+        print(f"{kind} {memory} mu {mu}: {cnt.mean():.4f} +- {se:.4f} vs {expect:.4f} "
+              f"({rel:+.3%} +- {se / expect:.3%}), samples per length "
+              f"{out[:, 3].sum() / (n * L):.2f}, evaluations {out[:, 4].sum() / (n * L):.2f}")
+        assert abs(cnt.mean() - expect) < z * se, (mu, rel)
+        if long_run and se / expect < 1.5e-3:
+            assert abs(rel) < 5e-3, (mu, rel)
+
+
+@pytest.mark.parametrize("tol", [3e-2, 3e-3])
+def test03_coarse_tolerances_lose_at_most_their_bound(device, prg, tol):
+    """A coarse tolerance misses crossings, at most tol per length scale (the bound, the
+    expected up-crossings inside accepted steps, is an upper bound on the misses); the
+    deficit against the exact expectation must be below it (one-sided z-test). The
+    uniform grid at correlation 0.5 (about the same samples per length as tol 3e-2) must
+    show a deficit above 3e-3 at this sample size, so the comparison can fail."""
+    n, L, mu = 3000, 40.0, 0.0
+    expect = expected_crossings("se", mu, L)
+    out = run_crossings(device, prg, SE, mu, n, L, tol=tol, seed=3)
+    cnt = out[:, 0]
+    se = cnt.std(ddof=1) / math.sqrt(n)
+    deficit = (expect - cnt.mean()) / L
+    print(f"tol {tol}: missed per length {deficit:.5f} +- {se / L:.5f}, "
+          f"samples per length {out[:, 3].sum() / (n * L):.2f}")
+    assert deficit < tol + z_threshold(2) * se / L
+    coarse = run_crossings(device, prg, SE, mu, 1000, L, c=0.5, seed=3)[:, 0]
+    se_c = coarse.std(ddof=1) / math.sqrt(len(coarse))
+    print(f"uniform c = 0.5: missed per length {(expect - coarse.mean()) / L:.5f} +- {se_c / L:.5f}")
+    assert (expect - coarse.mean()) / L > 3e-3 + z_threshold(2) * se_c / L
+
+
+@pytest.mark.long
+@pytest.mark.parametrize("mu", [0.0, 1.0, 2.0])
+def test04_first_passage_matches_a_dense_joint_sample(device, prg, long_run, mu):
+    """First hit along a fresh ray (constant mean mu, SE l = 0.5, length 6) against one
+    dense joint sample (numpy Cholesky, 601 points, spacing l / 50): two-sample KS,
+    Bonferroni over the levels."""
+    n = 60000 if long_run else 15000
+    kern = SquaredExponential(sigma=1.0, length_scale=0.5)
+    dense = FS.dense_first_hits(kern, Constant(mu), (0, 0, 0), (1, 0, 0), 0.0, 6.0, 601, n,
+                                np.random.default_rng(int(10 * mu) + 1))
+    dense = np.where(np.isfinite(dense), dense, -1.0)
+    out = flights(device, prg, kern, Constant(mu), n, memory="global", seed=int(10 * mu) + 2)
+    D, crit = ks_two_sample(out[:, 0], dense, 3)
+    print(f"mu {mu}: hit fraction {np.mean(out[:, 0] >= 0):.4f} vs {np.mean(dense >= 0):.4f}, "
+          f"KS {D:.4f} (critical {crit:.4f})")
+    assert D < crit
+
+
+def downcrossing_slope_cdf(y, a):
+    """P(Y <= y) for Y = -s / sd with density y phi(y + a) on y > 0."""
+    tail = lambda x: np.exp(-0.5 * x * x) / math.sqrt(2 * math.pi) - a * 0.5 * special.erfc(x / math.sqrt(2))
+    return 1.0 - tail(y + a) / tail(a)
+
+
+@pytest.mark.parametrize("a", [-40.0, -3.0, 0.0, 2.0, 12.0, 29.0])
+def test05_downcrossing_slope_draws_follow_their_law(device, prg, a):
+    """fs_downcrossing_slope against the exact CDF of |s| N(s; a sd, sd^2) on s < 0:
+    always negative, one-sample KS (Bonferroni over the cases)."""
+    n, sd = 50000, 0.7
+    buf = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 8 * n)
+    prg["slope_draw"](device.queue, (n,), None, np.float64(a * sd), np.float64(sd),
+                      np.uint32(9), buf)
+    s = np.empty(n)
+    cl.enqueue_copy(device.queue, s, buf)
+    assert np.all(s < 0)
+    y = np.sort(-s / sd)
+    F = downcrossing_slope_cdf(y, a)
+    D = np.max(np.maximum(np.arange(1, n + 1) / n - F, F - np.arange(n) / n))
+    crit = math.sqrt(-math.log(1e-3 / 6 / 2) / 2) / math.sqrt(n)
+    assert D < crit, (a, D, crit)
+
+
+@pytest.mark.parametrize("refine", [2, 6, 12, 20])
+def test06_slope_law_at_crossings_does_not_depend_on_refine(device, prg, refine):
+    """Along continued rays (mean 0, SE, global memory) the slopes at down-crossings after
+    the first follow Rice's (Palm) law |s| phi(s / sqrt(lambda2)): -s is Rayleigh with
+    E[-s] = sqrt(pi / 2) and E[s^2] = 2 for lambda2 = 1, whatever the bracket width (the
+    secant of the old sampler tilted it at refine >= 12 through the jitter)."""
+    n, L = 1500, 60.0
+    out = run_crossings(device, prg, SE, 0.0, n, L, refine=refine, seed=11)
+    M = (out[:, 0] - 1).clip(0)
+    z = z_threshold(8)
+    for j, sign, expect in ((1, -1.0, math.sqrt(math.pi / 2)), (2, 1.0, 2.0)):
+        S = sign * out[:, j]
+        est = S.sum() / M.sum()
+        # ratio estimator over rays (crossings of one ray are correlated): delta method
+        se = (S - est * M).std(ddof=1) / (math.sqrt(n) * M.mean())
+        print(f"refine {refine}: {int(M.sum())} crossings, moment {j}: {est:.4f} +- "
+              f"{se:.4f} (expect {expect:.4f})")
+        assert abs(est - expect) < z * se, (refine, j, est, expect, se)
+
+
+@pytest.fixture(scope="module")
+def dense_se():
+    """Cholesky factor of SE (l = 1) at spacing 0.01 over [0, 20] along a unit ray."""
+    from gpiscl.host.gp.kernels import covariance_matrix
+    ts = np.arange(2001) * 0.01
+    K = FS.jittered(covariance_matrix(SE, ts[:, None] * np.array([1.0, 0.0, 0.0])))
+    return ts, np.linalg.cholesky(K)
+
+
+@pytest.mark.parametrize("tol, mu", [(1e-1, 0.0), (3e-2, 0.0), (1e-2, 0.0), (3e-2, 2.0)])
+def test07_missed_crossings_of_the_same_realizations_stay_below_the_tolerance(dense_se, tol,
+                                                                             mu):
+    """The rule (numpy twin of fs_march.h) marched along dense joint samples (spacing
+    l / 100) that it reads where it samples: the down-crossings of the dense path that it
+    skips, per length scale, stay below the tolerance (one-sided Poisson bound, Bonferroni
+    over the cases); the misses are counted, not inferred from a rate."""
+    ts, C = dense_se
+    rng = np.random.default_rng(int(1000 * tol) + int(mu))
+    Z = C @ rng.standard_normal((len(ts), 500)) + mu
+    Z = Z[:, Z[0] >= 0.0][:, :300]
+    missed = steps = 0
+    for F in Z.T:
+        idx, m = FS.march_realization(SE, Constant(mu), (0, 0, 0), (1, 0, 0), ts, F, tol)
+        missed, steps = missed + m, steps + len(idx) - 1
+    length = Z.shape[1] * ts[-1]
+    allowed = tol * length
+    print(f"tol {tol} mu {mu}: {missed} missed over {length:.0f} l ({missed / length:.2e} "
+          f"per l, bound {tol:g}), {steps / length:.2f} steps per l")
+    assert missed < allowed + z_threshold(4) * math.sqrt(allowed)
+
+
+def test08_thin_features_of_the_mean_are_not_stepped_over(device, prg):
+    """A slab 0.1 thick (mean -5 sigma at its middle) under a smooth, small-sigma kernel
+    (l = 1.4, sigma = 0.01, the knob's): the rate's quadrature sees the process only at
+    its nodes, so steps of 2 l went over the slab; the mean's Lipschitz cap
+    (fs_mean_step) makes every ray hit it, at its entry face (within a few sigma)."""
+    from gpiscl.host.gp import Box
+    kern = SquaredExponential(sigma=0.01, length_scale=1.4)
+    slab = Box(half_extents=(0.05, 10.0, 10.0), center=(3.0, 0.0, 0.0))
+    out = flights(device, prg, kern, slab, 2000, memory="renewal_plus", t1=6.0, seed=4)
+    t = out[:, 0]
+    print(f"hit fraction {np.mean(t >= 0):.4f}, hit t in [{t.min():.4f}, {t.max():.4f}]")
+    assert np.all(t >= 0)
+    assert np.all(np.abs(t - 2.95) < 0.05)

@@ -1,0 +1,147 @@
+"""Function-space marching: the adaptive step (fs_march.h) against the old uniform step,
+equal-time MSE against a converged reference, same run.
+
+    python tools/bench_adaptive_marching.py [--resolution 24] [--seconds 4]
+        [--reference-seconds 40] [--spp 4] [--repeats 3] [scenes...]
+
+Per scene (function-space objects only; others are skipped):
+  * reference: the adaptive rule at a tight tolerance (1e-7) rendered for
+    --reference-seconds with its own seed; its per-pixel variance is subtracted from
+    every MSE below, so the MSEs estimate the error against the true image;
+  * equal samples: each variant at --spp, median of --repeats renders (variants
+    alternate, so load from other users of the machine hits all alike): paths/s, GP
+    values drawn per flight (one object along one ray; bisection included) and
+    step-rule moment evaluations per flight (2 rows each);
+  * equal time: each variant at the spp its paths/s buys in --seconds, with another
+    seed: `adaptive` (the scene's miss_tolerance, default 1e-5), `uniform 0.9` and
+    `uniform 0.99` (the old fixed step, neighbours at correlation c, set on the compiled
+    objects: scenes cannot select it). MSE over pixels and channels, its ratio to
+    adaptive's, and the whole image's mean relative to the reference's with its z-score
+    (the bias that equal time cannot average away).
+
+Window of the online sampler (fs_march.h): the next value's conditional variance given
+the last w samples on a uniform grid of spacing h, relative to 40 samples (numpy):
+    SE  h = 0.3: w=4 +120x  w=8 +3.2x  w=16 +8%     (variance 9e-6 of sigma^2)
+        h = 0.5: w=4 +3.1x  w=8 +63%   w=16 +7%     (variance 0.007)
+        h = 0.8: w=4 +9%    w=8 +0.7%  w=16 +4e-5   (variance 0.25)
+        h = 1.2: w=4 +1e-3  w=8 +3e-6               (variance 0.71)
+    RQ alpha 1  h = 0.3: w=4 +35%  w=8 +2%  w=16 +1e-4;  h = 0.5: w=8 +4e-4
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from gpiscl.host.layout import records as layouts  # noqa: E402
+from gpiscl.host.render.device import Device  # noqa: E402
+from gpiscl.host.render.integrator import WavefrontIntegrator  # noqa: E402
+from gpiscl.host.scene.loading import load_scene  # noqa: E402
+from gpiscl.host.compile.scene import compile_scene  # noqa: E402
+
+SCENES = ("scenes/fs_sphere_se.json", "scenes/knob.json", "scenes/wedge_volume.json",
+          "scenes/fs_volume_room_global.json")
+VARIANTS = {"adaptive": None, "uniform 0.9": 0.9, "uniform 0.99": 0.99}
+REFERENCE_TOLERANCE = 1e-7
+
+
+def compiled(path: str, resolution: int, step_corr=None, tolerance=None, seed=0):
+    """The scene at `resolution`^2 with the render seed, compiled; step_corr > 0 puts
+    every function-space object on the uniform step, tolerance overrides the adaptive
+    rule's miss tolerance."""
+    data = copy.deepcopy(load_scene(str(ROOT / path)).data)
+    data["camera"]["resolution"] = [resolution, resolution]
+    data["render"]["seed"] = seed
+    scene = compile_scene(load_scene(data).data)
+    objs = scene.gpis.objects
+    fs = objs["sampler"] == layouts.GPIS_SAMPLERS["function_space"]
+    if step_corr:
+        objs["step_corr"][fs] = step_corr
+    if tolerance:
+        objs["miss_tolerance"][fs] = tolerance
+    return scene, data["render"], int(fs.sum())
+
+
+def render(dev, scene, settings, spp=None, seconds=None):
+    integ = WavefrontIntegrator(dev, scene, settings, None)
+    t = time.perf_counter()
+    res = integ.render(spp if spp else 1 << 20, time_limit=seconds)
+    return res, time.perf_counter() - t
+
+
+def failures(st) -> str:
+    bad = st.nan_paths + st.gpis_failed + st.killed_paths
+    return f" FAILED PATHS: {st.summary()}" if bad else ""
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("scenes", nargs="*", default=SCENES)
+    ap.add_argument("--resolution", type=int, default=24)
+    ap.add_argument("--seconds", type=float, default=4.0, help="equal-time budget")
+    ap.add_argument("--reference-seconds", type=float, default=40.0)
+    ap.add_argument("--spp", type=int, default=4, help="equal-samples renders")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--device", default=None)
+    args = ap.parse_args()
+    dev = Device(args.device)
+    print(f"device: {dev.name}; {args.resolution}^2 px; equal time {args.seconds:g} s, "
+          f"reference {args.reference_seconds:g} s at tolerance {REFERENCE_TOLERANCE:g}; "
+          f"equal samples {args.spp} spp, median of {args.repeats}")
+    for path in args.scenes:
+        name = Path(path).stem
+        ref_scene, ref_settings, n_fs = compiled(path, args.resolution,
+                                                 tolerance=REFERENCE_TOLERANCE, seed=1)
+        if not n_fs:
+            print(f"{name}: no function-space object, skipped")
+            continue
+        pixels = args.resolution ** 2
+        variants = {k: compiled(path, args.resolution, step_corr=c, seed=2)[:2]
+                    for k, c in VARIANTS.items()}
+        for scene, settings in variants.values():   # warm-up: program builds
+            render(dev, scene, settings, spp=1)
+        # equal samples: the variants alternate; median paths/s
+        rates, stats = {k: [] for k in variants}, {}
+        for _ in range(args.repeats):
+            for k, (scene, settings) in variants.items():
+                res, sec = render(dev, scene, settings, spp=args.spp)
+                rates[k].append(res.stats.paths / sec)
+                stats[k] = res.stats
+        rate = {k: statistics.median(r) for k, r in rates.items()}
+        # reference and equal time: spp from the measured rates
+        ref_spp = max(args.spp, round(rate["adaptive"] * args.reference_seconds / pixels))
+        ref, ref_sec = render(dev, ref_scene, ref_settings, spp=ref_spp)
+        ref_img, ref_var = ref.image.mean, ref.image.stderr ** 2
+        print(f"\n{name}: reference {ref_spp} spp in {ref_sec:.1f} s{failures(ref.stats)}")
+        print(f"  {'variant':14s}{'spp':>6s}{'s':>7s}{'MSE':>11s}{'MSE/adaptive':>14s}"
+              f"{'paths/s':>10s}{'samples/flight':>16s}{'evals/flight':>14s}"
+              f"{'mean/ref - 1':>14s}{'z':>7s}")
+        rows = {}
+        for k, (scene, settings) in variants.items():
+            spp = max(1, round(rate[k] * args.seconds / pixels))
+            res, sec = render(dev, scene, settings, spp=spp)
+            img, var = res.image.mean, res.image.stderr ** 2
+            mse = float(((img - ref_img) ** 2 - ref_var).mean())
+            # whole-image mean against the reference's: the bias equal time keeps
+            diff = float(img.mean() - ref_img.mean())
+            se = float(np.sqrt((var.sum() + ref_var.sum())) / img.size)
+            rows[k] = (spp, sec, mse, diff / float(ref_img.mean()), diff / se,
+                       failures(res.stats))
+        for k, (spp, sec, mse, bias, z, bad) in rows.items():
+            st = stats[k]
+            flights = max(st.fs_flights, 1)
+            print(f"  {k:14s}{spp:6d}{sec:7.1f}{mse:11.3g}{mse / rows['adaptive'][2]:14.3g}"
+                  f"{rate[k]:10.4g}{st.fs_samples / flights:16.2f}{st.fs_evals / flights:14.2f}"
+                  f"{bias:+14.3%}{z:7.1f}{bad}{failures(st)}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
