@@ -15,10 +15,10 @@ from scipy import special
 from gpiscl.host.gp import Constant, RationalQuadratic, SquaredExponential
 from gpiscl.host.gp import function_space as FS
 from gpiscl.host.layout import function_space_records as FL
-from gpiscl.host.layout import gp_records
 from gpiscl.host.layout.records import GPIS_MEMORIES
 from stats import z_threshold
-from test_fs_sampling import CAP_MAX, WINDOW_MAX, _buf, flights, ks_two_sample, prg  # noqa: F401
+from test_fs_sampling import (CAP_MAX, WINDOW_MAX, _buf, flights, ks_two_sample, prg,  # noqa: F401
+                               sampler_buffers)
 
 SE = SquaredExponential(sigma=1.0, length_scale=1.0)
 RQ = RationalQuadratic(sigma=1.0, length_scale=1.0, alpha=1.0)
@@ -59,18 +59,14 @@ def run_crossings(device, prg, kernel, mu, n, L, memory="global", refine=6, c=0.
     """Per ray (out of n): hits, sum and sum of squares of slopes after the first hit,
     GP samples, moment evaluations (crossings wrapper of test_fs_sampling)."""
     q = device.queue
-    mean_nodes = gp_records.pack_mean(Constant(mu))
-    kp, mb = _buf(device, gp_records.pack_kernel(kernel)), _buf(device, mean_nodes)
     rb = _buf(device, np.array([0, 0, 0, 1, 0, 0, 0, L], np.float64))
-    stride = FL.scratch_doubles(FL.max_rows(WINDOW_MAX, CAP_MAX))
     chunk = max(1, min(n, 4096))
-    scratch = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, 8 * stride * chunk)
-    rings = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, FL.FS_OBS.dtype.itemsize * cap * chunk)
+    kp, mb, n_mean, scratch, rings = sampler_buffers(device, kernel, Constant(mu), cap, chunk)
     out = np.zeros((n, 6))
     for first in range(0, n, chunk):
         m = min(chunk, n - first)
         ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 48 * m)
-        prg["crossings"](q, (m,), None, kp, mb, np.int32(len(mean_nodes)),
+        prg["crossings"](q, (m,), None, kp, mb, np.int32(n_mean),
                          np.int32(GPIS_MEMORIES[memory]), np.int32(cap), np.int32(refine),
                          np.float64(c), np.float64(tol), rb, np.uint32(seed), np.int32(first),
                          scratch, rings, ob)

@@ -136,6 +136,18 @@ def _buf(device, a, rw=False):
                      hostbuf=np.ascontiguousarray(a))
 
 
+def sampler_buffers(device, kernel, mean, cap, chunk):
+    """The kernel, mean program, per-work-item scratch and global-memory rings of a
+    function-space wrapper launched `chunk` rays at a time: (kp, mb, mean count, scratch,
+    rings)."""
+    mean_nodes = gp_records.pack_mean(mean)
+    kp, mb = _buf(device, gp_records.pack_kernel(kernel)), _buf(device, mean_nodes)
+    stride = FL.scratch_doubles(FL.max_rows(WINDOW_MAX, CAP_MAX))
+    scratch = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, 8 * stride * chunk)
+    rings = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, FL.FS_OBS.dtype.itemsize * cap * chunk)
+    return kp, mb, len(mean_nodes), scratch, rings
+
+
 def flights(device, prg, kernel, mean, n, memory="global", window=0, cap=64, refine=6,
             c=0.0, tol=FL.DEFAULT_MISS_TOLERANCE, o=(0, 0, 0), d=(1, 0, 0), t0=0.0, t1=6.0,
             seed=1, restarts=0):
@@ -143,18 +155,15 @@ def flights(device, prg, kernel, mean, n, memory="global", window=0, cap=64, ref
     first flight, on all flights. c > 0: the uniform baseline step (correlation c),
     else the adaptive rule with tolerance tol; window 0: the default."""
     q = device.queue
-    mean_nodes = gp_records.pack_mean(mean)
-    kp, mb = _buf(device, gp_records.pack_kernel(kernel)), _buf(device, mean_nodes)
     rb = _buf(device, np.array([*o, *d, t0, t1], np.float64))
     stride = FL.scratch_doubles(FL.max_rows(WINDOW_MAX, CAP_MAX))
     chunk = max(1, min(n, (256 << 20) // (8 * stride)))
-    scratch = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, 8 * stride * chunk)
-    rings = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, FL.FS_OBS.dtype.itemsize * cap * chunk)
+    kp, mb, n_mean, scratch, rings = sampler_buffers(device, kernel, mean, cap, chunk)
     out = np.zeros((n, 8))
     for first in range(0, n, chunk):
         m = min(chunk, n - first)
         ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 64 * m)
-        prg["flight"](q, (m,), None, kp, mb, np.int32(len(mean_nodes)), np.int32(window),
+        prg["flight"](q, (m,), None, kp, mb, np.int32(n_mean), np.int32(window),
                       np.int32(GPIS_MEMORIES[memory]), np.int32(cap), np.int32(refine),
                       np.float64(c), np.float64(tol), rb, np.uint32(seed), np.int32(first), np.int32(restarts),
                       scratch, rings, ob)
