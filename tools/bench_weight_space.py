@@ -67,7 +67,7 @@ __kernel void bench_eval_cached(__global const GpKernel* kp, __global const Mean
                                 int mc, __global const float* cdf, int nc, int M, uint2 key,
                                 __global const float* x, __global float4* out)
 {
-    float cache[5 * WS_CACHE_FEATURES];
+    float cache[WS_CACHE_FLOATS];
     ws_fill_cache(kp[0], cdf, nc, key, 0, M, cache);
     for (int i = get_global_id(0) * PER; i < (get_global_id(0) + 1) * PER; ++i) {
         float3 g;
