@@ -61,6 +61,29 @@ __kernel void ws_philox_check(__global const uint2* keys, int object, uint call,
     random123[i] = (uint4)(r.v[0], r.v[1], r.v[2], r.v[3]);
 }
 
+__kernel void ws_sincos_k(__global const float* x, __global float2* out)
+{
+    int i = get_global_id(0);
+    wsf c, s = ws_sincos((wsf)x[i], &c);
+    out[i] = (float2)(ws_lane0(s), ws_lane0(c));
+}
+
+/* ws_affine over [tm - h, tm + h] from regenerated features and from a filled cache */
+__kernel void ws_affine_both(__global const GpKernel* kp, __global const float* cdf, int nc,
+                             int M, __global const uint2* keys, __global const float* o,
+                             __global const float* d, __global const float2* tmh,
+                             __global float4* regen, __global float4* cached)
+{
+    int r = get_global_id(0);
+    float cache[WS_CACHE_FLOATS];
+    ws_fill_cache(kp[0], cdf, nc, keys[r], 0, M, cache);
+    float3 O = vload3(r, o), D = vload3(r, d);
+    WsAffine a = ws_affine(0, kp[0], cdf, nc, M, keys[r], 0, O, D, tmh[r].x, tmh[r].y);
+    WsAffine b = ws_affine(cache, kp[0], cdf, nc, M, keys[r], 0, O, D, tmh[r].x, tmh[r].y);
+    regen[r] = (float4)(a.f0, a.f1, a.err, a.round);
+    cached[r] = (float4)(b.f0, b.f1, b.err, b.round);
+}
+
 __kernel void ws_lambda2_k(__global const GpKernel* kp, __global const float* d,
                            __global float* out)
 {
@@ -247,3 +270,59 @@ def test_order_tables():
     assert list(count[:2]) == [1, 1] and first[-1] == first[-2] + count[-2]
     np.testing.assert_array_equal(table[first[2]:first[2] + count[2]],
                                   ws.periodic_order_cdf(KERNELS[2].length_scale))
+
+
+def header_constant(name):
+    """A float #define of ws_features.h (the tests check the values the device uses)."""
+    import re
+    from gpiscl.host.render.program_sources import KERNEL_DIR
+    text = (KERNEL_DIR / "lib" / "ws_features.h").read_text()
+    return float(re.search(rf"#define {name} ([0-9.e+-]+)f", text).group(1))
+
+
+def sincos_polynomials(r):
+    """ws_sincos_quadrant's polynomials with its float32 coefficients, evaluated in
+    float64: their approximation error alone."""
+    f, z = np.float32, r * r
+    s = r + r * z * ((f(-1.9515295891e-4) * z + f(8.3321608736e-3)) * z - f(1.6666654611e-1))
+    c = (1 - 0.5 * z + z * z * ((f(2.443315711809948e-5) * z - f(1.388731625493765e-3)) * z
+                                + f(4.166664568298827e-2)))
+    return s.astype(np.float64), c.astype(np.float64)
+
+
+def test_sincos_error_is_within_its_bound(device, prg):
+    """WS_SINCOS_ERR (folded into ws_affine's err) bounds the polynomials' own error on the
+    reduced range; the device's sin/cos, reduction and float32 evaluation included, are
+    within it plus a few ulp (ws_affine's round) for phases up to 2^15."""
+    bound = header_constant("WS_SINCOS_ERR")
+    r = np.linspace(-np.pi / 4, np.pi / 4, 2_000_001)
+    s, c = sincos_polynomials(r)
+    assert np.max(np.abs(s - np.sin(r))) <= bound
+    assert np.max(np.abs(c - np.cos(r))) <= bound
+    rng = np.random.default_rng(8)
+    x = np.concatenate([rng.uniform(-7, 7, 1 << 16), rng.uniform(-2.0**15, 2.0**15, 1 << 16),
+                        np.arange(-64, 65) * np.pi / 4]).astype(np.float32)
+    (out,) = run(device, prg["ws_sincos_k"], len(x), buf(device, x),
+                 out_shapes=[((len(x), 2), np.float32)])
+    xd = x.astype(np.float64)
+    # the reduction's last part rounds at eps |x| 2^-24 (exact parts above it)
+    allow = bound + 3 * EPS + EPS * np.abs(xd) * 2.0**-20
+    assert np.all(np.abs(out[:, 0] - np.sin(xd)) <= allow)
+    assert np.all(np.abs(out[:, 1] - np.cos(xd)) <= allow)
+
+
+@pytest.mark.parametrize("kernel", KERNELS, ids=lambda k: k.kind)
+def test_cached_affine_equals_regenerated(device, prg, kernel):
+    """A search's cached bound (features and rounding moments computed once per ray)
+    equals the bound from regenerated features bit for bit: same features, same sums."""
+    n, m = 64, 45
+    rng = np.random.default_rng(9)
+    o = rng.uniform(-2, 2, (n, 3)).astype(np.float32)
+    d = rng.normal(size=(n, 3)).astype(np.float32)
+    tmh = np.stack([rng.uniform(0, 2, n), 10.0 ** rng.uniform(-4, 0.5, n)], -1)
+    a, b = run(device, prg["ws_affine_both"], n, *gp_args(device, kernel)[:1],
+               *gp_args(device, kernel)[3:], np.int32(m), buf(device, keys_for(n)),
+               buf(device, o), buf(device, d), buf(device, tmh.astype(np.float32)),
+               out_shapes=[((n, 4), np.float32)] * 2)
+    np.testing.assert_array_equal(a, b)
+    assert np.all(np.isfinite(a)) or kernel.kind == "thin_plate"

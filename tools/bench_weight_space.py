@@ -13,6 +13,8 @@ ctypes) run over the same data: the features dumped from the device as float32 a
 the same points, rays and search (same bound and step rules). All contestants run in
 turn within each of --repeats rounds; rates are medians, ratios are medians of the
 per-round ratios (the machines are shared and noisy: trust ratios over rates).
+GFLOP/s: each evaluation loop's rate times FLOPS_PER_TERM, against the device's float peak
+measured in the same run (bench_peak: independent float16 FMA chains).
 """
 from __future__ import annotations
 
@@ -45,6 +47,11 @@ RADIUS, PROXY, TOL = 1.0, 1.6, 1e-4 * 0.1
 # counts) and overflows the stack from ~512 up; ws_first_root_counted's cache is not.
 LOCAL = 64
 MAX_ITER = 16384   # WS_MAX_ITER
+# Useful flops per (point, feature) term of the evaluation loop, counted from its source
+# (FMA = 2): phase 6, reduction 7, sin polynomial 8, cos polynomial 10, value and gradient
+# sums 9. The same arithmetic in every contestant (numpy's and libm's sin/cos aside).
+FLOPS_PER_TERM = 40
+PEAK_FLOPS_PER_ITEM = 2 * 16 * 8 * 4096   # bench_peak
 # the plain loops (gcc fuses sinf/cosf into scalar sincosf calls), and the same loops with
 # sin and cos taken in separate passes, which gcc maps onto glibc's vector libm (libmvec)
 C_VARIANTS = (("C plain", False), ("C libmvec", True))
@@ -67,7 +74,7 @@ __kernel void bench_eval_cached(__global const GpKernel* kp, __global const Mean
                                 int mc, __global const float* cdf, int nc, int M, uint2 key,
                                 __global const float* x, __global float4* out)
 {
-    float cache[5 * WS_CACHE_FEATURES];
+    float cache[WS_CACHE_FLOATS];
     ws_fill_cache(kp[0], cdf, nc, key, 0, M, cache);
     for (int i = get_global_id(0) * PER; i < (get_global_id(0) + 1) * PER; ++i) {
         float3 g;
@@ -98,6 +105,23 @@ __kernel void bench_eval_stored(int M, __global const float* tx, __global const 
     float r = length(p);
     out[i] = (float4)(amp * (float3)(ws_hsum(gx), ws_hsum(gy), ws_hsum(gz)) + p / r,
                       amp * ws_hsum(v) + r - 1.0f);
+}
+
+/* the device's float peak: 8 independent float16 FMA chains per work-item (enough to
+ * cover the FMA latency), PEAK_ITERS steps: 2 * 16 * 8 * PEAK_ITERS flops per work-item */
+#define PEAK_ITERS 4096
+__kernel void bench_peak(float a, float b, __global float* out)
+{
+    /* named accumulators, not an array: PoCL keeps a private array on the stack */
+    float16 x = (float16)a, y = (float16)b, g = (float16)(float)get_global_id(0);
+    float16 c0 = g, c1 = g + 1.0f, c2 = g + 2.0f, c3 = g + 3.0f, c4 = g + 4.0f,
+            c5 = g + 5.0f, c6 = g + 6.0f, c7 = g + 7.0f;
+    for (int i = 0; i < PEAK_ITERS; ++i) {
+        c0 = fma(c0, x, y); c1 = fma(c1, x, y); c2 = fma(c2, x, y); c3 = fma(c3, x, y);
+        c4 = fma(c4, x, y); c5 = fma(c5, x, y); c6 = fma(c6, x, y); c7 = fma(c7, x, y);
+    }
+    float16 s = ((c0 + c1) + (c2 + c3)) + ((c4 + c5) + (c6 + c7));
+    out[get_global_id(0)] = s.s0 + s.s5 + s.sa + s.sf;
 }
 
 __kernel void bench_dump(__global const GpKernel* kp, __global const float* cdf, int nc, int M,
@@ -462,6 +486,20 @@ def main(argv=None):
                f"read the same features from arrays)",
                "/s", work, times, [name for name, _ in C_VARIANTS] + ["numpy"])
         print(f"  max |f_OpenCL - f_C| = {diff:.2e} (sigma = {KERNEL.sigma})")
+        # GFLOP/s of the loops against the device's measured FMA peak, same run
+        peak_out = cl.Buffer(device.ctx, mf.WRITE_ONLY, 4 * 4096)
+        def peak():
+            prg["bench_peak"](q, (4096,), (LOCAL,), np.float32(0.999), np.float32(1e-3),
+                              peak_out)
+            q.finish()
+        peak()
+        peak_times = interleaved({"peak": peak}, args.repeats)["peak"]
+        peak_rate = 4096 * PEAK_FLOPS_PER_ITEM / statistics.median(peak_times)
+        print(f"  device float peak (float16 FMA chains): {peak_rate / 1e9:.1f} GFLOP/s; "
+              f"loops at {FLOPS_PER_TERM} flops per term:")
+        for name, ts in times.items():
+            rate = statistics.median(work[name] / t for t in ts) * FLOPS_PER_TERM
+            print(f"    {name:28s} {rate / 1e9:7.1f} GFLOP/s  {rate / peak_rate:6.1%} of peak")
 
         # --- intersection: first roots along camera rays, one realization per ray ---
         r, rn = args.rays, min(args.rays, args.numpy_rays)

@@ -93,26 +93,44 @@ typedef struct {
     float lo_k, lo_a, lo_m, lo_b, hi_k, hi_a, hi_m, hi_b, round;
 } Tents;
 
-/* one feature's terms of ws_affine: centre A, slope B, error E, or the trivial range */
+/* one feature's terms of ws_affine, factored as there: sb = |B| h, q = bh^2 / 2 */
 #define AFFINE_TERMS(tx, ty, tz, tau, w, c, s)                                          \
     do {                                                                                \
         float beta = tx * d[0] + ty * d[1] + tz * d[2];                                \
-        float bh = fabsf(beta) * h, q = 0.5f * bh * bh;                                \
-        float A = c * (1.0f - 0.5f * q), B = -s * beta;                                \
-        float E = 0.5f * fabsf(c) * q + fabsf(s) * q * bh * (1.0f / 3.0f);            \
-        int trivial = fabsf(B) * h + E > 1.0f;                                         \
-        f0 += w * (trivial ? 0.0f : A);                                                \
-        f1 += w * (trivial ? 0.0f : B);                                                \
+        float sb = fabsf(s * beta) * h, q = beta * beta * hh;                          \
+        float E = q * (sb * (1.0f / 3.0f) + 0.5f * fabsf(c));                         \
+        int trivial = sb + E > 1.0f;                                                   \
+        float wt = trivial ? 0.0f : w;                                                 \
+        f0 += wt * (c - c * (0.5f * q));                                               \
+        f1 -= (wt * s) * beta;                                                         \
         err += fabsf(w) * (trivial ? 1.0f : E);                                        \
-        float e = 2.0f * (fabsf(tx) * xabs[0] + fabsf(ty) * xabs[1] + fabsf(tz) * xabs[2]) \
-                + tau + 2.0f;                                                          \
-        r2 += w * w * e * e;                                                           \
-        w2 += w * w;                                                                   \
     } while (0)
 
+/* ws_features.h's rounding moments (WsMoments) of the features: once per ray, as the
+ * device computes them when it fills a search's feature cache */
+typedef struct {
+    float sxx, syy, szz, sxy, sxz, syz, vx, vy, vz, c, w2, w1;
+} Moments;
+
+static Moments moments(const Feats* F)
+{
+    Moments m = {0};
+    for (int i = 0; i < F->m; ++i) {
+        float w = F->w[i], ww = w * w, t2 = F->tau[i] + 2.0f;
+        float ax = fabsf(F->tx[i]), ay = fabsf(F->ty[i]), az = fabsf(F->tz[i]);
+        m.sxx += ww * ax * ax; m.syy += ww * ay * ay; m.szz += ww * az * az;
+        m.sxy += ww * ax * ay; m.sxz += ww * ax * az; m.syz += ww * ay * az;
+        m.vx += ww * ax * t2; m.vy += ww * ay * t2; m.vz += ww * az * t2;
+        m.c += ww * t2 * t2; m.w2 += ww; m.w1 += fabsf(w);
+    }
+    return m;
+}
+
+#define WS_SINCOS_ERR 1e-8f   /* ws_features.h: folded into err (the device's polynomials) */
+
 /* ws_affine + ws_tents of ws_intersect.h, for the sphere mean */
-static Tents tents(const Feats* F, float radius, const float o[3], const float d[3], float a,
-                   float b)
+static Tents tents(const Feats* F, const Moments* M, float radius, const float o[3],
+                   const float d[3], float a, float b)
 {
     float tm = 0.5f * (a + b), h = 0.5f * (b - a);
     float xm[3], xabs[3];
@@ -120,7 +138,8 @@ static Tents tents(const Feats* F, float radius, const float o[3], const float d
         xm[j] = o[j] + tm * d[j];
         xabs[j] = fabsf(o[j]) + (fabsf(tm) + h) * fabsf(d[j]);
     }
-    float f0 = 0.0f, f1 = 0.0f, err = 0.0f, r2 = 0.0f, w2 = 0.0f;
+    float hh = 0.5f * h * h;
+    float f0 = 0.0f, f1 = 0.0f, err = 0.0f;
 #ifdef WS_SPLIT_SINCOS
     for (int i0 = 0; i0 < F->m; i0 += CHUNK) {
         int n = F->m - i0 < CHUNK ? F->m - i0 : CHUNK;
@@ -132,7 +151,7 @@ static Tents tents(const Feats* F, float radius, const float o[3], const float d
         for (int i = 0; i < n; ++i) AFFINE_TERMS(tx[i], ty[i], tz[i], tau[i], w[i], c[i], sn[i]);
     }
 #else
-#pragma omp simd reduction(+ : f0, f1, err, r2, w2)
+#pragma omp simd reduction(+ : f0, f1, err)
     for (int i = 0; i < F->m; ++i) {
         float p = F->tx[i] * xm[0] + F->ty[i] * xm[1] + F->tz[i] * xm[2] + F->tau[i];
         float c = cosf(p), s = sinf(p);
@@ -142,8 +161,14 @@ static Tents tents(const Feats* F, float radius, const float o[3], const float d
     float amp = F->amp;
     f0 *= amp;
     f1 *= amp;
-    err *= amp;
-    float af_round = 4.0f * amp * FLT_EPSILON * sqrtf(r2 + (float)F->m * w2);
+    err = amp * (err + 16.0f * WS_SINCOS_ERR * M->w1);
+    float sx_[3] = {M->sxx * xabs[0] + M->sxy * xabs[1] + M->sxz * xabs[2],
+                    M->sxy * xabs[0] + M->syy * xabs[1] + M->syz * xabs[2],
+                    M->sxz * xabs[0] + M->syz * xabs[1] + M->szz * xabs[2]};
+    float r2 = 4.0f * (xabs[0] * sx_[0] + xabs[1] * sx_[1] + xabs[2] * sx_[2])
+             + 4.0f * (M->vx * xabs[0] + M->vy * xabs[1] + M->vz * xabs[2]) + M->c;
+    float af_round = 4.0f * amp * FLT_EPSILON * sqrtf(r2 + (float)F->m * M->w2)
+                   + amp * WS_SINCOS_ERR * M->w1;
     float xa[3], xb[3];
     for (int j = 0; j < 3; ++j) {
         xa[j] = o[j] + a * d[j];
@@ -189,6 +214,7 @@ static float first_root(const Feats* F, float radius, float h0, const float o[3]
     float tres = 4.0f * FLT_EPSILON * (fabsf(t0) + fabsf(t1) + ol / dl);
     tol = fmaxf(tol, 2.0f * tres);
     float hmin = 0.875f * tol;
+    Moments mo = moments(F);
     float x[3], g[3];
     for (int j = 0; j < 3; ++j) x[j] = o[j] + t0 * d[j];
     float f = eval_point(F, radius, x, g);
@@ -232,7 +258,7 @@ static float first_root(const Feats* F, float radius, float h0, const float o[3]
             continue;
         }
         float b = fminf(fminf(a + fmaxf(step, hmin), t1), c);
-        Tents T = tents(F, radius, o, d, a, b);
+        Tents T = tents(F, &mo, radius, o, d, a, b);
         ++ev;
         noise = T.round;
         float x_safe, x_opp;

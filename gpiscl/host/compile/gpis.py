@@ -11,7 +11,6 @@ import numpy as np
 from ..layout import records as layouts
 from ..gp import kernels as K
 from ..gp import means as M
-from ..gp.knob import knob_grid
 from ..scene.proxies import analyse, bounding_proxy
 from ..scene.transforms import transform_matrix
 from ..gp.weight_space import pack_order_tables
@@ -88,18 +87,21 @@ def build_mean(m: dict) -> M.Mean:
         return cls[kind](build_mean(m["left"]), build_mean(m["right"]), k=m["k"])
     if kind == "transform":
         return M.Transform(build_mean(m["child"]), transform_matrix(m))
+    from .sdf_bake import mesh_mean, prepare_slopes, procedural_mean
     if kind == "mesh":
-        from .sdf_bake import mesh_mean
         grid = mesh_mean(m["file"], m["resolution"], m["margin"], m["band"],
                          transform_matrix(m["transform"]))[0]
     elif kind == "grid":
         from ..io.grids import load_grid
         grid = load_grid(m["file"])
     elif kind == "procedural":
-        grid = knob_grid(m["function"], m["resolution"])
+        grid = procedural_mean(m["function"], m["resolution"])[0]
     else:
         raise AssertionError(kind)
-    return dataclasses.replace(grid, interpolation=m["interpolation"])
+    grid = dataclasses.replace(grid, interpolation=m["interpolation"])
+    # the slope bounds the device's grid records need (gp_records.pack_mean), cached
+    prepare_slopes(grid)
+    return grid
 
 
 def kernel_length_scale(k: dict) -> float:

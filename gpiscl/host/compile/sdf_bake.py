@@ -1,4 +1,5 @@
-"""Grid means of triangle meshes: signed-distance bakes, cached.
+"""Grid means of triangle meshes and procedural functions: bakes, cached, and every
+grid's per-cell slope bounds, cached.
 
 Mesh bake: the mesh (transform applied to its vertices, so any affine map keeps exact
 distances) is sampled on a cubic-voxel grid over its bounds plus a margin, with libigl's
@@ -9,6 +10,14 @@ documented rule for open or self-intersecting meshes and agrees with the closed 
 meshes must be wound counter-clockwise seen from outside, as closed ones usually are).
 Bakes are cached in $GPISCL_CACHE/sdf (default ~/.cache/gpiscl/sdf), keyed by the sha256
 of the mesh file's bytes and the bake settings.
+
+Procedural bakes (gp/knob.py's functions, procedural_mean) are cached in
+$GPISCL_CACHE/procedural, keyed by the sha256 of knob.py's source and the settings; the
+slope bounds of any grid mean (GridMean.cell_bounds, and the cubic coefficients they are
+taken from: seconds of numpy at 128^3, every time a scene is loaded) in
+$GPISCL_CACHE/slopes, keyed by the grid's values, placement and interpolation and the
+source of gp/means.py that computes them (prepare_slopes). A warm start of the knob scene
+then reads ~50 MB instead of ~10 s of numpy.
 """
 from __future__ import annotations
 
@@ -20,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..gp import knob, means
 from ..gp.means import GridMean
 from ..io.grids import load_grid, save_grid
 from ..io.meshes import load_mesh
@@ -28,10 +38,36 @@ BAKE_VERSION = 1            # part of the cache key: bump when the bake's output
 DEFAULT_MARGIN = 0.1        # of the mesh's largest bounding-box extent, per side
 
 
-def cache_dir() -> Path:
+def cache_dir(kind: str = "sdf") -> Path:
+    """The cache folder of one kind of bake ("sdf", "procedural", "slopes")."""
     root = os.environ.get("GPISCL_CACHE") or os.path.join(os.path.expanduser("~"), ".cache",
                                                           "gpiscl")
-    return Path(root) / "sdf"
+    return Path(root) / kind
+
+
+def _store(path: Path, write, what: str) -> None:
+    """write(tmp) then an atomic rename onto path: concurrent renders never see half a
+    file, and a failure leaves no temporary behind. A read-only cache costs time, not the
+    render: it is reported and skipped."""
+    tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write(tmp)
+        os.replace(tmp, path)
+    except OSError as exc:
+        print(f"gpiscl: cannot cache the {what} in {path.parent} ({exc.strerror}); "
+              "set GPISCL_CACHE to a writable folder", file=sys.stderr)
+    finally:                                # a full disk or a signal: no half file left
+        tmp.unlink(missing_ok=True)
+
+
+def _settings_key(settings: dict, *blobs) -> str:
+    """sha256 over the blobs (bytes-like) and the settings as sorted JSON."""
+    digest = hashlib.sha256()
+    for b in blobs:
+        digest.update(hashlib.sha256(b).digest())
+    digest.update(json.dumps(settings, sort_keys=True).encode())
+    return digest.hexdigest()
 
 
 # ---- mesh bakes ------------------------------------------------------------------------
@@ -133,15 +169,78 @@ def mesh_mean(path, resolution: int = 128, margin: float | None = None,
     grid = GridMean(np.asarray(grid.values, np.float32).astype(np.float64), grid.origin,
                     grid.voxel_size)
     if cache:
-        tmp = cached.with_suffix(f".{os.getpid()}.tmp.npz")
-        try:
-            cached.parent.mkdir(parents=True, exist_ok=True)
-            save_grid(tmp, GridMean(np.asarray(grid.values, np.float32), grid.origin,
-                                    grid.voxel_size))
-            os.replace(tmp, cached)         # atomic: concurrent renders never see half a file
-        except OSError as exc:              # a read-only cache costs time, not the render
-            print(f"gpiscl: cannot cache the SDF bake in {cached.parent} ({exc.strerror}); "
-                  "set GPISCL_CACHE to a writable folder", file=sys.stderr)
-        finally:                            # a full disk or a signal: no half file left
-            tmp.unlink(missing_ok=True)
+        _store(cached, lambda tmp: save_grid(tmp, GridMean(np.asarray(grid.values, np.float32),
+                                                           grid.origin, grid.voxel_size)),
+               "SDF bake")
     return grid, False
+
+
+# ---- procedural bakes --------------------------------------------------------------------
+
+def procedural_mean(function: str, resolution: int, cache: bool = True):
+    """knob.knob_grid(function, resolution), from the cache when an equal bake exists (the
+    function's source unchanged). Returns (grid, cache_hit); the grid is the same float32
+    array either way."""
+    key = _settings_key({"version": BAKE_VERSION, "function": function,
+                         "resolution": int(resolution)}, Path(knob.__file__).read_bytes())
+    cached = cache_dir("procedural") / f"{key}.npz"
+    if cache and cached.is_file():
+        try:
+            g = load_grid(cached)
+            return GridMean(np.asarray(g.values, np.float32), g.origin, g.voxel_size), True
+        except ValueError:
+            pass
+    grid = knob.knob_grid(function, resolution)
+    if cache:
+        _store(cached, lambda tmp: save_grid(tmp, grid), "procedural bake")
+    return grid, False
+
+
+# ---- slope bounds of grid means ------------------------------------------------------------
+
+def _slopes_key(grid: GridMean) -> str:
+    values = np.ascontiguousarray(grid.values)
+    settings = {"version": BAKE_VERSION, "shape": list(values.shape), "dtype": str(values.dtype),
+                "origin": [float(o) for o in grid.origin], "voxel": float(grid.voxel_size),
+                "interpolation": grid.interpolation}
+    # the array's own buffer, not a tobytes() copy (16 MB at 128^3 float64)
+    return _settings_key(settings, memoryview(values).cast("B"),
+                         Path(means.__file__).read_bytes())
+
+
+_SLAB_CELLS = 4   # x layers of cells per means.cubic_cell_bounds pass
+
+
+def _cubic_cell_bounds_in_slabs(coef: np.ndarray, h: float) -> np.ndarray:
+    """means.cubic_cell_bounds over slabs of _SLAB_CELLS x layers: a cell's bound reads only
+    its 4^3 coefficients, so each slab takes its cells' layers plus 3 and computes the same
+    numbers; the ~50 full-grid temporaries then stay in cache (2.6x faster at 128^3, and
+    ~200 MB less peak memory for the knob)."""
+    cells = coef.shape[0] - 3
+    return np.concatenate([means.cubic_cell_bounds(coef[i:i + _SLAB_CELLS + 3], h)
+                           for i in range(0, cells, _SLAB_CELLS)])
+
+
+def prepare_slopes(grid: GridMean, cache: bool = True) -> bool:
+    """Give grid its cell slope bounds (and, cubic, the coefficients they come from) from
+    the cache when present, else compute and cache them. They are GridMean's
+    cached_property values, which live in the instance __dict__ once computed; setting
+    them there is what computing them would do, with the same arrays. Returns cache_hit."""
+    names = ("cell_bounds", "coefficients") if grid.interpolation == "cubic" else ("cell_bounds",)
+    cached = cache_dir("slopes") / f"{_slopes_key(grid)}.npz"
+    if cache and cached.is_file():
+        try:
+            with np.load(cached, allow_pickle=False) as z:
+                arrays = {n: np.asarray(z[n]) for n in names}
+            for n, a in arrays.items():
+                grid.__dict__[n] = a
+            return True
+        except (OSError, ValueError, KeyError):
+            pass                            # damaged: compute again and replace it
+    if grid.interpolation == "cubic":
+        grid.__dict__["cell_bounds"] = _cubic_cell_bounds_in_slabs(grid.coefficients,
+                                                                   float(grid.voxel_size))
+    arrays = {n: getattr(grid, n) for n in names}
+    if cache:
+        _store(cached, lambda tmp: np.savez(tmp, **arrays), "grid slope bounds")
+    return False

@@ -110,6 +110,15 @@ def knob_grid(function: str, resolution: int = 128):
     voxel = float(np.max(hi - lo)) / (resolution - 1)
     n = np.ceil((hi - lo) / voxel).astype(int) + 1
     axes = [lo[i] + voxel * np.arange(n[i]) for i in range(3)]
-    points = np.stack(np.meshgrid(*axes, indexing="ij"), -1)
-    values = FUNCTIONS[function](points).astype(np.float32)
+    values = np.empty(tuple(n), np.float32)
+    # in slabs of a few x planes (~60k points): the function's dozens of elementwise
+    # temporaries then stay in cache, ~6x faster than one 2M-point pass at 128^3, and
+    # every sample is computed by the same float64 operations (the same values)
+    for i in range(0, n[0], _SLAB):
+        points = np.stack(np.meshgrid(axes[0][i:i + _SLAB], axes[1], axes[2], indexing="ij"),
+                          -1)
+        values[i:i + _SLAB] = FUNCTIONS[function](points)
     return GridMean(values, tuple(lo), voxel)
+
+
+_SLAB = 4   # x planes per knob_grid pass

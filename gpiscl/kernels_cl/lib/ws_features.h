@@ -112,7 +112,16 @@ inline wsf ws_log(wsf x)
     return m + y + 0.693359375f * fe;
 }
 
-/* sin and cos of r + q pi/2 for |r| <= pi/4 */
+/* Approximation error of ws_sincos_quadrant's polynomials on |r| <= pi/4, evaluated
+ * exactly: 5.6e-9 (sin), 1.3e-10 (cos) (tests/test_ws_features.py measures both with the
+ * float32 coefficients below). Their float32 evaluation adds ~2 eps, which ws_affine's
+ * `round` covers with every other float rounding; this bound is folded into its `err`, so
+ * the bounds contain the exact realization whatever the polynomials' own error. */
+#define WS_SINCOS_ERR 1e-8f
+
+/* sin and cos of r + q pi/2 for |r| <= pi/4. The quadrant's sign is applied by flipping
+ * the sign bit (xor), not by negate-and-select: the same bits, fewer vector operations in
+ * the hot loop. */
 inline wsf ws_sincos_quadrant(wsf r, wsi q, wsf* c)
 {
     wsf z = r * r;
@@ -122,8 +131,10 @@ inline wsf ws_sincos_quadrant(wsf r, wsi q, wsf* c)
                       + 4.166664568298827e-2f);
     wsi odd = (q & 1) != 0;
     wsf s = select(s0, c0, odd), cc = select(c0, s0, odd);
-    *c = select(cc, -cc, ((q + 1) & 2) != 0);
-    return select(s, -s, (q & 2) != 0);
+    /* sin is negative in quadrants 2, 3 (bit 1 of q), cos in quadrants 1, 2 (bit 1 of
+     * q + 1); << 30 moves that bit to the sign bit */
+    *c = ws_as_f(ws_as_i(cc) ^ (((q + 1) & 2) << 30));
+    return ws_as_f(ws_as_i(s) ^ ((q & 2) << 30));
 }
 
 /* sin(x), cos(x) with Cody-Waite reduction by pi/2 (three parts, exact for |x| < 2^15) */
@@ -272,10 +283,12 @@ inline void ws_features(GpKernel k, __global const float* order_cdf, int order_c
     }
 }
 
-/* Feature cache: 5 * WS_CACHE_FEATURES floats, per chunk of WS_LANES features theta_x,
- * theta_y, theta_z, tau, w. A float array read by vloadn, not an array of vectors: the
- * stack of a PoCL work-item is not aligned to whole vectors, and aligned vector moves on
- * it fault. */
+/* Feature cache: WS_CACHE_FLOATS floats, per chunk of WS_LANES features theta_x,
+ * theta_y, theta_z, tau, w, then the realization's rounding moments (WsMoments, at
+ * WS_CACHE_MOMENTS). A float array read by vloadn, not an array of vectors: the stack of a
+ * PoCL work-item is not aligned to whole vectors, and aligned vector moves on it fault. */
+#define WS_CACHE_MOMENTS (5 * WS_CACHE_FEATURES)
+#define WS_CACHE_FLOATS (5 * WS_CACHE_FEATURES + 12)
 #if WS_LANES == 1
 #define ws_vload(i, p) ((p)[i])
 #define ws_vstore(v, i, p) ((p)[i] = (v))
@@ -284,9 +297,60 @@ inline void ws_features(GpKernel k, __global const float* order_cdf, int order_c
 #define ws_vstore(v, i, p) WS_CAT(vstore, WS_LANES)(v, i, p)
 #endif
 
+/* Sums over a realization's features that ws_affine's rounding allowance needs: with
+ * a = |theta| per feature and e = 2 a . xabs + tau + 2 its phase's error scale (in eps),
+ *   sum w^2 e^2 = 4 xabs^T S xabs + 4 V . xabs + C,
+ *   S = sum w^2 a a^T, V = sum w^2 (tau + 2) a, C = sum w^2 (tau + 2)^2,
+ * every term non-negative, so the expansion rounds like the direct sum. They depend on the
+ * features only, not on the interval: a cached search computes them once per ray instead
+ * of ~11 operations per feature per bound. w1 = sum |w| scales WS_SINCOS_ERR. */
+typedef struct {
+    float sxx, syy, szz, sxy, sxz, syz, vx, vy, vz, c, w2, w1;
+} WsMoments;
+
+typedef struct {
+    wsf sxx, syy, szz, sxy, sxz, syz, vx, vy, vz, c, w2, w1;
+} WsMomentSums;
+
+inline void ws_moments_add(WsMomentSums* m, wsf tx, wsf ty, wsf tz, wsf tau, wsf w)
+{
+    wsf ww = w * w, ax = fabs(tx), ay = fabs(ty), az = fabs(tz), t2 = tau + 2.0f;
+    wsf wx = ww * ax, wy = ww * ay, wz = ww * az;
+    m->sxx += wx * ax;
+    m->syy += wy * ay;
+    m->szz += wz * az;
+    m->sxy += wx * ay;
+    m->sxz += wx * az;
+    m->syz += wy * az;
+    m->vx += wx * t2;
+    m->vy += wy * t2;
+    m->vz += wz * t2;
+    m->c += ww * t2 * t2;
+    m->w2 += ww;
+    m->w1 += fabs(w);
+}
+
+inline WsMoments ws_moments_total(const WsMomentSums* m)
+{
+    WsMoments r = {ws_hsum(m->sxx), ws_hsum(m->syy), ws_hsum(m->szz), ws_hsum(m->sxy),
+                   ws_hsum(m->sxz), ws_hsum(m->syz), ws_hsum(m->vx), ws_hsum(m->vy),
+                   ws_hsum(m->vz), ws_hsum(m->c), ws_hsum(m->w2), ws_hsum(m->w1)};
+    return r;
+}
+
+/* sum w^2 e^2 for the phase error scales e at |x| <= xabs (componentwise) */
+inline float ws_moments_phase2(WsMoments m, float3 xabs)
+{
+    float3 sx = (float3)(m.sxx * xabs.x + m.sxy * xabs.y + m.sxz * xabs.z,
+                         m.sxy * xabs.x + m.syy * xabs.y + m.syz * xabs.z,
+                         m.sxz * xabs.x + m.syz * xabs.y + m.szz * xabs.z);
+    return 4.0f * dot(xabs, sx) + 4.0f * dot((float3)(m.vx, m.vy, m.vz), xabs) + m.c;
+}
+
 inline void ws_fill_cache(GpKernel k, __global const float* order_cdf, int order_count,
                           uint2 key, int object, int M, float* cache)
 {
+    WsMomentSums ms = {0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f};
     for (int i0 = 0; i0 < M; i0 += WS_LANES) {
         wsf tx, ty, tz, tau, w;
         ws_features(k, order_cdf, order_count, key, object, i0, M, &tx, &ty, &tz, &tau, &w);
@@ -296,7 +360,9 @@ inline void ws_fill_cache(GpKernel k, __global const float* order_cdf, int order
         ws_vstore(tz, j + 2, cache);
         ws_vstore(tau, j + 3, cache);
         ws_vstore(w, j + 4, cache);
+        ws_moments_add(&ms, tx, ty, tz, tau, w);
     }
+    *(WsMoments*)(cache + WS_CACHE_MOMENTS) = ws_moments_total(&ms);
 }
 
 /* Features i0 .. i0 + WS_LANES - 1 as ws_features, read from `cache` when it is given
@@ -405,31 +471,40 @@ inline WsAffine ws_affine(const float* cache, GpKernel k, __global const float* 
 {
     float3 xm = o + tm * d;
     float3 xabs = fabs(o) + (fabs(tm) + h) * fabs(d);
-    wsf f0 = 0.0f, f1 = 0.0f, err = 0.0f, r2 = 0.0f, w2 = 0.0f;
+    float hh = 0.5f * h * h;
+    wsf f0 = 0.0f, f1 = 0.0f, err = 0.0f;
+    WsMomentSums ms = {0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f};
     for (int i0 = 0; i0 < M; i0 += WS_LANES) {
         wsf tx, ty, tz, tau, w;
         ws_features_of(cache, k, order_cdf, order_count, key, object, i0, M, &tx, &ty, &tz,
                        &tau, &w);
         wsf beta = tx * d.x + ty * d.y + tz * d.z;
         wsf c, s = ws_sincos(tx * xm.x + ty * xm.y + tz * xm.z + tau, &c);
-        wsf bh = fabs(beta) * h, q = 0.5f * bh * bh;
-        wsf A = c * (1.0f - 0.5f * q), B = -s * beta;
-        wsf E = 0.5f * fabs(c) * q + fabs(s) * q * bh * (1.0f / 3.0f);
-        wsi trivial = fabs(B) * h + E > 1.0f;
-        f0 += w * select(A, (wsf)0.0f, trivial);
-        f1 += w * select(B, (wsf)0.0f, trivial);
+        /* the header's terms, factored for fewer vector operations: sb = |B| h = |s| bh,
+         * q = bh^2 / 2, E = q (|c| / 2 + sb / 3) */
+        wsf sb = fabs(s * beta) * h, q = beta * beta * hh;
+        wsf E = q * (sb * (1.0f / 3.0f) + 0.5f * fabs(c));
+        wsi trivial = sb + E > 1.0f;
+        wsf wt = select(w, (wsf)0.0f, trivial);
+        f0 += wt * (c - c * (0.5f * q));
+        f1 -= (wt * s) * beta;
         err += fabs(w) * select(E, (wsf)1.0f, trivial);
-        wsf e = 2.0f * (fabs(tx) * xabs.x + fabs(ty) * xabs.y + fabs(tz) * xabs.z)
-              + tau + 2.0f;
-        r2 += w * w * e * e;
-        w2 += w * w;
+        if (!cache) ws_moments_add(&ms, tx, ty, tz, tau, w);   /* regenerated features */
     }
+    WsMoments mo = cache ? *(const WsMoments*)(cache + WS_CACHE_MOMENTS) : ws_moments_total(&ms);
     float amp = ws_amplitude(k, M);
     WsAffine out;
     out.f0 = amp * ws_hsum(f0);
     out.f1 = amp * ws_hsum(f1);
-    out.err = amp * ws_hsum(err);
-    /* phase errors, plus the summation's own rounding (~sqrt(M) eps per unit weight) */
-    out.round = 4.0f * amp * FLT_EPSILON * sqrt(ws_hsum(r2) + (float)M * ws_hsum(w2));
+    /* The polynomials' own error eps_sc: computed c, s are within it of the exact ones, so
+     * A is off by <= eps_sc (1 + q/2), B (t - tm) by <= eps_sc bh and E by <= eps_sc (q/2 +
+     * q bh / 3). A feature kept (not trivial) has |B| h + E <= 1 with max(|c|, |s|) >=
+     * 1/sqrt 2, so bh <= 2.4 and q <= 2.9: those add up to < 16 eps_sc per unit weight (the
+     * trivial range [-1, 1] needs nothing). */
+    out.err = amp * (ws_hsum(err) + 16.0f * WS_SINCOS_ERR * mo.w1);
+    /* phase errors, plus the summation's own rounding (~sqrt(M) eps per unit weight), plus
+     * the polynomials' error of a point evaluation (which T.round stands for) */
+    out.round = 4.0f * amp * FLT_EPSILON * sqrt(ws_moments_phase2(mo, xabs) + (float)M * mo.w2)
+              + amp * WS_SINCOS_ERR * mo.w1;
     return out;
 }

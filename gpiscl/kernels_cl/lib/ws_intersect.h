@@ -184,7 +184,7 @@ inline float ws_first_root_post(WsPostBlock B, GpKernel k, __global const MeanNo
      * tol >= 8 eps |t|), so that a + hmin - a <= tol and the end point decides it */
     float hmin = 0.875f * tol;
 #if WS_CACHE_FEATURES > 0
-    float cache_mem[5 * WS_CACHE_FEATURES];
+    float cache_mem[WS_CACHE_FLOATS];
     const float* cache = 0;
     if (M <= WS_CACHE_FEATURES) {
         ws_fill_cache(k, order_cdf, order_count, key, object, M, cache_mem);

@@ -1,0 +1,150 @@
+"""Whole-process costs of example scenes, for one or more source trees in the same run:
+render paths/s, peak resident memory, and time to first pixel cold and warm.
+
+    python tools/bench_scenes.py [SCENE ...] [--trees DIR,DIR] [--repeats 3] [--spp 4]
+                                 [--modes render,first,cold,warm]
+
+Every measurement is a fresh `python -m gpiscl render` process (PYTHONPATH = the tree),
+so imports, scene preparation, OpenCL compiles and caches count as a user sees them:
+  render  the scene at its own resolution, --spp samples: paths/s as the CLI prints it
+          (its own timer), and peak RSS (the process's ru_maxrss);
+  first   time to first pixel with nothing cached: an empty PoCL kernel cache, pyopencl's
+          cache off, an empty bake cache ($GPISCL_CACHE): process start to the end of a
+          16x16, 1-spp render (an upper bound on the first sample accumulated);
+  cold    the same with the OpenCL programs already compiled (PoCL's cache warm) but the
+          bake cache empty: the first run of a new scene after the first-ever compile;
+  warm    both caches warm: the second run of the same scene.
+Scenes default to the issue-16 set: ws_sphere_se, ws_sphere_rq, the posterior sphere
+(ws_sphere_se conditioned on 100 points of the unit sphere, written to a temporary folder)
+and the knob. Trees default to this checkout; pass a second worktree at an older commit to
+get before/after ratios from the same run (the machines are shared and noisy: rounds
+interleave the trees, numbers are medians, ratios are medians of per-round ratios).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+DEFAULT_SCENES = ("scenes/ws_sphere_se.json", "scenes/ws_sphere_rq.json", "posterior_sphere",
+                  "scenes/knob.json")
+
+
+def posterior_sphere(folder: Path) -> Path:
+    """ws_sphere_se with its mean widened to radius 1.1 and conditioned on 100 points of
+    the unit sphere (noise 5% of sigma): a weight-space posterior like
+    tests/test_ws_posterior.test07."""
+    scene = json.loads((ROOT / "scenes/ws_sphere_se.json").read_text())
+    g = next(s for s in scene["shapes"] if s["type"] == "gpis")
+    n = 100
+    i = np.arange(n) + 0.5
+    z = 1 - 2 * i / n
+    phi = np.pi * (1 + 5**0.5) * i
+    r = np.sqrt(1 - z * z)
+    pts = np.stack([r * np.cos(phi), r * np.sin(phi), z], 1)
+    np.savetxt(folder / "posterior_sphere.xyz", pts)
+    g["mean"]["radius"] = 1.1
+    g["observations"] = {"file": str(folder / "posterior_sphere.xyz"),
+                         "noise": 0.05 * g["kernel"]["sigma"]}
+    path = folder / "posterior_sphere.json"
+    path.write_text(json.dumps(scene))
+    return path
+
+
+def run(tree: Path, scene: Path, args: list, env: dict, out: Path):
+    """(wall seconds, peak RSS MB, CLI output) of one render process."""
+    env = dict(os.environ, **env, PYTHONPATH=str(tree))
+    t = time.perf_counter()
+    p = subprocess.Popen([sys.executable, "-m", "gpiscl", "render", str(scene), *args,
+                          "-o", str(out)], cwd=tree, env=env, stdout=subprocess.PIPE,
+                         stderr=subprocess.STDOUT, text=True)
+    text = p.stdout.read()
+    _, status, usage = os.wait4(p.pid, 0)
+    wall = time.perf_counter() - t
+    p.returncode = os.waitstatus_to_exitcode(status)
+    if p.returncode:
+        raise RuntimeError(f"{scene} in {tree} failed:\n{text}")
+    return wall, usage.ru_maxrss / 1024.0, text
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("scenes", nargs="*", default=DEFAULT_SCENES)
+    ap.add_argument("--trees", default=str(ROOT), help="comma-separated source trees")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--spp", type=int, default=4, help="samples per pixel of 'render'")
+    ap.add_argument("--modes", default="render,first,cold,warm")
+    args = ap.parse_args(argv)
+    trees = [Path(t).resolve() for t in args.trees.split(",")]
+    modes = args.modes.split(",")
+    tmp = Path(tempfile.mkdtemp(prefix="gpiscl-bench-scenes-"))
+    try:
+        scenes = [posterior_sphere(tmp) if s == "posterior_sphere" else Path(s).resolve()
+                  for s in args.scenes]
+        # per tree: a PoCL cache kept warm across rounds, and a bake cache for 'warm'
+        caches = {t: (tmp / f"pocl{i}", tmp / f"bake{i}") for i, t in enumerate(trees)}
+        results = {}   # (scene, mode, tree) -> list of (value, rss)
+        small = ["--resolution", "16x16", "--spp", "1"]
+        for rnd in range(args.repeats):
+            for scene in scenes:
+                for mode in modes:
+                    for tree in trees:
+                        pocl, bake = caches[tree]
+                        out = tmp / "out.png"
+                        if mode == "render":
+                            env = {"POCL_CACHE_DIR": str(pocl), "GPISCL_CACHE": str(bake)}
+                            wall, rss, text = run(tree, scene, ["--spp", str(args.spp)], env,
+                                                  out)
+                            m = re.search(r"paths/s: ([0-9.e+]+)", text)
+                            value = float(m.group(1))
+                        else:
+                            fresh = tmp / f"fresh{rnd}"
+                            shutil.rmtree(fresh, ignore_errors=True)
+                            env = {"POCL_CACHE_DIR": str(fresh / "pocl" if mode == "first"
+                                                         else pocl),
+                                   "GPISCL_CACHE": str(bake if mode == "warm"
+                                                       else fresh / "bake")}
+                            if mode == "first":
+                                env["PYOPENCL_NO_CACHE"] = "1"
+                            if mode != "first":   # PoCL's cache (and, warm, the bakes')
+                                run(tree, scene, small, env, out)   # holds this scene
+                                shutil.rmtree(fresh / "bake", ignore_errors=True)
+                            value, rss, _ = run(tree, scene, small, env, out)
+                        results.setdefault((scene, mode, tree), []).append((value, rss))
+                        print(f"  round {rnd} {scene.name} {mode} {tree.name}: {value:.4g} "
+                              f"{'paths/s' if mode == 'render' else 's'}, {rss:.0f} MB",
+                              file=sys.stderr)
+        print(f"medians of {args.repeats} rounds; trees: "
+              + ", ".join(f"[{i}] {t}" for i, t in enumerate(trees)))
+        for scene in scenes:
+            for mode in modes:
+                cells = []
+                for i, tree in enumerate(trees):
+                    vals = results[(scene, mode, tree)]
+                    v = statistics.median(x for x, _ in vals)
+                    rss = statistics.median(r for _, r in vals)
+                    unit = "paths/s" if mode == "render" else "s"
+                    cell = f"[{i}] {v:9.4g} {unit} {rss:5.0f} MB"
+                    if i > 0:
+                        base = results[(scene, mode, trees[0])]
+                        ratio = statistics.median(x / b for (x, _), (b, _) in zip(vals, base))
+                        cell += f" (x{ratio:.2f} of [0])"
+                    cells.append(cell)
+                print(f"{scene.name:24s} {mode:6s} " + "   ".join(cells))
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
