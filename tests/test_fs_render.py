@@ -113,7 +113,10 @@ KERNELS = {"thin_plate": {"type": "thin_plate", "sigma": 0.04, "radius": 4.0},
                         "alpha": 0.75, "aniso": [1, 0.5, 2]},
            "periodic": {"type": "periodic", "sigma": 0.2, "length_scale": 1.0, "w": 1.0},
            "locally_periodic": {"type": "locally_periodic", "sigma": 0.2, "length_scale": 1.0,
-                                "w": 1.0, "se_length_scale": 0.5}}
+                                "w": 1.0, "se_length_scale": 0.5},
+           "matern32": {"type": "matern32", "sigma": 0.3, "length_scale": 0.25},
+           "matern52": {"type": "matern52", "sigma": 0.3, "length_scale": 0.2,
+                        "aniso": [1, 0.5, 2]}}
 
 
 @pytest.mark.parametrize("memory", ["renewal_plus", "global"])

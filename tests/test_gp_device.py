@@ -6,7 +6,7 @@ import pytest
 
 from gpiscl.host.gp import (Box, Capsule, Constant, Difference, Intersection,
                             LocallyPeriodic, Periodic, Plane, RationalQuadratic,
-                            RoundedBox, Sphere, SquaredExponential, ThinPlate, Torus,
+                            RoundedBox, Sphere, Matern32, Matern52, SquaredExponential, ThinPlate, Torus,
                             Transform, Union)
 from gpiscl.host.layout import gp_records
 from gpiscl.host.render.program_sources import kernel_source
@@ -52,6 +52,8 @@ KERNELS = [
     Periodic(sigma=1.125, length_scale=0.875, w=0.625, aniso=ANISO),
     LocallyPeriodic(sigma=0.75, length_scale=1.25, w=0.5, se_length_scale=1.5, aniso=ANISO),
     ThinPlate(sigma=0.5, radius=4.0, aniso=ANISO),
+    Matern32(sigma=1.125, length_scale=0.875, aniso=ANISO),
+    Matern52(sigma=0.875, length_scale=0.625, aniso=ANISO),
 ]
 
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from gpiscl.host.gp import (LocallyPeriodic, Periodic, RandomFeatures, RationalQuadratic,
+from gpiscl.host.gp import (LocallyPeriodic, Matern32, Matern52, Periodic, RandomFeatures, RationalQuadratic,
                             SquaredExponential, ThinPlate, periodic_order_weights,
                             sample_frequencies)
 from stats import z_threshold
@@ -18,6 +18,10 @@ KERNELS = [
     Periodic(sigma=1.1, length_scale=0.3, w=0.9, aniso=ANISO),
     Periodic(sigma=1.0, length_scale=4.0, w=1.5, aniso=ANISO),
     LocallyPeriodic(sigma=1.0, length_scale=0.9, w=0.7, se_length_scale=1.2, aniso=ANISO),
+    Matern32(sigma=1.0, length_scale=0.8),
+    Matern32(sigma=0.7, length_scale=0.6, aniso=ANISO),
+    Matern52(sigma=1.2, length_scale=0.9),
+    Matern52(sigma=0.8, length_scale=0.5, aniso=ANISO),
 ]
 LAGS = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.3, -0.4, 0.5], [0.0, 0.9, 0.0],
                  [0.7, 0.7, -0.2], [1.5, -0.3, 1.1]])
@@ -70,7 +74,8 @@ def test_thin_plate_is_rejected():
         sample_frequencies(ThinPlate(), 10, np.random.default_rng(0))
 
 
-@pytest.mark.parametrize("kernel", [KERNELS[1], KERNELS[3], KERNELS[8]],
+@pytest.mark.parametrize("kernel", [KERNELS[1], KERNELS[3], KERNELS[8], KERNELS[10],
+                                    KERNELS[12]],
                          ids=lambda k: k.kind)
 def test_random_feature_realizations_have_the_kernel_covariances(kernel):
     """Over independent bases, value and gradient covariances of weight-space realizations
@@ -111,3 +116,20 @@ def test_random_features_gradient_is_exact():
     fd = np.stack([(feats.evaluate(w, x + eps * e)[0] - feats.evaluate(w, x - eps * e)[0])
                    / (2 * eps) for e in np.eye(3)], -1)
     np.testing.assert_allclose(g, fd, atol=1e-7)
+
+
+@pytest.mark.parametrize("kernel", [KERNELS[10], KERNELS[12]], ids=lambda k: k.kind)
+def test_matern_second_moment_is_minus_k2(kernel):
+    """E[omega omega^T] = -Hess k(0) / k(0): nu / (nu - 1) A / l^2 (3 A / l^2 and
+    5 A / (3 l^2)), the lambda_2 of Rice's formula. 5/2 has a finite 4th moment, so a CLT
+    bound applies; 3/2's omega^2 has infinite variance, so there a loose relative check."""
+    rng = np.random.default_rng(17)
+    omega = sample_frequencies(kernel, N, rng)
+    target = kernel.gradient_variance() / kernel.variance
+    sq = omega**2
+    if kernel.kind == "matern52":
+        z = np.abs(sq.mean(0) - target) / (sq.std(0, ddof=1) / np.sqrt(N))
+        assert z.max() < z_threshold(3), z
+    else:
+        np.testing.assert_allclose(np.median(sq.reshape(100, -1, 3).mean(1), axis=0), target,
+                                   rtol=0.1)

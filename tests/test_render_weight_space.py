@@ -23,6 +23,8 @@ KERNELS = {
     "rational_quadratic": {"sigma": 0.1, "length_scale": 0.2, "alpha": 1.0},
     "periodic": {"sigma": 0.1, "length_scale": 1.0, "w": 8.0},
     "locally_periodic": {"sigma": 0.1, "length_scale": 1.0, "w": 8.0, "se_length_scale": 0.3},
+    "matern32": {"sigma": 0.1, "length_scale": 0.2},
+    "matern52": {"sigma": 0.1, "length_scale": 0.2},
 }
 
 

@@ -4,7 +4,7 @@ import pyopencl as cl
 import pytest
 
 from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, join_sources
-from gpiscl.host.gp import (Box, Constant, LocallyPeriodic, Periodic, RationalQuadratic, Sphere,
+from gpiscl.host.gp import (Box, Constant, LocallyPeriodic, Matern32, Matern52, Periodic, RationalQuadratic, Sphere,
                             SquaredExponential, Transform, Union)
 from gpiscl.host.gp import weight_space as ws
 from gpiscl.host.layout.gp_records import pack_kernel, pack_mean
@@ -17,6 +17,8 @@ KERNELS = [
     RationalQuadratic(sigma=0.875, length_scale=0.625, alpha=0.625, aniso=ANISO),  # a < 1: boost
     Periodic(sigma=1.125, length_scale=0.875, w=0.625, aniso=ANISO),
     LocallyPeriodic(sigma=0.75, length_scale=1.25, w=0.5, se_length_scale=1.5, aniso=ANISO),
+    Matern32(sigma=1.0, length_scale=0.625, aniso=ANISO),    # Student-t, 3 dof
+    Matern52(sigma=0.875, length_scale=0.75, aniso=ANISO),   # Student-t, 5 dof
 ]
 ROT = np.array([[0.36, 0.48, -0.8], [-0.8, 0.6, 0.0], [0.48, 0.64, 0.6]])
 MEAN = Union(Transform(Sphere(radius=0.75), np.concatenate([ROT, [[0.5], [0.0], [-0.25]]], 1)),

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from gpiscl.host.gp import (Box, Constant, LocallyPeriodic, Periodic, Plane, RationalQuadratic,
+from gpiscl.host.gp import (Box, Constant, LocallyPeriodic, Matern32, Matern52, Periodic, Plane, RationalQuadratic,
                             Sphere, SquaredExponential, ThinPlate, Torus, Transform, Union,
                             sample_frequencies)
 from gpiscl.host.gp import weight_space as ws
@@ -165,7 +165,9 @@ def test_bounds_contain_every_point_evaluation(device, prg, case):
 
 
 ROOT_CASES = [(KERNELS[0], MEANS[0], 512), (KERNELS[1], MEANS[1], 256),
-              (KERNELS[3], MEANS[2], 256), (KERNELS[2], MEANS[3], 128)]   # 1152 rays
+              (KERNELS[3], MEANS[2], 256), (KERNELS[2], MEANS[3], 128),   # 1152 rays
+              (Matern32(sigma=0.5, length_scale=0.5), MEANS[0], 128),
+              (Matern52(sigma=0.5, length_scale=0.5), MEANS[1], 128)]
 
 
 def roots_and_scan(device, prg, kernel, mean, o, d, keys, m, t0, t1, tol):
@@ -234,7 +236,11 @@ def rice_target(kernel, u, d, m, n_mc, rng):
 
 RICE_CASES = [(KERNELS[0], 0.0, (1.0, 0.0, 0.0)), (KERNELS[0], 0.3, (0.0, 0.6, 0.8)),
               (RationalQuadratic(sigma=0.75, length_scale=0.5, alpha=2.0), 0.0, (0.6, 0.0, 0.8)),
-              (KERNELS[1], 0.375, (0.0, 1.0, 0.0))]
+              (KERNELS[1], 0.375, (0.0, 1.0, 0.0)),
+              # Matern: lambda_2 = -k''(0) = 3 sigma^2 / l^2 (3/2), 5 sigma^2 / (3 l^2) (5/2)
+              (Matern32(sigma=0.5, length_scale=0.5), 0.0, (1.0, 0.0, 0.0)),
+              (Matern52(sigma=0.5, length_scale=0.5, aniso=(1.0, 0.5, 2.0)), 0.2,
+               (0.0, 0.6, 0.8))]
 
 
 @pytest.mark.parametrize("case", range(len(RICE_CASES)))

@@ -23,7 +23,7 @@ from ..layout import function_space_records as FSL
 
 _KERNELS = {"squared_exponential": K.SquaredExponential, "rational_quadratic": K.RationalQuadratic,
             "periodic": K.Periodic, "locally_periodic": K.LocallyPeriodic,
-            "thin_plate": K.ThinPlate}
+            "thin_plate": K.ThinPlate, "matern32": K.Matern32, "matern52": K.Matern52}
 
 # Roots are refined to this fraction of the kernel's length scale: far below the scale
 # on which the realization varies, far above float32 resolution of scene coordinates.

@@ -5,15 +5,16 @@ numpy implementations here are the references for gp_kernel.h and gp_mean.h and 
 scene compiler (their device records: layout/gp_records.py); see kernels.py, means.py and
 spectral.py for the pinned conventions.
 """
-from .kernels import (KERNELS, Jet, Kernel, LocallyPeriodic, Periodic, RationalQuadratic,
-                      SquaredExponential, ThinPlate, covariance_matrix)
+from .kernels import (KERNELS, Jet, Kernel, LocallyPeriodic, Matern32, Matern52, Periodic,
+                      RationalQuadratic, SquaredExponential, ThinPlate, covariance_matrix)
 from .means import (MEANS, Box, Capsule, Constant, Difference, Intersection, Mean, Plane,
                     RoundedBox, SmoothDifference, SmoothIntersection, SmoothUnion, Sphere,
                     Torus, Transform, Union, smooth_max, smooth_min)
 from .spectral import RandomFeatures, periodic_order_weights, sample_frequencies
 
 __all__ = [
-    "KERNELS", "Jet", "Kernel", "LocallyPeriodic", "Periodic", "RationalQuadratic",
+    "KERNELS", "Jet", "Kernel", "LocallyPeriodic", "Matern32", "Matern52", "Periodic",
+    "RationalQuadratic",
     "SquaredExponential", "ThinPlate", "covariance_matrix",
     "MEANS", "Box", "Capsule", "Constant", "Difference", "Intersection", "Mean", "Plane",
     "RoundedBox", "SmoothDifference", "SmoothIntersection", "SmoothUnion", "Sphere", "Torus",

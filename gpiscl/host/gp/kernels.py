@@ -24,6 +24,15 @@ Conventions (pinned here, in gp_kernel.h and in the docs):
                        A) gave negative eigenvalues; balls of diameter <= 0.8 R passed.
                        Keep R at least twice the domain diameter. At rho = 0 the
                        derivative covariances use their exact limits (no sqrt(0) NaN).
+  matern32             k = sigma^2 (1 + c rho) e^{-c rho},  c = sqrt(3)/l, rho = sqrt(s):
+                       2 k'(s) = -sigma^2 c^2 e^{-c rho}, 4 k''(s) = sigma^2 c^3 e^{-c rho} / rho.
+                       The 1/rho multiplies (u.Ar)(v.Ar) = O(rho^2): the limit at rho = 0 is
+                       0 (the Hessian of k is continuous, its 4th derivatives are not: the
+                       realizations are once differentiable). -k''(0) = 3 sigma^2 A / l^2.
+  matern52             k = sigma^2 (1 + c rho + c^2 rho^2 / 3) e^{-c rho},  c = sqrt(5)/l:
+                       2 k'(s) = -sigma^2 c^2 (1 + c rho) e^{-c rho} / 3,
+                       4 k''(s) = sigma^2 c^4 e^{-c rho} / 3 (smooth at 0);
+                       -k''(0) = 5 sigma^2 A / (3 l^2).
 
 Every kernel returns the local jet of k as a function of r:
   k(r),  grad k(r) = G,  Hess k(r) = alpha g g^T + diag(D)
@@ -202,6 +211,40 @@ class ThinPlate(_RadialKernel):
 
 
 @dataclass(frozen=True)
+class Matern32(_RadialKernel):
+    sigma: float = 1.0
+    length_scale: float = 1.0
+    aniso: tuple = (1.0, 1.0, 1.0)
+    kind = "matern32"
+    nu = 1.5
+
+    def _radial(self, s):
+        v, c = float(self.sigma) ** 2, np.sqrt(3.0) / self.length_scale
+        rho = np.sqrt(s)
+        e = np.exp(-c * rho)
+        safe = np.where(rho > 0.0, rho, 1.0)
+        ddk4 = np.where(rho > 0.0, v * c**3 * e / safe, 0.0)
+        return v * (1.0 + c * rho) * e, -v * c * c * e, ddk4
+
+
+@dataclass(frozen=True)
+class Matern52(_RadialKernel):
+    sigma: float = 1.0
+    length_scale: float = 1.0
+    aniso: tuple = (1.0, 1.0, 1.0)
+    kind = "matern52"
+    nu = 2.5
+
+    def _radial(self, s):
+        v, c = float(self.sigma) ** 2, np.sqrt(5.0) / self.length_scale
+        rho = np.sqrt(s)
+        cr = c * rho
+        e = np.exp(-cr)
+        return (v * (1.0 + cr + cr * cr / 3.0) * e, -v * c * c * (1.0 + cr) * e / 3.0,
+                v * c**4 * e / 3.0)
+
+
+@dataclass(frozen=True)
 class Periodic(_LogSeparableKernel):
     sigma: float = 1.0
     length_scale: float = 1.0
@@ -230,7 +273,8 @@ class LocallyPeriodic(_LogSeparableKernel):
 
 
 KERNELS = {cls.kind: cls for cls in
-           (SquaredExponential, RationalQuadratic, Periodic, LocallyPeriodic, ThinPlate)}
+           (SquaredExponential, RationalQuadratic, Periodic, LocallyPeriodic, ThinPlate,
+            Matern32, Matern52)}
 
 
 def _observation_rows(x1, x2, u1, u2):

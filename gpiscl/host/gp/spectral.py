@@ -23,6 +23,15 @@ periodic             per axis, exp(-(2/l^2) sin^2(pi w c t)) = exp(-z (1 - cos(2
 locally_periodic     the product of two kernels has the convolution of their measures as
                      its spectral measure: omega = omega_periodic + omega_SE, independent.
                      (E[cos((o1 + o2).r)] = E[cos o1.r] E[cos o2.r] for symmetric measures.)
+matern32, matern52   Matern nu = p + 1/2 (3/2, 5/2). With x = sqrt(2 nu s) / l,
+                     k / sigma^2 = 2^(1-nu) x^nu K_nu(x) / Gamma(nu), and for G ~ Gamma(nu, 1)
+                     E[exp(-c / G)] = 2 c^(nu/2) K_nu(2 sqrt c) / Gamma(nu); at c = x^2 / 4 =
+                     nu s / (2 l^2) the two agree, so exp(-s tau / 2) with tau = nu / (l^2 G)
+                     mixes to the kernel: omega = sqrt(nu / G) sqrt(A) z / l, a multivariate
+                     Student-t with 2 nu degrees of freedom (density ~ (2 nu / l^2 + |w|^2)
+                     ^-(nu + 3/2) for A = I). E[omega omega^T] = A nu / ((nu - 1) l^2): 3 A / l^2
+                     and 5 A / (3 l^2), i.e. -k''(0) / sigma^2. The 4th moment
+                     (E[1/G^2] = 1/((nu-1)(nu-2))) is infinite for 3/2, finite for 5/2.
 thin_plate           not sampled: raises ValueError (use function space).
 """
 from __future__ import annotations
@@ -70,6 +79,11 @@ def sample_frequencies(kernel: Kernel, n: int, rng: np.random.Generator) -> np.n
         al = kernel.alpha
         tau = rng.gamma(shape=al, scale=1.0 / (al * kernel.length_scale**2), size=n)
         return np.sqrt(tau)[:, None] * rng.standard_normal((n, 3)) * sqrt_a
+    if kind in ("matern32", "matern52"):
+        nu = kernel.nu
+        g = rng.gamma(shape=nu, scale=1.0, size=n)
+        return (np.sqrt(nu / g) / kernel.length_scale)[:, None] * rng.standard_normal((n, 3)) \
+            * sqrt_a
     if kind in ("periodic", "locally_periodic"):
         omega = 2.0 * np.pi * kernel.w * sqrt_a * _periodic_orders(kernel.length_scale,
                                                                    (n, 3), rng)

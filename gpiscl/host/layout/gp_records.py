@@ -80,7 +80,7 @@ MEAN_NODE = Struct("MeanNode", (
 ))
 
 KERNEL_KINDS = {"squared_exponential": 0, "rational_quadratic": 1, "periodic": 2,
-                "locally_periodic": 3, "thin_plate": 4}
+                "locally_periodic": 3, "thin_plate": 4, "matern32": 5, "matern52": 6}
 FIELD_KINDS = {"none": 0, "linear": 1, "radial": 2, "grid": 3}
 MEAN_KINDS = {"constant": 0, "plane": 1, "sphere": 2, "box": 3, "rounded_box": 4,
               "torus": 5, "capsule": 6, "grid": 7, "union": 16, "intersection": 17,

@@ -132,6 +132,14 @@ KERNELS = Tagged("kernel", {
                                 "w": Field(Number(gt=0), 6.283185307179586),
                                 "se_length_scale": Field(Number(gt=0), 1.0), "aniso": _ANISO,
                                 "sigma_field": _SIGMA_FIELD}),
+    # Matern nu = 3/2, 5/2: sigma^2 (1 + c rho) e^(-c rho), c = sqrt(3)/l, and
+    # sigma^2 (1 + c rho + c^2 rho^2 / 3) e^(-c rho), c = sqrt(5)/l; rho^2 = r^T A r
+    "matern32": Record({"sigma": Field(Number(gt=0), 1.0),
+                        "length_scale": Field(Number(gt=0), 1.0), "aniso": _ANISO,
+                        "sigma_field": _SIGMA_FIELD}),
+    "matern52": Record({"sigma": Field(Number(gt=0), 1.0),
+                        "length_scale": Field(Number(gt=0), 1.0), "aniso": _ANISO,
+                        "sigma_field": _SIGMA_FIELD}),
     "thin_plate": Record({"sigma": Field(Number(gt=0), 1.0),
                           "radius": Field(Number(gt=0), 1.0), "aniso": _ANISO,
                           "sigma_field": _SIGMA_FIELD}),
@@ -157,9 +165,9 @@ def field_minimum(field: dict, proxy: dict) -> float:
     return (v + sum(gi * (ci - oi) for gi, ci, oi in zip(g, c, o))
             - r * sum(gi * gi for gi in g) ** 0.5)
 
-# Random Fourier features per realization when "features" is null: the RQ spectrum is a
-# heavy-tailed scale mixture and needs more features to reach the same covariance error.
-DEFAULT_FEATURES = {"rational_quadratic": 1024}
+# Random Fourier features per realization when "features" is null: the RQ and Matern spectra are
+# heavy-tailed scale mixtures and need more features to reach the same covariance error.
+DEFAULT_FEATURES = {"rational_quadratic": 1024, "matern32": 1024, "matern52": 1024}
 DEFAULT_FEATURES_OTHER = 256
 
 class _FunctionSpaceSampler(Record):

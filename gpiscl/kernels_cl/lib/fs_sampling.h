@@ -413,7 +413,8 @@ inline int fs_isotropic_radial(GpKernel p)
     /* sigma(x), l(x) correlate d_T f(x_h) with the ray's values: no closed form */
     return !gp_kernel_nonstationary(p)
         && (p.kind == GP_KERNEL_SQUARED_EXPONENTIAL || p.kind == GP_KERNEL_RATIONAL_QUADRATIC
-            || p.kind == GP_KERNEL_THIN_PLATE)
+            || p.kind == GP_KERNEL_THIN_PLATE || p.kind == GP_KERNEL_MATERN32
+            || p.kind == GP_KERNEL_MATERN52)
         && p.aniso.x == p.aniso.y && p.aniso.y == p.aniso.z;
 }
 

@@ -54,6 +54,25 @@ inline void gp_radial(GpKernel p, GP_REAL s, GP_REAL* k, GP_REAL* dk2, GP_REAL* 
         *ddk4 = rho > 0 ? 6 * v / rho : (GP_REAL)0;
         return;
     }
+    if (p.kind == GP_KERNEL_MATERN32 || p.kind == GP_KERNEL_MATERN52) {
+        /* kernels.py Matern32/Matern52: c = sqrt(2 nu) / l, rho = sqrt(s) */
+        GP_REAL rho = sqrt(s);
+        if (p.kind == GP_KERNEL_MATERN32) {
+            GP_REAL c = (GP_REAL)1.7320508075688772 / (GP_REAL)p.length_scale;
+            GP_REAL e = exp(-c * rho);
+            *k = v * (1 + c * rho) * e;
+            *dk2 = -v * c * c * e;
+            /* c^3 e / rho multiplies (u.Ar)(v.Ar) = O(rho^2): the limit at rho = 0 is 0 */
+            *ddk4 = rho > 0 ? v * c * c * c * e / rho : (GP_REAL)0;
+        } else {
+            GP_REAL c = (GP_REAL)2.23606797749979 / (GP_REAL)p.length_scale, cr = c * rho;
+            GP_REAL e = exp(-cr);
+            *k = v * (1 + cr + cr * cr / 3) * e;
+            *dk2 = -v * c * c * (1 + cr) * e / 3;
+            *ddk4 = v * c * c * c * c * e / 3;
+        }
+        return;
+    }
     GP_REAL l2 = (GP_REAL)p.length_scale * (GP_REAL)p.length_scale;
     if (p.kind == GP_KERNEL_RATIONAL_QUADRATIC) {
         GP_REAL a = (GP_REAL)p.alpha, x = s / (2 * a * l2), base = 1 + x;

@@ -6,7 +6,8 @@
  * Memory: features are never stored. Feature i is a pure function of
  * (realization key, object, i), regenerated from Philox whenever it is needed, so a path's
  * realization costs O(1) memory (its uint2 key) whatever M is and however many paths are
- * in flight; the price is one Philox call (two for periodic/RQ) per feature evaluation.
+ * in flight; the price is one Philox call (two for periodic, more for RQ and Matern's
+ * gamma draws) per feature evaluation.
  * Streams: Philox4x32-10 (Random123's, as in pyopencl's philox.cl) with counter
  * (key.x, key.y, object, i) and key (call, WS_PHILOX_KEY1). rng.h uses key word 1 =
  * 0x6a09e667, so the two generators never share a stream. Realization key: (pixel, sample)
@@ -266,11 +267,18 @@ inline void ws_features(GpKernel k, __global const float* order_cdf, int order_c
     float scale = 0.0f;
     if (k.kind == GP_KERNEL_SQUARED_EXPONENTIAL) scale = 1.0f / k.length_scale;
     else if (k.kind == GP_KERNEL_LOCALLY_PERIODIC) scale = 1.0f / k.se_length_scale;
-    else if (k.kind != GP_KERNEL_RATIONAL_QUADRATIC && k.kind != GP_KERNEL_PERIODIC)
+    else if (k.kind != GP_KERNEL_RATIONAL_QUADRATIC && k.kind != GP_KERNEL_PERIODIC
+             && k.kind != GP_KERNEL_MATERN32 && k.kind != GP_KERNEL_MATERN52)
         scale = NAN;
     wsf s = (wsf)scale;
     if (k.kind == GP_KERNEL_RATIONAL_QUADRATIC)    /* tau_g ~ Gamma(a, rate a l^2) */
         s = sqrt(ws_gamma(k.alpha, key, object, idx) / (k.alpha * k.length_scale * k.length_scale));
+    if (k.kind == GP_KERNEL_MATERN32 || k.kind == GP_KERNEL_MATERN52) {
+        /* multivariate Student-t, 2 nu degrees of freedom: sqrt(nu / G) / l, G ~ Gamma(nu, 1)
+         * (spectral.py derives it) */
+        float nu = k.kind == GP_KERNEL_MATERN32 ? 1.5f : 2.5f;
+        s = sqrt(nu / ws_gamma(nu, key, object, idx)) / k.length_scale;
+    }
     *tx = sa.x * s * z0;
     *ty = sa.y * s * z1;
     *tz = sa.z * s * z2;
@@ -408,7 +416,11 @@ inline float ws_lambda2(GpKernel k, float3 d)
             v += s / (k.se_length_scale * k.se_length_scale);
         return v;
     }
-    return s / (k.length_scale * k.length_scale);   /* SE; RQ too since E[tau_g] = 1/l^2 */
+    float v = s / (k.length_scale * k.length_scale);   /* SE; RQ too since E[tau_g] = 1/l^2 */
+    /* Matern: E[nu / G] = nu / (nu - 1) for G ~ Gamma(nu, 1) */
+    if (k.kind == GP_KERNEL_MATERN32) v *= 3.0f;
+    if (k.kind == GP_KERNEL_MATERN52) v *= 5.0f / 3.0f;
+    return v;
 }
 
 inline float ws_amplitude(GpKernel k, int M) { return sqrt(2.0f * k.sigma2 / (float)M); }
