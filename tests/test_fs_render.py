@@ -91,6 +91,30 @@ def test03_global_memory_agrees_with_weight_space(device):
             assert abs(diff) < z_threshold(1) * se
 
 
+@pytest.mark.parametrize("kernel", ["matern32", "matern52"])
+def test03b_matern_global_memory_agrees_with_weight_space(device, kernel):
+    """test03 for the Matern kernels: weight space with 1024 features of their Student-t
+    spectra against function space's general conditional sampler (global memory), per
+    pixel (z-test, Bonferroni) and in the image mean."""
+    spp = 32
+    k = {"type": kernel, "sigma": 0.3, "length_scale": 0.25}
+
+    def render(sampler):
+        scene = gpis_scene(sampler, "diffuse", 0.9, LIGHTS, spp, seed=7, max_depth=64,
+                           rr_start=8)
+        scene["shapes"][0]["kernel"] = k
+        return run(scene, device).image
+
+    ws = render({"type": "weight_space", "features": 1024})
+    g = render(fs("global", memory_cap=64))
+    assert_agree(g.mean, g.stderr, ws.mean, ws.stderr, what=f"{kernel} global vs weight space")
+    diff = g.mean.mean() - ws.mean.mean()
+    se = math.sqrt((g.stderr**2).sum() + (ws.stderr**2).sum()) / g.mean.size
+    print(f"{kernel}: image mean {g.mean.mean():.4f} vs weight space {ws.mean.mean():.4f}: "
+          f"{diff / ws.mean.mean():+.2%} +- {se / ws.mean.mean():.2%}")
+    assert abs(diff) < z_threshold(1) * se
+
+
 def test04_failed_free_flights_are_counted_and_reported(device):
     """A length scale far below the proxy size needs more than FS_MAX_STEPS steps (at
     most 2 length scales each, fs_march.h): each such ray is counted in gpis_failed and

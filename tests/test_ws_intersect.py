@@ -264,6 +264,8 @@ def test_crossing_rate_matches_rice(device, prg, case):
     closed = math.exp(-u * u / (2 * kernel.variance)) * math.sqrt(l2 / kernel.variance) / (2 * math.pi)
     target, target_se = rice_target(kernel, u, d, m, 20_000, rng)
     z = abs(rate - target) / math.hypot(rate_se, target_se)
+    print(f"{kernel.kind} u {u}: rate {rate:.4f} +- {rate_se:.4f}, target {target:.4f}, "
+          f"closed {closed:.4f}, z {z:.2f}")
     # target - closed is the finite-M correction (-0.2 % to -1 % at M = 128)
     assert z < z_threshold(len(RICE_CASES)), (rate, target, closed, z)
 
