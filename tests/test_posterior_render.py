@@ -8,7 +8,7 @@ import pyopencl as cl
 import pytest
 
 from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, kernel_source
-from gpiscl.host.gp import RationalQuadratic
+from gpiscl.host.gp import Matern32, Matern52, RationalQuadratic
 from gpiscl.host.gp import Sphere
 from gpiscl.host.gp import SquaredExponential
 from gpiscl.host.layout import gp_records
@@ -129,6 +129,10 @@ CASES = {
                   False),
     # values, normals (three derivative rows per point) and inside/outside points, RQ
     "rq_normals": (RationalQuadratic(sigma=0.5, length_scale=0.5, alpha=1.5), True),
+    # Matern (function-space posteriors: the general conditional sampler), with and
+    # without derivative rows
+    "m32_normals": (Matern32(sigma=0.5, length_scale=0.5), True),
+    "m52_values": (Matern52(sigma=0.5, length_scale=0.625, aniso=(1.0, 0.75, 1.5)), False),
     # a variance field: no function of x - x' (gp_cov_ns on the device)
     "se_sigma_field": (NonStationary(SquaredExponential(sigma=0.5, length_scale=0.5),
                                      sigma_field=LinearField(value=1.0,
