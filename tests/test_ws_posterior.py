@@ -317,9 +317,14 @@ def test06_scene_key_accepts_weight_space(tmp_path):
     s = sphere_scene(1.2, 0.3, 1, {"file": pts})
     s["shapes"][0]["sampler"] = {"type": "weight_space", "features": 64}
     load_scene(s)
-    bad = dict(s, shapes=[dict(s["shapes"][0], kernel={"type": "periodic", "sigma": 0.3})])
-    with pytest.raises(SceneError, match="squared_exponential and rational_quadratic"):
-        load_scene(bad)
+    for kind in ("periodic", "matern32", "matern52"):
+        bad = dict(s, shapes=[dict(s["shapes"][0], kernel={"type": kind, "sigma": 0.3})])
+        with pytest.raises(SceneError, match="squared_exponential and rational_quadratic"):
+            load_scene(bad)
+    # function space conditions Matern priors with the general conditional sampler
+    fs = dict(s, shapes=[dict(s["shapes"][0], kernel={"type": "matern32", "sigma": 0.3},
+                              sampler={"type": "function_space"})])
+    load_scene(fs)
     np.savetxt(tmp_path / "big.xyz", fibonacci_sphere(OBS.WS_MAX_ROWS + 1))
     s["shapes"][0]["observations"] = {"file": str(tmp_path / "big.xyz")}
     with pytest.raises(SceneError, match="weight_space sampler"):
