@@ -11,7 +11,7 @@ import pyopencl as cl
 import pytest
 
 from gpiscl import render_result
-from gpiscl.host.gp import Plane, Sphere, SquaredExponential
+from gpiscl.host.gp import Matern52, Plane, Sphere, SquaredExponential
 from gpiscl.host.gp import weight_space as ws
 from gpiscl.host.layout.gp_records import pack_kernel, pack_mean
 from reference import pixel_rays
@@ -158,13 +158,18 @@ __kernel void first_hit_normals(__global const GpKernel* kp, __global const Mean
 """
 
 
-def test_surface_type_slopes_follow_the_beckmann_law(device):
+@pytest.mark.parametrize("kind", ["squared_exponential", "matern52"])
+def test_surface_type_slopes_follow_the_beckmann_law(device, kind):
     """Plane mean y, small sigma / l: the surface is the height field y = -g(x, z), and
     vertical rays hit it uniformly in (x, z), so hit normals have slopes
     n_x / n_y = g_x ~ N(0, sigma^2 a_x / l^2) (our SE convention, A = diag(aniso)) up to
-    O(sigma^2 / l^2): a Beckmann distribution of roughness alpha_i^2 = 2 sigma^2 a_i / l^2."""
+    O(sigma^2 / l^2): a Beckmann distribution of roughness alpha_i^2 = 2 sigma^2 a_i / l^2.
+    Matern 5/2: -k''(0) = 5 sigma^2 a_x / (3 l^2) instead."""
     sigma, ell, aniso, m, n = 0.004, 0.2, (1.0, 1.0, 4.0), 256, 20000
-    kernel = SquaredExponential(sigma=sigma, length_scale=ell, aniso=aniso)
+    if kind == "matern52":
+        kernel, factor = Matern52(sigma=sigma, length_scale=ell, aniso=aniso), 5.0 / 3.0
+    else:
+        kernel, factor = SquaredExponential(sigma=sigma, length_scale=ell, aniso=aniso), 1.0
     prg = build(device, SLOPE_KERNEL)
     rng = np.random.default_rng(4)
     o = np.stack([rng.uniform(-5, 5, n), np.full(n, 0.5), rng.uniform(-5, 5, n)], -1)
@@ -182,7 +187,7 @@ def test_surface_type_slopes_follow_the_beckmann_law(device):
     z = z_threshold(4)
     for axis, a in ((0, aniso[0]), (2, aniso[2])):
         slope = out[:, axis].astype(float) / out[:, 1]
-        var = sigma**2 * a / ell**2
+        var = factor * sigma**2 * a / ell**2
         # sampling error of a variance estimate (Gaussian slopes: sd = var sqrt(2 / n)) and
         # the O(var^2) height-field terms (1 + g_y)^-2 ~ 1 + 3 var
         est = np.mean(slope**2)
