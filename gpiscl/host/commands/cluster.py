@@ -45,12 +45,15 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
-import pyopencl as cl
-from distributed import Client, KilledWorker, LocalCluster, get_worker, wait
 
 from ..errors import SceneError
+
+try:
+    from distributed import Client, KilledWorker, LocalCluster, get_worker, wait
+except ImportError:   # an optional extra: say how to get it, in one line
+    raise SceneError("<install>", "cluster", "rendering on a cluster needs Dask: "
+                     "pip install 'gpiscl[distributed]'") from None
 from ..io.output_files import scene_inputs
-from ..layout.records import COUNTERS
 from ..render.batching import BatchSizer
 from ..render.device import shared_device
 from ..render.integrator import RenderResult, RenderStats, WavefrontIntegrator
@@ -236,8 +239,9 @@ def _worker_name() -> str:
 
 # ---- units, run on the workers ------------------------------------------------------------
 
-COUNTED = ("paths", "rays", "shadow_rays", "nan_paths", "truncated_paths", "killed_paths",
-           "gpis_failed")
+# every count of RenderStats a unit reports: the integrator's own, summed over units
+COUNTED = ("paths", "rays", "shadow_rays", "truncated_paths", "fs_flights", "fs_samples",
+           "fs_evals", *WavefrontIntegrator.DEVICE_TOTALS)
 
 
 @dataclass
@@ -262,12 +266,8 @@ class UnitResult:
 
 
 def _counts(integ: WavefrontIntegrator) -> dict:
-    cl.enqueue_copy(integ.device.queue, integ.counters_host, integ.counters)
-    device = {"nan_paths": "nan_paths", "killed_paths": "killed", "gpis_failed": "gpis_failed"}
-    out = {k: int(integ.counters_host[COUNTERS[v]]) for k, v in device.items()}
-    out.update({k: getattr(integ.stats, k) for k in ("paths", "rays", "shadow_rays",
-                                                      "truncated_paths")})
-    return out
+    integ.read_counters()
+    return {k: getattr(integ.stats, k) for k in COUNTED}
 
 
 def render_unit(payload: ScenePayload, batch_size: int, start: int, count: int) -> UnitResult:

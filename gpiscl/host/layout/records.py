@@ -153,13 +153,17 @@ PRIM_KINDS = {"sphere": 0, "rectangle": 1, "disk": 2, "triangle": 3}
 MATERIAL_KINDS = {"diffuse": 0, "mirror": 1, "null": 2, "rough_conductor": 3}
 LIGHT_KINDS = {"environment": 0, "environment_map": 1, "point": 2, "sphere": 3,
                "rectangle": 4, "directional": 5}
-# Device-side counters; the host reads only rays_out between bounces.
+# Device-side counters, int32. The host reads them after every bounce; the first four are
+# the bounce's queue sizes, the rest counts of failures and work.
 COUNTERS = {"rays_out": 0, "hits": 1, "escaped": 2, "shadow": 3, "nan_paths": 4,
             "killed": 5, "gpis_failed": 6, "depth_cut": 7,
             # function-space work: flights (one object along one ray), GP values drawn,
-            # step-rule moment evaluations (fs_march.h); int32, per render
+            # step-rule moment evaluations (fs_march.h)
             "fs_flights": 8, "fs_samples": 9, "fs_evals": 10}
-NUM_COUNTERS = 11
+NUM_COUNTERS = len(COUNTERS)
+# Counters the host adds up into Python ints after each bounce and zeroes on the device, so
+# they cannot wrap however long the render (GP values drawn pass 2^31 at ~512^2 x 256 spp).
+BOUNCE_SUMMED = ("fs_flights", "fs_samples", "fs_evals")
 GPIS_PROXIES = {"box": 0, "sphere": 1, "mesh": 2}
 GPIS_SAMPLERS = {"weight_space": 0, "function_space": 1}
 GPIS_MEMORIES = {"none": 0, "renewal": 1, "renewal_plus": 2, "global": 3}

@@ -246,7 +246,7 @@ class WavefrontIntegrator:
         self.generate_camera_rays(num_paths)
         n, cur, nxt = num_paths, self.rays[0], self.rays[1]
         for bounce in range(self.max_iterations):
-            cl.enqueue_fill_buffer(queue, self.counters, np.int32(0), 0, 16)  # per-bounce counters
+            cl.enqueue_fill_buffer(queue, self.counters, np.int32(0), 0, 16)  # queue sizes
             self._upload_params(bounce=bounce)
             self.intersect(cur, n)
             self.gpis_free_flight(cur, n)
@@ -257,6 +257,7 @@ class WavefrontIntegrator:
             self.gpis_shadow(n)
             self.shadow_rays(n)
             cl.enqueue_copy(queue, self.counters_host, self.counters)
+            self._sum_bounce_counters()
             self.stats.rays += n
             self.stats.shadow_rays += int(self.counters_host[layouts.COUNTERS["shadow"]])
             n = int(self.counters_host[layouts.COUNTERS["rays_out"]])
@@ -272,6 +273,26 @@ class WavefrontIntegrator:
         self.stats.paths += num_paths
         self.stats.batches += 1
         return True
+
+    # RenderStats fields read from device counters that count over the whole render
+    DEVICE_TOTALS = {"nan_paths": "nan_paths", "killed_paths": "killed",
+                     "gpis_failed": "gpis_failed", "depth_cut_paths": "depth_cut"}
+
+    def _sum_bounce_counters(self):
+        """Add the bounce's work counters (just copied to counters_host) into stats and
+        zero them on the device (layouts.BOUNCE_SUMMED: int32 would wrap over a render)."""
+        first = layouts.COUNTERS[layouts.BOUNCE_SUMMED[0]]
+        for k, name in enumerate(layouts.BOUNCE_SUMMED):
+            assert layouts.COUNTERS[name] == first + k   # one contiguous fill below
+            setattr(self.stats, name, getattr(self.stats, name) + int(self.counters_host[first + k]))
+        cl.enqueue_fill_buffer(self.device.queue, self.counters, np.int32(0), 4 * first,
+                               4 * len(layouts.BOUNCE_SUMMED))
+
+    def read_counters(self):
+        """Bring the device's whole-render counters into stats (after the last batch)."""
+        cl.enqueue_copy(self.device.queue, self.counters_host, self.counters)
+        for stat, name in self.DEVICE_TOTALS.items():
+            setattr(self.stats, stat, int(self.counters_host[layouts.COUNTERS[name]]))
 
     def render(self, spp: int, time_limit: float | None = None, progress=None,
                stop=None) -> RenderResult:
@@ -316,15 +337,7 @@ class WavefrontIntegrator:
         except KeyboardInterrupt:
             self.stats.interrupted = True
         self.device.queue.finish()
-        cl.enqueue_copy(self.device.queue, self.counters_host, self.counters)
-        count = lambda name: int(self.counters_host[layouts.COUNTERS[name]])
-        self.stats.nan_paths = count("nan_paths")
-        self.stats.killed_paths = count("killed")
-        self.stats.gpis_failed = count("gpis_failed")
-        self.stats.depth_cut_paths = count("depth_cut")
-        self.stats.fs_flights = count("fs_flights")
-        self.stats.fs_samples = count("fs_samples")
-        self.stats.fs_evals = count("fs_evals")
+        self.read_counters()
         self.stats.seconds = time.perf_counter() - start
         self.stats.kernel_table = self.program.timings.table()
         return RenderResult(self.film.read(), self.stats)
