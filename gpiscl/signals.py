@@ -22,11 +22,13 @@ import os
 import signal
 import sys
 import threading
+import time
 from contextlib import contextmanager
 
 SIGNALS = tuple(s for s in (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None))
                 if s is not None)
 GRACE_SECONDS = 1.0
+REPEAT_SECONDS = 0.5    # the same signal again within this is the same request
 
 
 def exit_code(signum: int) -> int:
@@ -56,6 +58,8 @@ class _State:
     installed = False
     heard = 0              # signals the watchdog has seen
     acknowledged = False   # main() has reported the stop: the watchdog must not again
+    last_signum = None     # the last signal the watchdog counted, and when
+    last_time = 0.0
 
 
 _state = _State()
@@ -107,6 +111,13 @@ def _watchdog(fd: int):
         for signum in data:
             if signum not in SIGNALS:
                 continue
+            now = time.monotonic()
+            # `timeout`, `kill -- -PGID` and terminals send one stop to the process and
+            # again to its group: the same signal twice within a moment is one request,
+            # not a user insisting (D21 lost whole renders to the duplicate)
+            if signum == _state.last_signum and now - _state.last_time < REPEAT_SECONDS:
+                continue
+            _state.last_signum, _state.last_time = signum, now
             _state.heard += 1
             first = _state.signum if _state.signum is not None else signum
             if _state.mode == "start-up":

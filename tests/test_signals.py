@@ -137,3 +137,18 @@ def test_signal_during_an_sdf_bake_acts_at_once_and_leaves_no_files(tmp_path):
     assert "Traceback" not in err and "nothing written" in err, err
     assert not (tmp_path / "b.exr").exists()
     assert not cache.exists() or not any(p.is_file() for p in cache.rglob("*"))
+
+
+def test_a_signal_sent_twice_at_once_is_one_stop(tmp_path):
+    """`timeout` and `kill -- -PGID` deliver one stop to the process and again to its group
+    within microseconds (../shared/bad-input-cases/D21): that is one request, so the
+    samples so far are still written (the duplicate used to mean 'stopped at once,
+    nothing written')."""
+    out = tmp_path / "img.exr"
+    proc = start_render(tmp_path, "-o", str(out))
+    wait_for_line(proc, "rendering ")
+    time.sleep(2.5)
+    proc.send_signal(signal.SIGTERM)
+    seconds, err = stop(proc, signal.SIGTERM)
+    assert proc.returncode == 143 and "nothing written" not in err, err
+    assert "interrupted by SIGTERM at " in err and read_exr(out)["samples"].max() >= 1
