@@ -8,6 +8,7 @@ if __name__ == "__main__":
     _signals.install()
 
 import argparse
+import importlib
 import copy
 import math
 import sys
@@ -185,6 +186,8 @@ def cmd_render(args) -> int:
     from .host.render.progress import SppBar
     from .host.render.aov import parse as aov_names
 
+    if args.cluster:
+        importlib.import_module(f"{__package__}.host.commands.cluster")  # before any work: is Dask there?
     scene = _load(args)
     data = copy.deepcopy(scene.data)
     if args.resolution:
@@ -287,6 +290,8 @@ def cmd_uq(args) -> int:
     from .host.io.output_files import check_writable, scene_inputs
     from .host.commands.uq import check_uq_scene, merge_partials, uq_output_paths, write_uq_outputs
 
+    if args.cluster:
+        importlib.import_module(f"{__package__}.host.commands.cluster")  # before any work: is Dask there?
     if args.merge:
         sums, meta = merge_partials(args.merge)
         if sums.n < 2:

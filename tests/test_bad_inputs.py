@@ -155,6 +155,29 @@ def test_unreadable_points_file_is_one_line(tmp_path):
     assert "shapes[0].observations.file" in r.stderr and "Permission denied" in r.stderr
 
 
+def test_observed_points_beyond_float32_are_refused(tmp_path):
+    """A point at 1e300 rendered with thousands of undecided root searches (exit 0)."""
+    (tmp_path / "p.xyz").write_text("0 0.8 0\n1e300 0 0\n")
+    shape = gpis({"type": "sphere", "radius": 0.8}, sampler={"type": "function_space"},
+                 observations={"file": "p.xyz"})
+    refused(scene(tmp_path, [shape]), "shapes[0].observations.file", "beyond")
+
+
+def test_cluster_without_dask_is_one_line(tmp_path, monkeypatch, capsys):
+    """Dask is an optional extra: without it --cluster says how to get it, before any work."""
+    from gpiscl.__main__ import main
+    monkeypatch.setitem(sys.modules, "distributed", None)     # import distributed fails
+    monkeypatch.delitem(sys.modules, "gpiscl.host.commands.cluster", raising=False)
+    import gpiscl.host.commands as commands
+    monkeypatch.delattr(commands, "cluster", raising=False)
+    path = scene(tmp_path, [{"type": "sphere", "center": [0, 0, 0], "radius": 0.5}])
+    assert main(["render", str(path), "--cluster", "local:1", "-o",
+                 str(tmp_path / "x.exr")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "gpiscl[distributed]" in err[0], err
+    assert not (tmp_path / "x.exr").exists()
+
+
 def test_the_command_line_gives_these_as_one_line(tmp_path):
     (tmp_path / "m.obj").write_text(CUBE.replace("v 1 1 1", "v nan 0 0"))
     path = scene(tmp_path, [{"type": "mesh", "file": "m.obj"}])

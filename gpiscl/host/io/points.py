@@ -6,6 +6,8 @@ import re
 
 import numpy as np
 
+from .float_range import array_problem
+
 EXTENSIONS = (".xyz", ".txt", ".npy")
 
 
@@ -38,4 +40,7 @@ def load_points(path: str) -> np.ndarray:
         raise ValueError("no points")
     if not np.isfinite(a).all():
         raise ValueError("points contain non-finite numbers")
+    problem = array_problem(a, "points")   # float32 on the device, like meshes and grids
+    if problem:
+        raise ValueError(problem)
     return a
