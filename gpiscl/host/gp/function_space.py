@@ -154,7 +154,7 @@ def return_rate(m, m1, s, r, g, outside):
         return 0.0
     a = (m1 - r / s * m) / g
     e = (math.exp(-0.5 * a * a) / _SQRT2PI / (a * a) * (1 - 3 / (a * a)) if a < -8.0
-         else math.exp(-0.5 * a * a) / _SQRT2PI + a * (1.0 - _q(a)))
+         else math.exp(-0.5 * a * a) / _SQRT2PI + a * _q(-a))   # Phi(a) = Q(-a): no cancellation for a < 0, as fs_return_rate
     return math.exp(-0.5 * (m / s) ** 2) / _SQRT2PI / s * g * e
 
 

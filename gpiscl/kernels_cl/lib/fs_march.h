@@ -225,7 +225,6 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
         if (n - fixed >= window) {
             n = fs_slide(p, mean, mc, S, fixed, n, window / 2, &res.status);
             if (res.status) return res;
-            res.windows++;
         }
         if (dt > 0.0) {                        /* uniform baseline: one row per step */
             tb = fmin(ta + h, ray.t1);

@@ -33,8 +33,8 @@
  *                    three gradient components, each derivative with its own
  *                    direction), the most recent `cap` of them; the path's
  *                    observations live in a per-path ring of capacity cap
- *                    (FsVertex.obs_end/obs_count). The ring holds only genuine draws,
- *                    never the interpolated f(x_h) = 0 or the secant slope (see the hit).
+ *                    (FsVertex.obs_end/obs_count). The ring holds genuine draws and,
+ *                    at a hit, the crossing's f(x_h) = 0 (fs_march.h), never a secant.
  *  - Normal at a hit: the slope along d is drawn from its law at a down-crossing
  *    (fs_march.h); the tangential components from their conditional law given all rows,
  *    f(x_h) = 0 and that slope. Isotropic radial kernels (SE, RQ, thin-plate with equal
@@ -118,7 +118,6 @@ typedef struct {
     double t;               /* hit distance, or t1 */
     double3 grad;           /* sampled gradient of f at the hit (outward, grad . d < 0) */
     int samples, evals;     /* work done: GP values drawn, step-rule moment evaluations */
-    int windows;            /* window slides (fs_march.h) */
     int new_first, new_end;  /* global: rows [new_first, new_end) join the memory */
 } FsResult;
 

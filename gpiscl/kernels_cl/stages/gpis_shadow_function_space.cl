@@ -14,9 +14,9 @@
  * continuation's stream 0), so E[V | prefix] = T(prefix), the model's transmittance.
  * The pixel estimate is a sum of such terms, each linear in one V, so the correlation
  * that one shared realization would put between a shadow ray and the later path (weight
- * space has it, we do not) cannot change any expectation. Crossings are found on the
- * same sample grid as free flight, so the visibility agrees with what a continuation
- * ray along the same segment would see. */
+ * space has it, we do not) cannot change any expectation. Crossings are found by the
+ * same adaptive march as free flight (fs_march.h), so the visibility agrees in law with
+ * what a continuation ray along the same segment would see. */
 __kernel void gpis_shadow_function_space(__constant RenderParams* params, int first,
                                          int end, PATH_PARAMS(path),
                                          SHADOW_PARAMS(shadow),
