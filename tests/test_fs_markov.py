@@ -4,8 +4,10 @@ against exact Gaussian laws, first passage against a dense joint sample and the 
 sampler, Rice's crossing rate, white furnaces, and renders against the general sampler."""
 import copy
 import math
+import re
 
 from decimal import Decimal, getcontext
+from pathlib import Path
 import numpy as np
 import pytest
 from scipy import stats as sst
@@ -121,6 +123,12 @@ def test01_transition_is_the_kernels_joint_law(device, name):
         assert abs(kern.value(x[None])[0] - k[0]) < 1e-12
         assert abs(kern.cov_vd(np.zeros(3), x[None], d)[0] - k[1]) < 1e-12
         assert abs(kern.cov_dd(np.zeros(3), d, x[None], d)[0] + k[2]) < 1e-12
+    # fs_march.h's length scale l_d (the lag of correlation e^-1/2) as fs_markov.h's
+    # FS_MK_ELL32/52 give it: lambda l_d
+    text = (Path(__file__).resolve().parent.parent / "gpiscl" / "kernels_cl" / "lib"
+            / "fs_markov.h").read_text()
+    ell = float(re.search(r"#define FS_MK_ELL%s ([0-9.]+)" % kern.kind[-2:], text).group(1))
+    assert abs(kern.value((ell / L * d)[None])[0] / kern.sigma ** 2 - math.exp(-0.5)) < 1e-14
     for lh in (1e-3, 1e-2, 0.3, 1.0, 4.0):
         h = lh / L
         A, Q = transition(device, kern, h, d)
@@ -342,3 +350,24 @@ def test07_markov_and_general_samplers_render_alike(device, kernel, memory):
     print(f"{kernel} {memory}: image mean Markov {a.mean.mean():.4f}, general "
           f"{b.mean.mean():.4f} ({diff / b.mean.mean():+.2%} +- {se / b.mean.mean():.2%})")
     assert abs(diff) < z_threshold(1) * se
+
+
+@pytest.mark.parametrize("name", ["m32", "m52_aniso"])
+def test08_hit_gradients_match_the_general_sampler(device, name):
+    """The gradient at the first hit (constant mean 0.5 sigma, a ray oblique to the
+    anisotropy axes): Markov (tangential parts in the A-orthonormal frame, independent of
+    the ray) against the general sampler (isotropic: the same closed form; anisotropic:
+    two rows conditioned on everything): each component and the along-ray slope,
+    two-sample KS, Bonferroni over 4 x 2."""
+    kern, d = KERNELS[name], np.asarray(DIRS[name])
+    l_d = 1.0 / lam(kern, d)
+    n, mean = 12000, Constant(0.5 * kern.sigma)
+    mk = flights(device, kern, mean, n, markov=True, d=d, t1=8 * l_d, seed=61)
+    gen = flights(device, kern, mean, n, markov=False, d=d, t1=8 * l_d, seed=62)
+    assert np.all(mk[:, 5] == 0) and np.all(gen[:, 5] == 0)
+    a, b = mk[mk[:, 0] >= 0, 1:4], gen[gen[:, 0] >= 0, 1:4]
+    for j, (x, y) in enumerate(zip([*a.T, a @ d], [*b.T, b @ d])):
+        D, crit = ks_two_sample(x, y, 8)
+        print(f"{name} component {j}: KS {D:.4f} (critical {crit:.4f}), mean {x.mean():+.4f} "
+              f"vs {y.mean():+.4f}, sd {x.std():.4f} vs {y.std():.4f}")
+        assert D < crit
