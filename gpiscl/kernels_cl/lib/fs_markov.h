@@ -56,7 +56,8 @@
  * renewal / renewal_plus start above reads.
  *
  * Random numbers: fs_march.h's segments (the step index) and blocks: slots 0..p the
- * state noise of a step, FS_SLOT_REFINE + (p+1) k + j bisection k, FS_SLOT_NORMAL and
+ * state noise of a step, FS_SLOT_REFINE + 2k + j (3/2) or 4k + j (5/2) bisection k (at
+ * most 33 or 16: a 2 l_d step needs 8), FS_SLOT_NORMAL and
  * FS_U_SLOPE at the hit's step; the start's free components FS_MK_SLOT_START + j. */
 #define FS_MK_SLOT_START 600
 #define FS_MK_ELL32 1.3576766739458992   /* (1 + x) e^-x = e^-1/2 */
@@ -209,13 +210,25 @@ inline void fs_mk_inverse(int n, double a[3][3], double out[3][3])
     }
 }
 
+/* fs_normal at slots slot .. slot + n - 1 (n <= 3, slot even), one Philox block and one
+ * Box-Muller pair per two slots: the same numbers, a third of the cost for 5/2. */
+inline void fs_mk_normals(FsRng rng, uint seg, uint slot, int n, double* z)
+{
+    for (int j = 0; j < n; j += 2) {
+        double2 u = fs_uniform2(rng, seg, (slot + (uint)j) >> 1);
+        double rad = sqrt(-2.0 * log(1.0 - u.x)), ang = 2.0 * M_PI * u.y;
+        z[j] = rad * cos(ang);
+        if (j + 1 < n) z[j + 1] = rad * sin(ang);
+    }
+}
+
 /* The state h world lengths on: x := A(h) x + chol(Q(h)) z, z from slots slot.. */
 inline void fs_mk_advance(FsMarkov m, double A[3][3], double Q[3][3], double* x,
                           FsRng rng, uint seg, uint slot)
 {
     double L[3][3], z[3], y[3];
     fs_mk_chol(m.n, Q, L);
-    for (int j = 0; j < m.n; ++j) z[j] = fs_normal(rng, seg, slot + (uint)j);
+    fs_mk_normals(rng, seg, slot, m.n, z);
     for (int i = 0; i < m.n; ++i) {
         double s = 0.0;
         for (int k = 0; k < m.n; ++k) s += A[i][k] * x[k];
@@ -268,7 +281,9 @@ inline void fs_mk_bridge_sample(FsMarkov m, double h1, double h2, const double* 
     fs_mk_bridge(m, h1, h2, xa, xb, Lam, eta);
     fs_mk_chol(m.n, Lam, L);
     fs_mk_forward(m.n, L, eta);
-    for (int j = 0; j < m.n; ++j) eta[j] += fs_normal(rng, seg, slot + (uint)j);
+    double z[3];
+    fs_mk_normals(rng, seg, slot, m.n, z);
+    for (int j = 0; j < m.n; ++j) eta[j] += z[j];
     fs_mk_backward(m.n, L, eta);
     for (int j = 0; j < m.n; ++j) x[j] = eta[j];
 }
@@ -413,11 +428,12 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
     }
 
     /* bisection by bridge draws in (ta, tb]: x is the state at ta, xb at tb */
-    int kmax = (FS_SLOT_NORMAL - FS_SLOT_REFINE) / m.n;
+    /* an even number of slots per bisection (fs_mk_normals pairs them): 2 or 4 */
+    int stride = (m.n + 1) & ~1, kmax = (FS_SLOT_NORMAL - FS_SLOT_REFINE) / stride;
     for (int k = 0; (k < prm.refine || tb - ta > FS_ROOT_WIDTH * ell) && k < kmax; ++k) {
         double tm = 0.5 * (ta + tb), xm[3], mu1m;
         fs_mk_bridge_sample(m, (tm - ta) * dlen, (tb - tm) * dlen, x, xb, rng, (uint)step,
-                            FS_SLOT_REFINE + (uint)(m.n * k), xm);
+                            FS_SLOT_REFINE + (uint)(stride * k), xm);
         double f = fs_mk_mean(mean, mc, ray, dn, tm, &mu1m) + xm[0];
         res.samples++;
         if (isnan(f)) { res.status = FS_STATUS_NAN; return res; }
