@@ -222,6 +222,12 @@ inline void fs_mk_normals(FsRng rng, uint seg, uint slot, int n, double* z)
     }
 }
 
+inline void fs_mk_copy(int n, double src[3][3], double dst[3][3])
+{
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j) dst[i][j] = src[i][j];
+}
+
 /* The state h world lengths on: x := A(h) x + chol(Q(h)) z, z from slots slot.. */
 inline void fs_mk_advance(FsMarkov m, double A[3][3], double Q[3][3], double* x,
                           FsRng rng, uint seg, uint slot)
@@ -247,9 +253,14 @@ inline void fs_mk_bridge(FsMarkov m, double h1, double h2, const double* xa,
     int n = m.n;
     double A1[3][3], Q1[3][3], A2[3][3], Q2[3][3], P1[3][3], P2[3][3], a[3], w[3];
     fs_mk_transition(m, h1, A1, Q1);
-    fs_mk_transition(m, h2, A2, Q2);
     fs_mk_inverse(n, Q1, P1);
-    fs_mk_inverse(n, Q2, P2);
+    if (h2 == h1) {               /* a bisection's midpoint: both halves alike */
+        fs_mk_copy(n, A1, A2);
+        fs_mk_copy(n, P1, P2);
+    } else {
+        fs_mk_transition(m, h2, A2, Q2);
+        fs_mk_inverse(n, Q2, P2);
+    }
     for (int i = 0; i < n; ++i) {
         double s = 0.0;
         for (int k = 0; k < n; ++k) s += A1[i][k] * xa[k];
@@ -333,12 +344,6 @@ inline double fs_mk_mean(__global const MeanNode* mean, int mc, FsRay ray, doubl
     float v = gp_mean_eval(mean, mc, convert_float3(ray.o + t * ray.d), &g);
     *slope = dot(convert_double3(g), dn);
     return (double)v;
-}
-
-inline void fs_mk_copy(int n, double src[3][3], double dst[3][3])
-{
-    for (int i = 0; i < n; ++i)
-        for (int j = 0; j < n; ++j) dst[i][j] = src[i][j];
 }
 
 /* The start state's free components given those set (Y, and Y' if `slope_set`):
@@ -432,7 +437,8 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
     int stride = (m.n + 1) & ~1, kmax = (FS_SLOT_NORMAL - FS_SLOT_REFINE) / stride;
     for (int k = 0; (k < prm.refine || tb - ta > FS_ROOT_WIDTH * ell) && k < kmax; ++k) {
         double tm = 0.5 * (ta + tb), xm[3], mu1m;
-        fs_mk_bridge_sample(m, (tm - ta) * dlen, (tb - tm) * dlen, x, xb, rng, (uint)step,
+        double hh = 0.5 * (tb - ta) * dlen;     /* both halves, exactly equal */
+        fs_mk_bridge_sample(m, hh, hh, x, xb, rng, (uint)step,
                             FS_SLOT_REFINE + (uint)(stride * k), xm);
         double f = fs_mk_mean(mean, mc, ray, dn, tm, &mu1m) + xm[0];
         res.samples++;
