@@ -21,8 +21,9 @@
  * G_0 = s^p / p!, G_{i+1} = G_i' - lambda G_i (the impulse response and its derivatives),
  * so Q_ij = q sum_k c_ijk k! / (2 lambda)^(k+1) P(k + 1, 2 lambda h) with P the
  * regularised incomplete gamma. P(k + 1, x) is summed as e^-x sum_{j > k} x^j / j! below
- * x = 4: the textbook Q = P_inf - A P_inf A' cancels to O(h^(2p+1)) (5/2 at 1e-3 l_d: 15
- * of 16 digits lost), the series has none. Double throughout: Q(h)'s entries span
+ * x = 1 (fs_mk_gammas): the textbook Q = P_inf - A P_inf A' cancels to O(h^(2p+1)) (5/2 at
+ * 1e-3 l_d: Q_00 ~ 1e-14 sigma^2, ~14 of 16 digits lost), the series has no cancellation
+ * (Q's leading terms in h all have positive coefficients). Double throughout: Q(h)'s entries span
  * h^(2p+1)..h, and bridges at 1e-2 l_d invert them (condition ~h^-2p); the Cholesky
  * factors of these diagonally graded matrices keep their relative accuracy.
  * tests/test_fs_markov.py checks A and Q against the kernel's derivative covariances.
