@@ -252,12 +252,20 @@ inline double fs_downcrossing_slope(double mean, double sd, double2 u)
     double a = mean / sd;
     if (a > 30.0) return sd * log((1.0 - u.x) * (1.0 - u.y)) / a;
     double target = (1.0 - u.x) * fs_crossing_tail(a, a);   /* (1 - u) in (0, 1] */
-    double lo = 0.0, hi = fmax(-a, 0.0) + 12.0;
-    for (int k = 0; k < 64; ++k) {
-        double mid = 0.5 * (lo + hi);
-        if (fs_crossing_tail(mid + a, a) > target) lo = mid; else hi = mid;
+    /* Newton on S(y) = target (S' = -y phi(y + a)) inside the bisection bracket, a
+     * bisection step wherever Newton would leave it: ~6-10 evaluations of S instead of
+     * 64 (measured: the 64 took 5-10 us a hit, a third of a short flight) */
+    double lo = 0.0, hi = fmax(-a, 0.0) + 12.0, y = 0.5 * (lo + hi);
+    for (int k = 0; k < 100; ++k) {
+        double r = fs_crossing_tail(y + a, a) - target;
+        if (r > 0.0) lo = y; else hi = y;
+        double d = y * fs_phi(y + a), yn = d > 0.0 ? y + r / d : lo;
+        if (!(yn > lo && yn < hi)) yn = 0.5 * (lo + hi);
+        int done = fabs(yn - y) <= 1e-13 * (1.0 + y) || hi - lo <= 1e-13 * (1.0 + y);
+        y = yn;
+        if (done) break;
     }
-    return -sd * fmax(0.5 * (lo + hi), DBL_MIN);
+    return -sd * fmax(y, DBL_MIN);
 }
 
 /* The longest step the prior mean allows: the rule sees the process only at its node
@@ -303,7 +311,8 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
                                FsParams prm, FsRay ray, FsVertex v,
                                __global const FsObs* ring, FsRng rng, FsScratch S)
 {
-    FsResult res = {0, 0, ray.t1, (double3)(0.0), 0, 0, 0, 0, 0};
+    FsResult res = {0};
+    res.t = ray.t1;
     if (S.post.n > FS_POST_MAX) { res.status = FS_STATUS_ROWS; return res; }   /* no v cache */
     double fa;
     int outside, n_old;
