@@ -81,7 +81,16 @@ def test_truncated_environment_map_is_refused(tmp_path):
     data = (tmp_path / "full.exr").read_bytes()
     (tmp_path / "sky.exr").write_bytes(data[: len(data) // 2])
     light = [{"type": "environment_map", "file": "sky.exr"}]
-    refused(scene(tmp_path, lights=light), "lights[0].file", "truncated")
+    path = scene(tmp_path, lights=light)
+    refused(path, "lights[0].file", "truncated")
+    # from the shell: our one line and nothing else (OpenEXR printed its own two
+    # diagnostics, one on stdout and one on stderr, before it)
+    r = subprocess.run([sys.executable, "-m", "gpiscl", "render", str(path), "-o",
+                        str(tmp_path / "x.exr")], capture_output=True, text=True, cwd=ROOT,
+                       env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=120)
+    assert r.returncode == 2 and r.stdout == "" and r.stderr.count("\n") == 1, (r.stdout,
+                                                                              r.stderr)
+    assert "truncated" in r.stderr
 
 
 @pytest.mark.parametrize("voxel,reason", [(1e-300, "voxel_size"), (1e30, "voxel_size")])

@@ -49,14 +49,9 @@ ALBEDO = Vector(broadcast=True, item=Number(ge=0, le=1))
 
 
 def _exr_problem(path):
-    import OpenEXR
+    from ..io.images import read_exr_channel_names
     try:
-        if hasattr(OpenEXR, "InputFile"):
-            f = OpenEXR.InputFile(path)
-            names = set(f.header()["channels"])
-            f.close()
-        else:
-            names = set(OpenEXR.File(path, separate_channels=True).channels())
+        names = read_exr_channel_names(path)
     except Exception:
         return "cannot read as an OpenEXR image"
     missing = [c for c in "RGB" if c not in names]
