@@ -397,33 +397,24 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
         double hmean = lip > 0.0
             ? fmax(FS_MEAN_KAPPA * sd, fabs(mua) - FS_MEAN_Z * sd) / lip : INFINITY;
         h = fmin(fmin(grow * h, FS_H_MAX * ell), hmean);
-        double nu_end = -1.0;
         for (;;) {
+            /* fs_march.h's Radau rule: one node at 2h/3 per try (nu(ta) = 0) */
             int clipped = ta + h >= ray.t1;
             double hs = clipped ? ray.t1 - ta : h, mu1m;
-            double mum = fs_mk_mean(mean, mc, ray, dn, ta + 0.5 * hs, &mu1m);
-            fs_mk_transition(m, 0.5 * hs * dlen, Am, Qm);
-            double mid = fs_return_rate(fs_mk_moments(m, Am, Qm, x, mum, mu1m), outside);
+            double mum = fs_mk_mean(mean, mc, ray, dn, ta + FS_RADAU_NODE * hs, &mu1m);
+            fs_mk_transition(m, FS_RADAU_NODE * hs * dlen, Am, Qm);
+            double r = FS_RADAU_WEIGHT
+                * fs_return_rate(fs_mk_moments(m, Am, Qm, x, mum, mu1m), outside)
+                * dlen * ell / tol;
             res.evals++;
-            if (nu_end < 0.0) {
-                mue = fs_mk_mean(mean, mc, ray, dn, ta + hs, &mu1e);
-                fs_mk_transition(m, hs * dlen, Ae, Qe);
-                nu_end = fs_return_rate(fs_mk_moments(m, Ae, Qe, x, mue, mu1e), outside);
-                res.evals++;
-            }
-            double r = (4.0 * mid + nu_end) / 6.0 * dlen * ell / tol;
             if (r <= 1.0 || h <= FS_H_MIN * ell) {
                 tb = clipped ? ray.t1 : ta + hs;
                 grow = r < 0.05 ? 2.0 : (r < 0.3 ? 1.5 : 1.1);
+                mue = fs_mk_mean(mean, mc, ray, dn, ta + hs, &mu1e);
+                fs_mk_transition(m, hs * dlen, Ae, Qe);
                 break;
             }
-            /* halve: the middle, whose transition and mean are known, becomes the end */
             h = 0.5 * hs;
-            nu_end = mid;
-            fs_mk_copy(m.n, Am, Ae);
-            fs_mk_copy(m.n, Qm, Qe);
-            mue = mum;
-            mu1e = mu1m;
         }
         for (int j = 0; j < m.n; ++j) xb[j] = x[j];
         fs_mk_advance(m, Ae, Qe, xb, rng, (uint)step, 0u);
