@@ -66,8 +66,25 @@ _state = _State()
 
 
 def requested() -> bool:
-    """Whether a stop signal has arrived (the render loop's stop())."""
+    """Whether a stop signal has arrived (the render loop's stop(), polled between
+    bounces; it also puts our handlers back, see _reassert)."""
+    _reassert()
     return _state.signum is not None
+
+
+def _reassert() -> None:
+    """Install our handlers again. LLVM, inside PoCL's compiler (used first after
+    install(): the device probe, program builds, PoCL's per-kernel compiles in the first
+    batches), registers its own handlers for SIGINT, SIGTERM and SIGHUP with SA_RESETHAND
+    and SA_NODEFER, once per process: a signal resets the disposition to the default
+    before LLVM's handler passes it back to ours, so a second one microseconds later
+    (`timeout` and `kill -- -PGID` send two) killed the process with nothing written (1
+    run in 3 to 10 of test_a_signal_sent_twice_at_once_is_one_stop). LLVM does not
+    register again once it believes its handlers are in place, so after the first
+    compiles ours stay. Main thread only (render loops poll requested() there)."""
+    if _state.installed and threading.current_thread() is threading.main_thread():
+        for sig in SIGNALS:
+            signal.signal(sig, _handle)
 
 
 def received():
@@ -168,6 +185,7 @@ def _mode(mode: str):
 
 def noting():
     """While rendering: a signal is noted for requested(), not raised."""
+    _reassert()   # the device and its programs were built since install()
     return _mode("noting")
 
 
