@@ -27,16 +27,17 @@ def test_procedural_bake_is_cached_by_function_and_resolution(tmp_path, monkeypa
 
 def test_slope_bounds_from_the_cache_equal_computed_ones(tmp_path, monkeypatch):
     monkeypatch.setenv("GPISCL_CACHE", str(tmp_path))
-    base = knob_grid("knob_outer", 20)
+    base = knob_grid("knob_outer", 20)   # 19 cells: two of sdf_bake's linear slabs
     for interpolation in ("linear", "cubic"):
         fresh = dataclasses.replace(base, interpolation=interpolation)
         assert not sdf_bake.prepare_slopes(fresh)
         warm = dataclasses.replace(base, interpolation=interpolation)
         assert sdf_bake.prepare_slopes(warm)
+        assert {"cell_bounds", "lipschitz"} <= set(warm.__dict__)   # read, not recomputed
         np.testing.assert_array_equal(warm.cell_bounds, fresh.cell_bounds)
         ref = dataclasses.replace(base, interpolation=interpolation)   # never cached
         np.testing.assert_array_equal(warm.cell_bounds, ref.cell_bounds)
-        assert warm.lipschitz == ref.lipschitz
+        assert warm.lipschitz == ref.lipschitz == fresh.lipschitz   # bit for bit
         if interpolation == "cubic":
             np.testing.assert_array_equal(warm.coefficients, ref.coefficients)
     # other values or placement: another entry

@@ -13,8 +13,8 @@ of the mesh file's bytes and the bake settings.
 
 Procedural bakes (gp/knob.py's functions, procedural_mean) are cached in
 $GPISCL_CACHE/procedural, keyed by the sha256 of knob.py's source and the settings; the
-slope bounds of any grid mean (GridMean.cell_bounds, and the cubic coefficients they are
-taken from: seconds of numpy at 128^3, every time a scene is loaded) in
+slope bounds of any grid mean (GridMean.cell_bounds, its lipschitz, and the cubic
+coefficients they are taken from: seconds of numpy at 128^3, every time a scene is loaded) in
 $GPISCL_CACHE/slopes, keyed by the grid's values, placement and interpolation and the
 source of gp/means.py that computes them (prepare_slopes). A warm start of the knob scene
 then reads ~50 MB instead of ~10 s of numpy.
@@ -221,25 +221,49 @@ def _cubic_cell_bounds_in_slabs(coef: np.ndarray, h: float) -> np.ndarray:
                            for i in range(0, cells, _SLAB_CELLS)])
 
 
+_LINEAR_SLAB_CELLS = 16   # x layers of cells per means._corner_gradients2 pass
+
+
+def _linear_slopes_in_slabs(values: np.ndarray, h: float):
+    """(means.cell_slope_bounds, GridMean.lipschitz) of a trilinear grid, over slabs of
+    _LINEAR_SLAB_CELLS x layers: a cell's bound reads its 8 corners only, so each slab
+    takes its cells' layers plus 1 and computes the same numbers, and the largest squared
+    corner gradient of all slabs is the whole grid's (bit for bit: tests/test_bake_cache).
+    The whole-grid form held ~150 MB of float64 temporaries at 128^3."""
+    cells, parts, inner2 = values.shape[0] - 1, [], 0.0
+    for i in range(0, cells, _LINEAR_SLAB_CELLS):
+        c2 = means._corner_gradients2(np.asarray(values[i:i + _LINEAR_SLAB_CELLS + 1],
+                                                 np.float64))
+        inner2 = max(inner2, float(np.max(c2)))
+        parts.append(np.sqrt(c2) / h)
+    return np.concatenate(parts), means.grid_slope_bound(values, h, inner2)
+
+
 def prepare_slopes(grid: GridMean, cache: bool = True) -> bool:
-    """Give grid its cell slope bounds (and, cubic, the coefficients they come from) from
-    the cache when present, else compute and cache them. They are GridMean's
-    cached_property values, which live in the instance __dict__ once computed; setting
-    them there is what computing them would do, with the same arrays. Returns cache_hit."""
-    names = ("cell_bounds", "coefficients") if grid.interpolation == "cubic" else ("cell_bounds",)
+    """Give grid its cell slope bounds and its whole-grid bound `lipschitz` (and, cubic, the
+    coefficients they come from) from the cache when present, else compute and cache them.
+    They are GridMean's cached_property values, which live in the instance __dict__ once
+    computed; setting them there is what computing them would do, with the same values.
+    Returns cache_hit."""
+    names = ("cell_bounds", "lipschitz")
+    if grid.interpolation == "cubic":
+        names += ("coefficients",)
     cached = cache_dir("slopes") / f"{_slopes_key(grid)}.npz"
     if cache and cached.is_file():
         try:
             with np.load(cached, allow_pickle=False) as z:
                 arrays = {n: np.asarray(z[n]) for n in names}
             for n, a in arrays.items():
-                grid.__dict__[n] = a
+                grid.__dict__[n] = float(a) if n == "lipschitz" else a
             return True
-        except (OSError, ValueError, KeyError):
+        except (OSError, ValueError, KeyError, TypeError):
             pass                            # damaged: compute again and replace it
+    h = float(grid.voxel_size)
     if grid.interpolation == "cubic":
-        grid.__dict__["cell_bounds"] = _cubic_cell_bounds_in_slabs(grid.coefficients,
-                                                                   float(grid.voxel_size))
+        grid.__dict__["cell_bounds"] = _cubic_cell_bounds_in_slabs(grid.coefficients, h)
+    else:
+        grid.__dict__["cell_bounds"], grid.__dict__["lipschitz"] = \
+            _linear_slopes_in_slabs(grid.values, h)
     arrays = {n: getattr(grid, n) for n in names}
     if cache:
         _store(cached, lambda tmp: np.savez(tmp, **arrays), "grid slope bounds")

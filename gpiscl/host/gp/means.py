@@ -506,17 +506,21 @@ def _corner_gradients2(values: np.ndarray) -> np.ndarray:
     return best
 
 
-def grid_slope_bound(values: np.ndarray, h: float) -> float:
+def grid_slope_bound(values: np.ndarray, h: float, inner2: float | None = None) -> float:
     """The maximum of |grad| of GridMean (world units). Inside: the exact maximum over
     each cell (_corner_gradients2). Outside, over a face cell whose bilinear gradient is at
     most a: |grad| <= max(a, 1) where its samples are >= 0 (then g >= 0 on it, and
     sqrt(g^2 + d^2) mixes slopes a and 1 in a weighted mean), sqrt(a^2 + 1) where any is
     negative (g + d: orthogonal parts add). Edges and corners of the box take their values
-    and slopes from face cells, and slope 1 from d: the bound is never below 1."""
-    bound2 = max(float(np.max(_corner_gradients2(values))) / h**2, 1.0)
+    and slopes from face cells, and slope 1 from d: the bound is never below 1.
+    inner2: max(_corner_gradients2(values)) when already known (compile/sdf_bake.py takes
+    it in slabs: the whole-grid temporaries were ~150 MB at 128^3); faces are in double."""
+    if inner2 is None:
+        inner2 = float(np.max(_corner_gradients2(np.asarray(values, np.float64))))
+    bound2 = max(inner2 / h**2, 1.0)
     for axis in range(3):
         for end in (0, -1):
-            f = np.take(values, end, axis=axis)
+            f = np.asarray(np.take(values, end, axis=axis), np.float64)
             a2 = _corner_gradients2(f) / h**2
             corners = [f[i:f.shape[0] - 1 + i, j:f.shape[1] - 1 + j] for i in (0, 1)
                        for j in (0, 1)]
