@@ -14,7 +14,8 @@ from ..gp import means as M
 from ..scene.proxies import analyse, bounding_proxy
 from ..scene.transforms import transform_matrix
 from ..gp.weight_space import pack_order_tables
-from ..layout.gp_records import GP_KERNEL, MEAN_NODE, pack_kernel, pack_kernel_grids, pack_mean
+from ..layout.gp_records import (GP_KERNEL, MEAN_NODE, pack_kernel, pack_kernel_grids,
+                                 pack_mean_parts)
 from ..scene.gpis import FIELD_KEYS, field_minimum
 from .colour_fields import pack_field
 from ..errors import SceneError
@@ -102,6 +103,20 @@ def build_mean(m: dict) -> M.Mean:
     # the slope bounds the device's grid records need (gp_records.pack_mean), cached
     prepare_slopes(grid)
     return grid
+
+
+def _join(parts: list) -> np.ndarray:
+    """np.concatenate(parts), emptying the list as it goes: each part is freed once copied,
+    so a scene's grid records (~10 MB per 128^3 grid) are not held twice."""
+    nodes = MEAN_NODE.zeros(sum(len(p) for p in parts))
+    at = 0
+    parts.reverse()
+    while parts:
+        part = parts.pop()
+        assert part.dtype == nodes.dtype    # as np.concatenate would insist
+        nodes[at:at + len(part)] = part
+        at += len(part)
+    return nodes
 
 
 def kernel_length_scale(k: dict) -> float:
@@ -195,7 +210,7 @@ def compile_gpis(shapes: list, material_of, source: str = "<scene>",
         o["occupancy_level"] = occupancy_level(g)
         o["occupancy_step"] = OCCUPANCY_MIN_STEP * kernel_length_scale(g["kernel"])
         try:
-            prog = pack_mean(build_mean(g["mean"]))
+            prog = pack_mean_parts(build_mean(g["mean"]))
         except ValueError as exc:
             raise SceneError(source, f"{keys[i]}.mean", str(exc)) from None
         if g.get("observations") is not None:
@@ -205,9 +220,11 @@ def compile_gpis(shapes: list, material_of, source: str = "<scene>",
             programs.append(block)
             if "occupancy_level" in objects.dtype.names:
                 o["occupancy_level"] = 0.0   # the bound follows the prior mean, not this one
-        o["mean_first"], o["mean_count"] = first, len(prog)
-        first += len(prog)
-        programs.append(prog)
+        count = sum(len(part) for part in prog)
+        o["mean_first"], o["mean_count"] = first, count
+        first += count
+        programs.extend(prog)
+        prog = None                         # the list holds them; _join frees them
     # mesh proxies' face planes, after every mean program like the fields below
     for i, g in enumerate(shapes):
         if g["proxy"]["type"] == "mesh":
@@ -232,7 +249,7 @@ def compile_gpis(shapes: list, material_of, source: str = "<scene>",
                 objects[i][slot] = first
                 first += len(records)
                 programs.append(records)
-    nodes = np.concatenate(programs) if programs else MEAN_NODE.zeros(0)
+    nodes = _join(programs)
     table, t_first, t_count = pack_order_tables([build_kernel(g["kernel"]) for g in shapes])
     objects["order_first"], objects["order_count"] = t_first, t_count
     return CompiledGpis(objects, kernels, nodes, table)

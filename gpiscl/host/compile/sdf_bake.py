@@ -13,11 +13,11 @@ of the mesh file's bytes and the bake settings.
 
 Procedural bakes (gp/knob.py's functions, procedural_mean) are cached in
 $GPISCL_CACHE/procedural, keyed by the sha256 of knob.py's source and the settings; the
-slope bounds of any grid mean (GridMean.cell_bounds, its lipschitz, and the cubic
-coefficients they are taken from: seconds of numpy at 128^3, every time a scene is loaded) in
+slope bounds of any grid mean (its brick bounds and lipschitz, and the cubic coefficients
+they are taken from: seconds of numpy at 128^3, every time a scene is loaded) in
 $GPISCL_CACHE/slopes, keyed by the grid's values, placement and interpolation and the
 source of gp/means.py that computes them (prepare_slopes). A warm start of the knob scene
-then reads ~50 MB instead of ~10 s of numpy.
+then reads ~0.5 MB (brick bounds of two 128^3 grids) instead of ~10 s of numpy.
 """
 from __future__ import annotations
 
@@ -33,6 +33,7 @@ from ..gp import knob, means
 from ..gp.means import GridMean
 from ..io.grids import load_grid, save_grid
 from ..io.meshes import load_mesh
+from ..layout.gp_records import GRID_BRICK
 
 BAKE_VERSION = 1            # part of the cache key: bump when the bake's output changes
 DEFAULT_MARGIN = 0.1        # of the mesh's largest bounding-box extent, per side
@@ -202,7 +203,7 @@ def _slopes_key(grid: GridMean) -> str:
     values = np.ascontiguousarray(grid.values)
     settings = {"version": BAKE_VERSION, "shape": list(values.shape), "dtype": str(values.dtype),
                 "origin": [float(o) for o in grid.origin], "voxel": float(grid.voxel_size),
-                "interpolation": grid.interpolation}
+                "interpolation": grid.interpolation, "brick": GRID_BRICK}
     # the array's own buffer, not a tobytes() copy (16 MB at 128^3 float64)
     return _settings_key(settings, memoryview(values).cast("B"),
                          Path(means.__file__).read_bytes())
@@ -240,31 +241,38 @@ def _linear_slopes_in_slabs(values: np.ndarray, h: float):
 
 
 def prepare_slopes(grid: GridMean, cache: bool = True) -> bool:
-    """Give grid its cell slope bounds and its whole-grid bound `lipschitz` (and, cubic, the
-    coefficients they come from) from the cache when present, else compute and cache them.
-    They are GridMean's cached_property values, which live in the instance __dict__ once
-    computed; setting them there is what computing them would do, with the same values.
-    Returns cache_hit."""
-    names = ("cell_bounds", "lipschitz")
-    if grid.interpolation == "cubic":
-        names += ("coefficients",)
+    """Give grid what its device records need (gp_records._grid_leaf): its whole-grid slope
+    bound `lipschitz`, its brick bounds (means.brick_slope_bounds at GRID_BRICK) and, cubic,
+    the coefficients they come from; from the cache when present, else computed and cached.
+    They are GridMean's memoised values (cached_property, brick_bounds), which live in the
+    instance once computed; setting them there is what computing them would do, with the
+    same values. The cell bounds they are taken from are not kept (64 times the bricks'
+    bytes; GridMean.cell_bounds recomputes them if asked). Returns cache_hit."""
+    names = ("bricks", "lipschitz") + (("coefficients",) if grid.interpolation == "cubic"
+                                       else ())
     cached = cache_dir("slopes") / f"{_slopes_key(grid)}.npz"
     if cache and cached.is_file():
         try:
             with np.load(cached, allow_pickle=False) as z:
                 arrays = {n: np.asarray(z[n]) for n in names}
-            for n, a in arrays.items():
-                grid.__dict__[n] = float(a) if n == "lipschitz" else a
+            grid.__dict__["lipschitz"] = float(arrays["lipschitz"])
+            grid.brick_bounds[GRID_BRICK] = arrays["bricks"]
+            if "coefficients" in arrays:
+                grid.__dict__["coefficients"] = arrays["coefficients"]
             return True
         except (OSError, ValueError, KeyError, TypeError):
-            pass                            # damaged: compute again and replace it
+            pass                            # damaged or older: compute again and replace it
     h = float(grid.voxel_size)
     if grid.interpolation == "cubic":
         grid.__dict__["cell_bounds"] = _cubic_cell_bounds_in_slabs(grid.coefficients, h)
     else:
         grid.__dict__["cell_bounds"], grid.__dict__["lipschitz"] = \
             _linear_slopes_in_slabs(grid.values, h)
-    arrays = {n: getattr(grid, n) for n in names}
+    arrays = {"bricks": means.brick_slope_bounds(grid, GRID_BRICK),
+              "lipschitz": np.float64(grid.lipschitz)}
+    if grid.interpolation == "cubic":
+        arrays["coefficients"] = grid.coefficients
+    del grid.__dict__["cell_bounds"]
     if cache:
         _store(cached, lambda tmp: np.savez(tmp, **arrays), "grid slope bounds")
     return False

@@ -308,6 +308,11 @@ class GridMean(Mean):
         return cell_slope_bounds(self)
 
     @cached_property
+    def brick_bounds(self) -> dict:
+        """brick edge -> brick_slope_bounds of this grid, filled as they are asked for."""
+        return {}
+
+    @cached_property
     def coefficients(self) -> np.ndarray:
         """The cubic B-spline coefficients, (nx + 2, ny + 2, nz + 2) (cubic only)."""
         return cubic_coefficients(np.asarray(self.values, np.float64))
@@ -479,8 +484,16 @@ def cell_slope_bounds(grid: "GridMean") -> np.ndarray:
 
 
 def brick_slope_bounds(grid: "GridMean", brick: int) -> np.ndarray:
-    """The largest cell bound in each brick of brick^3 cells (the last bricks partial)."""
-    cells = grid.cell_bounds
+    """The largest cell bound in each brick of brick^3 cells (the last bricks partial),
+    kept in grid.brick_bounds[brick] (compile/sdf_bake.py caches them there: 1/64 of the
+    cell bounds' bytes)."""
+    memo = grid.brick_bounds
+    if brick not in memo:
+        memo[brick] = _brick_maxima(grid.cell_bounds, brick)
+    return memo[brick]
+
+
+def _brick_maxima(cells: np.ndarray, brick: int) -> np.ndarray:
     nb = [-(-n // brick) for n in cells.shape]
     pad = [(0, b * brick - n) for b, n in zip(nb, cells.shape)]
     cells = np.pad(cells, pad, constant_values=0.0)

@@ -192,9 +192,18 @@ class KernelTimings:
 
 
 def to_device(device: Device, array: np.ndarray, writable=False) -> cl.Buffer:
-    """Upload an array (a 1-element dummy for empty arrays, which OpenCL cannot hold)."""
+    """Upload an array (a 1-element dummy for empty arrays, which OpenCL cannot hold).
+
+    A read-only buffer on a CPU device uses the array's own memory (USE_HOST_PTR; the
+    buffer keeps the array alive): a copy would be the same RAM twice, e.g. 20 MB of the
+    knob's grid records (tools/bench_scenes.py, peak RSS). The array must then not change
+    while the buffer lives, which holds for the compiled scene's arrays. GPUs get a copy
+    in their own memory, as before."""
     mf = cl.mem_flags
     if array.size == 0:
         array = np.zeros(1, dtype=array.dtype)
+    array = np.ascontiguousarray(array)
+    if not writable and device.device.type & cl.device_type.CPU:
+        return cl.Buffer(device.ctx, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=array)
     flags = (mf.READ_WRITE if writable else mf.READ_ONLY) | mf.COPY_HOST_PTR
-    return cl.Buffer(device.ctx, flags, hostbuf=np.ascontiguousarray(array))
+    return cl.Buffer(device.ctx, flags, hostbuf=array)
