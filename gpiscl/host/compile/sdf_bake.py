@@ -178,10 +178,11 @@ def mesh_mean(path, resolution: int = 128, margin: float | None = None,
 
 # ---- procedural bakes --------------------------------------------------------------------
 
-def procedural_mean(function: str, resolution: int, cache: bool = True):
+def procedural_mean(function: str, resolution: int, cache: bool = True, bakes=None):
     """knob.knob_grid(function, resolution), from the cache when an equal bake exists (the
     function's source unchanged). Returns (grid, cache_hit); the grid is the same float32
-    array either way."""
+    array either way. bakes: a device's bakes (render/device_bakes.py: the same samples bit
+    for bit) to bake with instead of numpy."""
     key = _settings_key({"version": BAKE_VERSION, "function": function,
                          "resolution": int(resolution)}, Path(knob.__file__).read_bytes())
     cached = cache_dir("procedural") / f"{key}.npz"
@@ -191,7 +192,7 @@ def procedural_mean(function: str, resolution: int, cache: bool = True):
             return GridMean(np.asarray(g.values, np.float32), g.origin, g.voxel_size), True
         except ValueError:
             pass
-    grid = knob.knob_grid(function, resolution)
+    grid = (bakes.procedural if bakes is not None else knob.knob_grid)(function, resolution)
     if cache:
         _store(cached, lambda tmp: save_grid(tmp, grid), "procedural bake")
     return grid, False
@@ -240,14 +241,16 @@ def _linear_slopes_in_slabs(values: np.ndarray, h: float):
     return np.concatenate(parts), means.grid_slope_bound(values, h, inner2)
 
 
-def prepare_slopes(grid: GridMean, cache: bool = True) -> bool:
+def prepare_slopes(grid: GridMean, cache: bool = True, bakes=None) -> bool:
     """Give grid what its device records need (gp_records._grid_leaf): its whole-grid slope
     bound `lipschitz`, its brick bounds (means.brick_slope_bounds at GRID_BRICK) and, cubic,
     the coefficients they come from; from the cache when present, else computed and cached.
     They are GridMean's memoised values (cached_property, brick_bounds), which live in the
     instance once computed; setting them there is what computing them would do, with the
     same values. The cell bounds they are taken from are not kept (64 times the bricks'
-    bytes; GridMean.cell_bounds recomputes them if asked). Returns cache_hit."""
+    bytes; GridMean.cell_bounds recomputes them if asked). bakes: a device's bakes
+    (render/device_bakes.py) for a trilinear grid's bounds, the same numbers bit for bit.
+    Returns cache_hit."""
     names = ("bricks", "lipschitz") + (("coefficients",) if grid.interpolation == "cubic"
                                        else ())
     cached = cache_dir("slopes") / f"{_slopes_key(grid)}.npz"
@@ -263,7 +266,10 @@ def prepare_slopes(grid: GridMean, cache: bool = True) -> bool:
         except (OSError, ValueError, KeyError, TypeError):
             pass                            # damaged or older: compute again and replace it
     h = float(grid.voxel_size)
-    if grid.interpolation == "cubic":
+    if grid.interpolation == "linear" and bakes is not None:
+        bricks, lipschitz = bakes.linear_slopes(grid.values, h, GRID_BRICK)
+        grid.brick_bounds[GRID_BRICK], grid.__dict__["lipschitz"] = bricks, lipschitz
+    elif grid.interpolation == "cubic":
         grid.__dict__["cell_bounds"] = _cubic_cell_bounds_in_slabs(grid.coefficients, h)
     else:
         grid.__dict__["cell_bounds"], grid.__dict__["lipschitz"] = \
@@ -272,7 +278,7 @@ def prepare_slopes(grid: GridMean, cache: bool = True) -> bool:
               "lipschitz": np.float64(grid.lipschitz)}
     if grid.interpolation == "cubic":
         arrays["coefficients"] = grid.coefficients
-    del grid.__dict__["cell_bounds"]
+    grid.__dict__.pop("cell_bounds", None)
     if cache:
         _store(cached, lambda tmp: np.savez(tmp, **arrays), "grid slope bounds")
     return False
