@@ -188,8 +188,7 @@ def procedural_mean(function: str, resolution: int, cache: bool = True, bakes=No
     cached = cache_dir("procedural") / f"{key}.npz"
     if cache and cached.is_file():
         try:
-            g = load_grid(cached)
-            return GridMean(np.asarray(g.values, np.float32), g.origin, g.voxel_size), True
+            return load_grid(cached, np.float32), True
         except ValueError:
             pass
     grid = (bakes.procedural if bakes is not None else knob.knob_grid)(function, resolution)
