@@ -96,12 +96,16 @@ def test_cpu_scene_buffers_share_the_arrays_and_scratch_follows_the_units(device
     import pyopencl as cl
     from gpiscl.host.render import function_space_stages as fs
     from gpiscl.host.render.device import to_device
-    a = np.arange(1000, dtype=np.float32)
+    from gpiscl.host.layout.gp_records import MEAN_NODE
+    a = MEAN_NODE.page_aligned_zeros(1000)
+    assert a.ctypes.data % 4096 == 0
     shared, copied = to_device(device, a), to_device(device, a, writable=True)
     cpu = bool(device.device.type & cl.device_type.CPU)
     assert (shared.hostbuf is a) == cpu
     assert bool(shared.flags & cl.mem_flags.USE_HOST_PTR) == cpu
     assert not copied.flags & cl.mem_flags.USE_HOST_PTR
+    unaligned = a.view(np.uint8)[4:4 + 4000]   # 4 bytes past a page: copied
+    assert not to_device(device, unaligned).flags & cl.mem_flags.USE_HOST_PTR
     integrator, _ = prepare_render({**TINY, "shapes": [{
         "type": "gpis", "proxy": {"type": "sphere", "radius": 1.0},
         "mean": {"type": "sphere", "radius": 0.5},
