@@ -117,7 +117,7 @@ CAMERA = Record({
 }, checks=[_camera_frame])
 
 RENDER = Record({
-    "spp": Field(Int(ge=1), 16),
+    "spp": Field(Int(ge=1, lt=2**31), 16),   # the device counts sample indices in int32
     "max_depth": Field(Int(ge=1), 8),
     "seed": Field(Int(ge=0, lt=2**32), 0),
     # the PNG preview's curve (io/images.tonemap_srgb8); the EXR keeps linear radiance
