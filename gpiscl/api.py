@@ -11,6 +11,7 @@ import numpy as np
 
 from .host.scene import arguments
 from .host.render.device import Device, shared_device
+from .host.render.device_bakes import DeviceBakes
 from .host.render.integrator import RenderResult, WavefrontIntegrator
 from .host.scene.loading import Scene, load_scene
 from .host.errors import SceneError
@@ -127,8 +128,9 @@ def prepare_render(scene, spp=None, seed=None, resolution=None, device=None, bat
     _check_realization(data, scene.source)
     if not isinstance(device, Device):
         device = shared_device(device)
-    integrator = WavefrontIntegrator(device, compile_scene(data, scene.source), settings,
-                                     batch_size, max_memory, scene.source, aov)
+    compiled = compile_scene(data, scene.source, DeviceBakes(device))
+    integrator = WavefrontIntegrator(device, compiled, settings, batch_size, max_memory,
+                                     scene.source, aov)
     return integrator, Scene.resolved(data, scene.source, scene.base_dir)
 
 

@@ -6,7 +6,8 @@ import numpy as np
 
 from gpiscl.host.compile import sdf_bake
 from gpiscl.host.gp.knob import knob_grid
-from gpiscl.host.gp.means import GridMean
+from gpiscl.host.gp.means import GridMean, brick_slope_bounds
+from gpiscl.host.layout.gp_records import GRID_BRICK, pack_mean
 
 
 def test_procedural_bake_is_cached_by_function_and_resolution(tmp_path, monkeypatch):
@@ -27,16 +28,23 @@ def test_procedural_bake_is_cached_by_function_and_resolution(tmp_path, monkeypa
 
 def test_slope_bounds_from_the_cache_equal_computed_ones(tmp_path, monkeypatch):
     monkeypatch.setenv("GPISCL_CACHE", str(tmp_path))
-    base = knob_grid("knob_outer", 20)
+    base = knob_grid("knob_outer", 20)   # 19 cells: two of sdf_bake's linear slabs
     for interpolation in ("linear", "cubic"):
         fresh = dataclasses.replace(base, interpolation=interpolation)
         assert not sdf_bake.prepare_slopes(fresh)
+        assert "cell_bounds" not in fresh.__dict__   # not kept: 64x the bricks' bytes
         warm = dataclasses.replace(base, interpolation=interpolation)
         assert sdf_bake.prepare_slopes(warm)
-        np.testing.assert_array_equal(warm.cell_bounds, fresh.cell_bounds)
+        # read, not recomputed: what the device records need is there already
+        assert "lipschitz" in warm.__dict__ and GRID_BRICK in warm.brick_bounds
+        assert "cell_bounds" not in warm.__dict__
         ref = dataclasses.replace(base, interpolation=interpolation)   # never cached
-        np.testing.assert_array_equal(warm.cell_bounds, ref.cell_bounds)
-        assert warm.lipschitz == ref.lipschitz
+        for g in (warm, fresh):
+            np.testing.assert_array_equal(brick_slope_bounds(g, GRID_BRICK),
+                                          brick_slope_bounds(ref, GRID_BRICK))
+            assert g.lipschitz == ref.lipschitz                  # bit for bit
+            np.testing.assert_array_equal(g.cell_bounds, ref.cell_bounds)
+            np.testing.assert_array_equal(pack_mean(g), pack_mean(ref))
         if interpolation == "cubic":
             np.testing.assert_array_equal(warm.coefficients, ref.coefficients)
     # other values or placement: another entry
@@ -55,4 +63,6 @@ def test_damaged_slope_entries_are_recomputed(tmp_path, monkeypatch):
     entry.write_bytes(b"not an npz")
     again = GridMean(grid.values, grid.origin, grid.voxel_size)
     assert not sdf_bake.prepare_slopes(again)
-    np.testing.assert_array_equal(again.cell_bounds, grid.cell_bounds)
+    np.testing.assert_array_equal(brick_slope_bounds(again, GRID_BRICK),
+                                  brick_slope_bounds(grid, GRID_BRICK))
+    assert again.lipschitz == grid.lipschitz

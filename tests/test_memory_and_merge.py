@@ -87,3 +87,32 @@ def test_uq_merge_refuses_damaged_partial_sums(tmp_path, capsys):
                      str(tmp_path / "m.exr")]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and f"{name}.uq.npz" in err[0], err
+
+
+def test_cpu_scene_buffers_share_the_arrays_and_scratch_follows_the_units(device):
+    """On a CPU the device's memory is the process's: read-only scene arrays are used in
+    place (no second copy), and the function-space scratch is sized to the compute units,
+    not to the batch (whole-batch chunks held ~250 MB resident for the knob)."""
+    import pyopencl as cl
+    from gpiscl.host.render import function_space_stages as fs
+    from gpiscl.host.render.device import to_device
+    from gpiscl.host.layout.gp_records import MEAN_NODE
+    a = MEAN_NODE.page_aligned_zeros(1000)
+    assert a.ctypes.data % 4096 == 0
+    shared, copied = to_device(device, a), to_device(device, a, writable=True)
+    cpu = bool(device.device.type & cl.device_type.CPU)
+    assert (shared.hostbuf is a) == cpu
+    assert bool(shared.flags & cl.mem_flags.USE_HOST_PTR) == cpu
+    assert not copied.flags & cl.mem_flags.USE_HOST_PTR
+    unaligned = a.view(np.uint8)[4:4 + 4000]   # 4 bytes past a page: copied
+    assert not to_device(device, unaligned).flags & cl.mem_flags.USE_HOST_PTR
+    integrator, _ = prepare_render({**TINY, "shapes": [{
+        "type": "gpis", "proxy": {"type": "sphere", "radius": 1.0},
+        "mean": {"type": "sphere", "radius": 0.5},
+        "kernel": {"type": "squared_exponential", "sigma": 0.1, "length_scale": 0.5},
+        "sampler": {"type": "function_space"}}]}, resolution=(256, 256), spp=64,
+        device=device)
+    stages = integrator.function_space
+    assert integrator.batch == 1 << 18
+    units = device.device.max_compute_units * stages.local * fs.GROUPS_PER_UNIT
+    assert stages.chunk <= max(units, stages.local) < integrator.batch

@@ -319,6 +319,28 @@ def test07_packing_puts_the_samples_inline():
 
 
 @pytest.mark.parametrize("interp", ["linear", "cubic"])
+def test07b_packing_in_layers_is_the_whole_grid_pass_bit_for_bit(interp):
+    """gp_records writes a grid's samples into its records a few x layers at a time: the
+    floats must be those of one float64 pass over the whole grid rounded to float32 (the
+    packing before), past several layer blocks and with the payload not a whole record."""
+    rng = np.random.default_rng(7)
+    g = dataclasses.replace(random_grid(rng, shape=(19, 6, 7)), interpolation=interp)
+    nodes = pack_mean(g)
+    samples = g.coefficients if interp == "cubic" else np.asarray(g.values, np.float64)
+    s_index = g.lipschitz * g.voxel_size
+    bricks = means_module.brick_slope_bounds(g, GRID_BRICK) / g.lipschitz
+    want = np.asarray(np.concatenate([(samples / s_index).ravel(), bricks.ravel()]),
+                      np.float32)
+    assert want.size % GRID_PAYLOAD_FLOATS        # a partly filled last record
+    payload = nodes[1:]
+    assert len(payload) == nodes[0]["flags"] == -(-want.size // GRID_PAYLOAD_FLOATS)
+    floats = np.stack([payload[f] for f in ("row0", "row1", "row2", "p0", "p1")], 1).ravel()
+    np.testing.assert_array_equal(floats[:want.size], want)
+    assert not np.any(floats[want.size:])
+    assert np.all(payload["kind"] == MEAN_KINDS["payload"]) and not np.any(payload["flags"])
+
+
+@pytest.mark.parametrize("interp", ["linear", "cubic"])
 def test08_lipschitz_bound_holds(device, prg, interp):
     """ws_mean_lipschitz (unchanged) yields the grid's slope bound through the leaf's
     scale, and no gradient exceeds it, inside the box, outside it, or transformed."""

@@ -56,6 +56,7 @@ except ImportError:   # an optional extra: say how to get it, in one line
 from ..io.output_files import scene_inputs
 from ..render.batching import BatchSizer
 from ..render.device import shared_device
+from ..render.device_bakes import DeviceBakes
 from ..render.integrator import RenderResult, RenderStats, WavefrontIntegrator
 from ..scene.loading import Scene
 from ..compile.scene import compile_scene
@@ -190,7 +191,7 @@ class WorkerScene:
         self.data = _replace_paths(payload.data, moved)
         self.source = payload.source
         self.device = shared_device(None)    # PYOPENCL_CTX on the worker picks another
-        self.compiled = compile_scene(self.data, self.source)
+        self.compiled = compile_scene(self.data, self.source, DeviceBakes(self.device))
         self._integrator = None
         self.sizer = None
 

@@ -352,13 +352,15 @@ def render_realizations(scene, realizations: int, spp: int, seed: int | None = N
     """Render realizations first .. first+realizations-1 with spp samples each; stop()
     (asked between bounces) or Ctrl-C ends it, keeping the completed realizations."""
     from ..render.device import Device, shared_device
+    from ..render.device_bakes import DeviceBakes
     from ..compile.scene import compile_scene
 
     scene, data, seed = prepare_realizations(scene, realizations, spp, seed, first,
                                              resolution)
     if not isinstance(device, Device):
         device = shared_device(device)
-    compiled = compile_scene(data, scene.source)   # once: only the ids and seeds change
+    # once: only the ids and seeds change
+    compiled = compile_scene(data, scene.source, DeviceBakes(device))
     w, h = data["camera"]["resolution"]
     sums = UqSums.empty((h, w, 3))
     paths, done, interrupted = 0, [], False

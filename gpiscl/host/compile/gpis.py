@@ -14,7 +14,8 @@ from ..gp import means as M
 from ..scene.proxies import analyse, bounding_proxy
 from ..scene.transforms import transform_matrix
 from ..gp.weight_space import pack_order_tables
-from ..layout.gp_records import GP_KERNEL, MEAN_NODE, pack_kernel, pack_kernel_grids, pack_mean
+from ..layout.gp_records import (GP_KERNEL, MEAN_NODE, pack_kernel, pack_kernel_grids,
+                                 pack_mean_parts)
 from ..scene.gpis import FIELD_KEYS, field_minimum
 from .colour_fields import pack_field
 from ..errors import SceneError
@@ -65,7 +66,9 @@ def build_kernel(k: dict, proxy: dict | None = None) -> K.Kernel:
                            length_scale_field=lf and _build_field(lf), step_length_scale=step)
 
 
-def build_mean(m: dict) -> M.Mean:
+def build_mean(m: dict, bakes=None) -> M.Mean:
+    """The mean tree of a resolved mean; bakes: a device's bakes for procedural grids and
+    grid slope bounds (render/device_bakes.py; numpy when None, the same numbers)."""
     kind = m["type"]
     if kind == "constant":
         return M.Constant(offset=m["value"])
@@ -84,9 +87,10 @@ def build_mean(m: dict) -> M.Mean:
         return M.Capsule(a=tuple(m["a"]), b=tuple(m["b"]), radius=m["radius"])
     if kind in ("union", "intersection", "difference"):
         cls = {"union": M.Union, "intersection": M.Intersection, "difference": M.Difference}
-        return cls[kind](build_mean(m["left"]), build_mean(m["right"]), k=m["k"])
+        return cls[kind](build_mean(m["left"], bakes), build_mean(m["right"], bakes),
+                         k=m["k"])
     if kind == "transform":
-        return M.Transform(build_mean(m["child"]), transform_matrix(m))
+        return M.Transform(build_mean(m["child"], bakes), transform_matrix(m))
     from .sdf_bake import mesh_mean, prepare_slopes, procedural_mean
     if kind == "mesh":
         grid = mesh_mean(m["file"], m["resolution"], m["margin"], m["band"],
@@ -95,13 +99,27 @@ def build_mean(m: dict) -> M.Mean:
         from ..io.grids import load_grid
         grid = load_grid(m["file"])
     elif kind == "procedural":
-        grid = procedural_mean(m["function"], m["resolution"])[0]
+        grid = procedural_mean(m["function"], m["resolution"], bakes=bakes)[0]
     else:
         raise AssertionError(kind)
     grid = dataclasses.replace(grid, interpolation=m["interpolation"])
     # the slope bounds the device's grid records need (gp_records.pack_mean), cached
-    prepare_slopes(grid)
+    prepare_slopes(grid, bakes=bakes)
     return grid
+
+
+def _join(parts: list) -> np.ndarray:
+    """np.concatenate(parts), emptying the list as it goes: each part is freed once copied,
+    so a scene's grid records (~10 MB per 128^3 grid) are not held twice."""
+    nodes = MEAN_NODE.page_aligned_zeros(sum(len(p) for p in parts))   # used in place
+    at = 0
+    parts.reverse()
+    while parts:
+        part = parts.pop()
+        assert part.dtype == nodes.dtype    # as np.concatenate would insist
+        nodes[at:at + len(part)] = part
+        at += len(part)
+    return nodes
 
 
 def kernel_length_scale(k: dict) -> float:
@@ -142,10 +160,10 @@ def occupancy_level(g: dict) -> float:
     return float(np.nextafter(np.float32(level), np.float32(np.inf)))
 
 
-def _posterior_block(g: dict, proxy: dict, source: str, key: str) -> np.ndarray:
+def _posterior_block(g: dict, proxy: dict, source: str, key: str, bakes=None) -> np.ndarray:
     try:
         post = build_posterior(g["observations"], build_kernel(g["kernel"], proxy),
-                               build_mean(g["mean"]))
+                               build_mean(g["mean"], bakes))
     except np.linalg.LinAlgError as exc:
         raise SceneError(source, f"{key}.observations", str(exc)) from None
     return pack_posterior(post)
@@ -163,9 +181,10 @@ class CompiledGpis:
 
 
 def compile_gpis(shapes: list, material_of, source: str = "<scene>",
-                 keys: list | None = None) -> CompiledGpis:
+                 keys: list | None = None, bakes=None) -> CompiledGpis:
     """shapes: the resolved "gpis" shapes in scene order; material_of(bsdf) -> index;
-    source and keys (each shape's key path) name what a compile-time error is about."""
+    source and keys (each shape's key path) name what a compile-time error is about;
+    bakes: see build_mean."""
     keys = keys or [f"gpis[{i}]" for i in range(len(shapes))]
     objects = layouts.GPIS_OBJECT.zeros(len(shapes))
     kernels = GP_KERNEL.zeros(len(shapes))
@@ -195,19 +214,21 @@ def compile_gpis(shapes: list, material_of, source: str = "<scene>",
         o["occupancy_level"] = occupancy_level(g)
         o["occupancy_step"] = OCCUPANCY_MIN_STEP * kernel_length_scale(g["kernel"])
         try:
-            prog = pack_mean(build_mean(g["mean"]))
+            prog = pack_mean_parts(build_mean(g["mean"], bakes))
         except ValueError as exc:
             raise SceneError(source, f"{keys[i]}.mean", str(exc)) from None
         if g.get("observations") is not None:
             # the posterior block sits just before the mean program (fs_posterior.h)
-            block = _posterior_block(g, proxy, source, keys[i])
+            block = _posterior_block(g, proxy, source, keys[i], bakes)
             first += len(block)
             programs.append(block)
             if "occupancy_level" in objects.dtype.names:
                 o["occupancy_level"] = 0.0   # the bound follows the prior mean, not this one
-        o["mean_first"], o["mean_count"] = first, len(prog)
-        first += len(prog)
-        programs.append(prog)
+        count = sum(len(part) for part in prog)
+        o["mean_first"], o["mean_count"] = first, count
+        first += count
+        programs.extend(prog)
+        prog = None                         # the list holds them; _join frees them
     # mesh proxies' face planes, after every mean program like the fields below
     for i, g in enumerate(shapes):
         if g["proxy"]["type"] == "mesh":
@@ -232,7 +253,7 @@ def compile_gpis(shapes: list, material_of, source: str = "<scene>",
                 objects[i][slot] = first
                 first += len(records)
                 programs.append(records)
-    nodes = np.concatenate(programs) if programs else MEAN_NODE.zeros(0)
+    nodes = _join(programs)
     table, t_first, t_count = pack_order_tables([build_kernel(g["kernel"]) for g in shapes])
     objects["order_first"], objects["order_count"] = t_first, t_count
     return CompiledGpis(objects, kernels, nodes, table)

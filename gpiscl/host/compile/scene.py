@@ -214,8 +214,9 @@ def bound_scene_proxies(data: dict, prims: np.ndarray | None = None) -> list:
     return [dict(s, proxy=box) if s["proxy"]["type"] == "scene" else s for s in shapes]
 
 
-def compile_scene(data: dict, source: str = "<scene>") -> CompiledScene:
-    """source: the scene's file, for errors found only while compiling (e.g. a mesh bake)."""
+def compile_scene(data: dict, source: str = "<scene>", bakes=None) -> CompiledScene:
+    """source: the scene's file, for errors found only while compiling (e.g. a mesh bake);
+    bakes: the render device's bakes (render/device_bakes.py), numpy's when None."""
     b = _Builder()
     env = {}
     for s in data.get("shapes", []):
@@ -226,7 +227,7 @@ def compile_scene(data: dict, source: str = "<scene>") -> CompiledScene:
     prims = np.array(b.prims, dtype=layouts.PRIMITIVE.dtype)
     gpis_at = [i for i, s in enumerate(data.get("shapes", [])) if s["type"] == "gpis"]
     gpis = compile_gpis(bound_scene_proxies(data, prims), b.material, source,
-                        [f"shapes[{i}]" for i in gpis_at])
+                        [f"shapes[{i}]" for i in gpis_at], bakes)
     if len(prims):
         nodes, order = build_bvh(*_bounds(prims))
         prims = prims[order]

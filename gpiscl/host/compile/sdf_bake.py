@@ -13,11 +13,11 @@ of the mesh file's bytes and the bake settings.
 
 Procedural bakes (gp/knob.py's functions, procedural_mean) are cached in
 $GPISCL_CACHE/procedural, keyed by the sha256 of knob.py's source and the settings; the
-slope bounds of any grid mean (GridMean.cell_bounds, and the cubic coefficients they are
-taken from: seconds of numpy at 128^3, every time a scene is loaded) in
+slope bounds of any grid mean (its brick bounds and lipschitz, and the cubic coefficients
+they are taken from: seconds of numpy at 128^3, every time a scene is loaded) in
 $GPISCL_CACHE/slopes, keyed by the grid's values, placement and interpolation and the
 source of gp/means.py that computes them (prepare_slopes). A warm start of the knob scene
-then reads ~50 MB instead of ~10 s of numpy.
+then reads ~0.5 MB (brick bounds of two 128^3 grids) instead of ~10 s of numpy.
 """
 from __future__ import annotations
 
@@ -33,6 +33,7 @@ from ..gp import knob, means
 from ..gp.means import GridMean
 from ..io.grids import load_grid, save_grid
 from ..io.meshes import load_mesh
+from ..layout.gp_records import GRID_BRICK
 
 BAKE_VERSION = 1            # part of the cache key: bump when the bake's output changes
 DEFAULT_MARGIN = 0.1        # of the mesh's largest bounding-box extent, per side
@@ -177,20 +178,20 @@ def mesh_mean(path, resolution: int = 128, margin: float | None = None,
 
 # ---- procedural bakes --------------------------------------------------------------------
 
-def procedural_mean(function: str, resolution: int, cache: bool = True):
+def procedural_mean(function: str, resolution: int, cache: bool = True, bakes=None):
     """knob.knob_grid(function, resolution), from the cache when an equal bake exists (the
     function's source unchanged). Returns (grid, cache_hit); the grid is the same float32
-    array either way."""
+    array either way. bakes: a device's bakes (render/device_bakes.py: the same samples bit
+    for bit) to bake with instead of numpy."""
     key = _settings_key({"version": BAKE_VERSION, "function": function,
                          "resolution": int(resolution)}, Path(knob.__file__).read_bytes())
     cached = cache_dir("procedural") / f"{key}.npz"
     if cache and cached.is_file():
         try:
-            g = load_grid(cached)
-            return GridMean(np.asarray(g.values, np.float32), g.origin, g.voxel_size), True
+            return load_grid(cached, np.float32), True
         except ValueError:
             pass
-    grid = knob.knob_grid(function, resolution)
+    grid = (bakes.procedural if bakes is not None else knob.knob_grid)(function, resolution)
     if cache:
         _store(cached, lambda tmp: save_grid(tmp, grid), "procedural bake")
     return grid, False
@@ -202,7 +203,7 @@ def _slopes_key(grid: GridMean) -> str:
     values = np.ascontiguousarray(grid.values)
     settings = {"version": BAKE_VERSION, "shape": list(values.shape), "dtype": str(values.dtype),
                 "origin": [float(o) for o in grid.origin], "voxel": float(grid.voxel_size),
-                "interpolation": grid.interpolation}
+                "interpolation": grid.interpolation, "brick": GRID_BRICK}
     # the array's own buffer, not a tobytes() copy (16 MB at 128^3 float64)
     return _settings_key(settings, memoryview(values).cast("B"),
                          Path(means.__file__).read_bytes())
@@ -221,26 +222,62 @@ def _cubic_cell_bounds_in_slabs(coef: np.ndarray, h: float) -> np.ndarray:
                            for i in range(0, cells, _SLAB_CELLS)])
 
 
-def prepare_slopes(grid: GridMean, cache: bool = True) -> bool:
-    """Give grid its cell slope bounds (and, cubic, the coefficients they come from) from
-    the cache when present, else compute and cache them. They are GridMean's
-    cached_property values, which live in the instance __dict__ once computed; setting
-    them there is what computing them would do, with the same arrays. Returns cache_hit."""
-    names = ("cell_bounds", "coefficients") if grid.interpolation == "cubic" else ("cell_bounds",)
+_LINEAR_SLAB_CELLS = 16   # x layers of cells per means._corner_gradients2 pass
+
+
+def _linear_slopes_in_slabs(values: np.ndarray, h: float):
+    """(means.cell_slope_bounds, GridMean.lipschitz) of a trilinear grid, over slabs of
+    _LINEAR_SLAB_CELLS x layers: a cell's bound reads its 8 corners only, so each slab
+    takes its cells' layers plus 1 and computes the same numbers, and the largest squared
+    corner gradient of all slabs is the whole grid's (bit for bit: tests/test_bake_cache).
+    The whole-grid form held ~150 MB of float64 temporaries at 128^3."""
+    cells, parts, inner2 = values.shape[0] - 1, [], 0.0
+    for i in range(0, cells, _LINEAR_SLAB_CELLS):
+        c2 = means._corner_gradients2(np.asarray(values[i:i + _LINEAR_SLAB_CELLS + 1],
+                                                 np.float64))
+        inner2 = max(inner2, float(np.max(c2)))
+        parts.append(np.sqrt(c2) / h)
+    return np.concatenate(parts), means.grid_slope_bound(values, h, inner2)
+
+
+def prepare_slopes(grid: GridMean, cache: bool = True, bakes=None) -> bool:
+    """Give grid what its device records need (gp_records._grid_leaf): its whole-grid slope
+    bound `lipschitz`, its brick bounds (means.brick_slope_bounds at GRID_BRICK) and, cubic,
+    the coefficients they come from; from the cache when present, else computed and cached.
+    They are GridMean's memoised values (cached_property, brick_bounds), which live in the
+    instance once computed; setting them there is what computing them would do, with the
+    same values. The cell bounds they are taken from are not kept (64 times the bricks'
+    bytes; GridMean.cell_bounds recomputes them if asked). bakes: a device's bakes
+    (render/device_bakes.py) for a trilinear grid's bounds, the same numbers bit for bit.
+    Returns cache_hit."""
+    names = ("bricks", "lipschitz") + (("coefficients",) if grid.interpolation == "cubic"
+                                       else ())
     cached = cache_dir("slopes") / f"{_slopes_key(grid)}.npz"
     if cache and cached.is_file():
         try:
             with np.load(cached, allow_pickle=False) as z:
                 arrays = {n: np.asarray(z[n]) for n in names}
-            for n, a in arrays.items():
-                grid.__dict__[n] = a
+            grid.__dict__["lipschitz"] = float(arrays["lipschitz"])
+            grid.brick_bounds[GRID_BRICK] = arrays["bricks"]
+            if "coefficients" in arrays:
+                grid.__dict__["coefficients"] = arrays["coefficients"]
             return True
-        except (OSError, ValueError, KeyError):
-            pass                            # damaged: compute again and replace it
+        except (OSError, ValueError, KeyError, TypeError):
+            pass                            # damaged or older: compute again and replace it
+    h = float(grid.voxel_size)
+    if grid.interpolation == "linear" and bakes is not None:
+        bricks, lipschitz = bakes.linear_slopes(grid.values, h, GRID_BRICK)
+        grid.brick_bounds[GRID_BRICK], grid.__dict__["lipschitz"] = bricks, lipschitz
+    elif grid.interpolation == "cubic":
+        grid.__dict__["cell_bounds"] = _cubic_cell_bounds_in_slabs(grid.coefficients, h)
+    else:
+        grid.__dict__["cell_bounds"], grid.__dict__["lipschitz"] = \
+            _linear_slopes_in_slabs(grid.values, h)
+    arrays = {"bricks": means.brick_slope_bounds(grid, GRID_BRICK),
+              "lipschitz": np.float64(grid.lipschitz)}
     if grid.interpolation == "cubic":
-        grid.__dict__["cell_bounds"] = _cubic_cell_bounds_in_slabs(grid.coefficients,
-                                                                   float(grid.voxel_size))
-    arrays = {n: getattr(grid, n) for n in names}
+        arrays["coefficients"] = grid.coefficients
+    grid.__dict__.pop("cell_bounds", None)
     if cache:
         _store(cached, lambda tmp: np.savez(tmp, **arrays), "grid slope bounds")
     return False

@@ -100,15 +100,20 @@ BOUNDS = {"knob": (np.array([-1.1, -1.0, -1.1]), np.array([1.1, 1.0, 1.0])),
           "knob_inner": (np.array([-0.8, -0.8, -0.8]), np.array([0.8, 0.8, 0.8]))}
 
 
+def grid_placement(function: str, resolution: int):
+    """(origin, voxel size, sample counts) of knob_grid (and of its device twin)."""
+    lo, hi = BOUNDS[function]
+    voxel = float(np.max(hi - lo)) / (resolution - 1)
+    return lo, voxel, np.ceil((hi - lo) / voxel).astype(int) + 1
+
+
 @functools.lru_cache(maxsize=8)
 def knob_grid(function: str, resolution: int = 128):
     """The function sampled on a grid over its bounds (longest side `resolution` samples):
     a GridMean the device interpolates, like any baked signed distance."""
     from .means import GridMean
 
-    lo, hi = BOUNDS[function]
-    voxel = float(np.max(hi - lo)) / (resolution - 1)
-    n = np.ceil((hi - lo) / voxel).astype(int) + 1
+    lo, voxel, n = grid_placement(function, resolution)
     axes = [lo[i] + voxel * np.arange(n[i]) for i in range(3)]
     values = np.empty(tuple(n), np.float32)
     # in slabs of a few x planes (~60k points): the function's dozens of elementwise

@@ -308,6 +308,11 @@ class GridMean(Mean):
         return cell_slope_bounds(self)
 
     @cached_property
+    def brick_bounds(self) -> dict:
+        """brick edge -> brick_slope_bounds of this grid, filled as they are asked for."""
+        return {}
+
+    @cached_property
     def coefficients(self) -> np.ndarray:
         """The cubic B-spline coefficients, (nx + 2, ny + 2, nz + 2) (cubic only)."""
         return cubic_coefficients(np.asarray(self.values, np.float64))
@@ -479,8 +484,16 @@ def cell_slope_bounds(grid: "GridMean") -> np.ndarray:
 
 
 def brick_slope_bounds(grid: "GridMean", brick: int) -> np.ndarray:
-    """The largest cell bound in each brick of brick^3 cells (the last bricks partial)."""
-    cells = grid.cell_bounds
+    """The largest cell bound in each brick of brick^3 cells (the last bricks partial),
+    kept in grid.brick_bounds[brick] (compile/sdf_bake.py caches them there: 1/64 of the
+    cell bounds' bytes)."""
+    memo = grid.brick_bounds
+    if brick not in memo:
+        memo[brick] = _brick_maxima(grid.cell_bounds, brick)
+    return memo[brick]
+
+
+def _brick_maxima(cells: np.ndarray, brick: int) -> np.ndarray:
     nb = [-(-n // brick) for n in cells.shape]
     pad = [(0, b * brick - n) for b, n in zip(nb, cells.shape)]
     cells = np.pad(cells, pad, constant_values=0.0)
@@ -506,17 +519,21 @@ def _corner_gradients2(values: np.ndarray) -> np.ndarray:
     return best
 
 
-def grid_slope_bound(values: np.ndarray, h: float) -> float:
+def grid_slope_bound(values: np.ndarray, h: float, inner2: float | None = None) -> float:
     """The maximum of |grad| of GridMean (world units). Inside: the exact maximum over
     each cell (_corner_gradients2). Outside, over a face cell whose bilinear gradient is at
     most a: |grad| <= max(a, 1) where its samples are >= 0 (then g >= 0 on it, and
     sqrt(g^2 + d^2) mixes slopes a and 1 in a weighted mean), sqrt(a^2 + 1) where any is
     negative (g + d: orthogonal parts add). Edges and corners of the box take their values
-    and slopes from face cells, and slope 1 from d: the bound is never below 1."""
-    bound2 = max(float(np.max(_corner_gradients2(values))) / h**2, 1.0)
+    and slopes from face cells, and slope 1 from d: the bound is never below 1.
+    inner2: max(_corner_gradients2(values)) when already known (compile/sdf_bake.py takes
+    it in slabs: the whole-grid temporaries were ~150 MB at 128^3); faces are in double."""
+    if inner2 is None:
+        inner2 = float(np.max(_corner_gradients2(np.asarray(values, np.float64))))
+    bound2 = max(inner2 / h**2, 1.0)
     for axis in range(3):
         for end in (0, -1):
-            f = np.take(values, end, axis=axis)
+            f = np.asarray(np.take(values, end, axis=axis), np.float64)
             a2 = _corner_gradients2(f) / h**2
             corners = [f[i:f.shape[0] - 1 + i, j:f.shape[1] - 1 + j] for i in (0, 1)
                        for j in (0, 1)]

@@ -15,7 +15,9 @@ WHY_MAGNITUDE = "the device computes in float32, where its square would overflow
 def array_problem(a, what: str, nonnegative: bool = False):
     """None, or why the numbers of array a (a mesh's vertices, an image's texels, a
     grid's samples) cannot go to the device: non-finite, out of range, or negative."""
-    a = np.asarray(a, dtype=np.float64)
+    a = np.asarray(a)
+    if a.dtype.kind != "f":   # floats as they are: a float32 grid needs no double copy
+        a = a.astype(np.float64)
     bad = np.count_nonzero(~np.isfinite(a))
     if bad:
         return f"{what} has {bad} NaN or infinite value(s)"

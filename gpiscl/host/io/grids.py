@@ -70,25 +70,26 @@ def read_grid_arrays(path, keys=GRID_KEYS) -> dict:
     return arrays
 
 
-def check_grid_values(values, shape_ok: bool, expected: str) -> np.ndarray:
-    """values as float64 if real, finite and of the expected shape; ValueError otherwise."""
+def check_grid_values(values, shape_ok: bool, expected: str, dtype=np.float64) -> np.ndarray:
+    """values as dtype if real, finite and of the expected shape; ValueError otherwise."""
     if not shape_ok:
         raise ValueError(f"grid array 'values' must be {expected} (got shape {values.shape})")
     if not np.issubdtype(values.dtype, np.number) or np.iscomplexobj(values):
         raise ValueError(f"grid array 'values' must be real numbers (got {values.dtype})")
-    values = values.astype(np.float64)
+    values = values.astype(dtype)
     problem = array_problem(values, "grid array 'values'")
     if problem:
         raise ValueError(problem)
     return values
 
 
-def load_grid(path) -> GridMean:
-    """A GridMean from an .npz file; ValueError naming the array key when it is unusable."""
+def load_grid(path, dtype=np.float64) -> GridMean:
+    """A GridMean from an .npz file; ValueError naming the array key when it is unusable.
+    dtype: of the values (float32 for bakes stored in float32: no double copy)."""
     arrays = read_grid_arrays(path)
     v = arrays["values"]
     values = check_grid_values(v, v.ndim == 3 and min(v.shape) >= 2,
-                               "3-D (nx, ny, nz) with every dimension >= 2")
+                               "3-D (nx, ny, nz) with every dimension >= 2", dtype)
     return GridMean(values, tuple(float(o) for o in arrays["origin"]),
                     float(arrays["voxel_size"].item()))
 

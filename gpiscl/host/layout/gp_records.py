@@ -203,18 +203,49 @@ def _leaf(node, m, scale):
     return rec
 
 
+def payload_records(count: int, lead: int = 0):
+    """(records, floats): `lead` zeroed records (for the caller's header) then zeroed
+    payload records for `count` floats, and the (payload records, GRID_PAYLOAD_FLOATS)
+    float32 view of their row0..p1 that write_floats fills. Writing into the records
+    directly spares the float64 and float32 copies of a whole grid that a
+    concatenate-then-convert pass holds at once (~60 MB per 128^3 grid)."""
+    n_rec = -(-int(count) // GRID_PAYLOAD_FLOATS)
+    records = MEAN_NODE.zeros(lead + n_rec)
+    records["kind"][lead:] = MEAN_KINDS["payload"]
+    assert [MEAN_NODE.dtype.fields[n][1] for n in _PAYLOAD_FIELDS] == [0, 16, 32, 48, 64]
+    width = MEAN_NODE.dtype.itemsize // 4
+    floats = records[lead:].view(np.float32).reshape(n_rec, width)[:, :GRID_PAYLOAD_FLOATS]
+    return records, floats
+
+
+def write_floats(floats: np.ndarray, start: int, values) -> int:
+    """Write values (flattened in C order, rounded to float32) into the payload view
+    `floats` from float index `start` on; returns the index after them."""
+    values = np.asarray(values).ravel()
+    width, n, i = floats.shape[1], values.size, 0
+    row, col = divmod(int(start), width)
+    if col and n:
+        k = min(width - col, n)
+        floats[row, col:col + k] = values[:k]
+        i, row = k, row + 1
+    full = (n - i) // width
+    if full:
+        floats[row:row + full] = values[i:i + full * width].reshape(full, width)
+        i, row = i + full * width, row + full
+    if i < n:
+        floats[row, :n - i] = values[i:]
+    return int(start) + n
+
+
+_PAYLOAD_FIELDS = ("row0", "row1", "row2", "p0", "p1")
+
+
 def pack_payload(floats) -> np.ndarray:
     """Payload records holding `floats` (float32, flattened) in row0..p1, as grid leaves,
     grid colour fields and grid kernel fields store their samples."""
-    flat = np.asarray(floats, np.float32).ravel()
-    n_rec = -(-flat.size // GRID_PAYLOAD_FLOATS)
-    padded = np.zeros(n_rec * GRID_PAYLOAD_FLOATS, np.float32)
-    padded[:flat.size] = flat
-    padded = padded.reshape(n_rec, GRID_PAYLOAD_FLOATS // 4, 4)
-    payload = MEAN_NODE.zeros(n_rec)
-    for f, name in enumerate(("row0", "row1", "row2", "p0", "p1")):
-        payload[name] = padded[:, f]
-    payload["kind"] = MEAN_KINDS["payload"]
+    floats = np.asarray(floats)
+    payload, view = payload_records(floats.size)
+    write_floats(view, 0, floats)
     return payload
 
 
@@ -253,26 +284,35 @@ def pack_kernel_grids(kernel: K.Kernel, record: np.ndarray, offset: int) -> list
     return out
 
 
+_PACK_LAYERS = 8   # x layers of a grid's samples per write_floats
+
+
 def _grid_leaf(node: M.GridMean, m, scale):
     """The grid leaf record followed by its payload records."""
-    values = np.asarray(node.values, np.float64)
     h = float(node.voxel_size)
     s_index = node.lipschitz * h            # slope bound per voxel
     to_index = np.concatenate([np.eye(3) / h, -np.asarray(node.origin, float)[:, None] / h], 1)
     cubic = node.interpolation == "cubic"
-    samples = node.coefficients if cubic else values
+    samples = node.coefficients if cubic else node.values
     _check_grid_size(samples)
     # per-brick slope bounds in the samples' units (<= 1), after the samples
     bricks = M.brick_slope_bounds(node, GRID_BRICK) / node.lipschitz
-    payload = pack_payload(np.concatenate([(samples / s_index).ravel(), bricks.ravel()]))
-    rec = MEAN_NODE.zeros(1)
+    # samples / S h in double, rounded to float32, a few x layers at a time (the same
+    # numbers as one whole-grid pass, without its temporaries)
+    out, floats = payload_records(samples.size + bricks.size, lead=1)
+    at = 0
+    for i in range(0, samples.shape[0], _PACK_LAYERS):
+        at = write_floats(floats, at, np.asarray(samples[i:i + _PACK_LAYERS], np.float64)
+                          / s_index)
+    write_floats(floats, at, bricks)
+    rec = out[:1]                           # the leaf, then its payload
     rec["kind"] = MEAN_KINDS["grid"]
-    rec["flags"] = len(payload)
+    rec["flags"] = len(out) - 1
     rec["row0"], rec["row1"], rec["row2"] = _compose(m, to_index)
     rec["p0"] = (h / s_index, 1.0 if cubic else 0.0, GRID_BRICK, 0.0)
-    rec["p1"] = (*values.shape, 0.0)
+    rec["p1"] = (*np.shape(node.values), 0.0)
     rec["scale"] = scale * s_index
-    return np.concatenate([rec, payload])
+    return out
 
 
 def _emit(node, m, scale, out):
@@ -295,6 +335,12 @@ def _emit(node, m, scale, out):
 
 def pack_mean(mean: M.Mean) -> np.ndarray:
     """The postfix MeanNode program of a mean tree (raises if it needs too deep a stack)."""
+    return np.concatenate(pack_mean_parts(mean))
+
+
+def pack_mean_parts(mean: M.Mean) -> list:
+    """pack_mean's program as the record arrays it concatenates, for a caller that joins
+    several programs: one concatenation instead of two (a grid's records are ~10 MB)."""
     need = _stack_need(mean)
     if need > MEAN_STACK_DEPTH:
         raise ValueError(f"mean CSG tree needs a stack of {need} entries; the device "
@@ -302,4 +348,4 @@ def pack_mean(mean: M.Mean) -> np.ndarray:
                          " leaves in a balanced tree): rebalance the unions")
     out = []
     _emit(mean, np.eye(3, 4), 1.0, out)
-    return np.concatenate(out)
+    return out

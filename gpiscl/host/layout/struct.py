@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+PAGE = 4096
+
 # C type name -> (numpy base dtype, element count, alignment in bytes)
 _C_TYPES = {
     "int": (np.int32, 1, 4),
@@ -47,6 +49,14 @@ class Struct:
 
     def zeros(self, n: int) -> np.ndarray:
         return np.zeros(n, dtype=self.dtype)
+
+    def page_aligned_zeros(self, n: int) -> np.ndarray:
+        """zeros(n) starting on a 4096-byte boundary (numpy's large arrays start 16 bytes
+        past one): a CPU device can use such an array in place (render.device.to_device),
+        where an unaligned one is copied."""
+        raw = np.zeros(n * self.dtype.itemsize + PAGE, np.uint8)
+        start = -raw.ctypes.data % PAGE
+        return raw[start:start + n * self.dtype.itemsize].view(self.dtype)
 
 
 @dataclass(frozen=True)

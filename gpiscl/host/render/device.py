@@ -192,9 +192,21 @@ class KernelTimings:
 
 
 def to_device(device: Device, array: np.ndarray, writable=False) -> cl.Buffer:
-    """Upload an array (a 1-element dummy for empty arrays, which OpenCL cannot hold)."""
+    """Upload an array (a 1-element dummy for empty arrays, which OpenCL cannot hold).
+
+    A read-only buffer on a CPU device uses the array's own memory when it is aligned as
+    the device aligns its buffers (USE_HOST_PTR; the buffer keeps the array alive): a copy
+    would be the same RAM twice, e.g. 20 MB of the knob's grid records, which the compiler
+    allocates page-aligned for this (tools/bench_scenes.py, peak RSS). The array must then
+    not change while the buffer lives, which holds for the compiled scene's arrays.
+    Unaligned arrays (vector loads would straddle cache lines) and GPUs get a copy."""
     mf = cl.mem_flags
     if array.size == 0:
         array = np.zeros(1, dtype=array.dtype)
+    array = np.ascontiguousarray(array)
+    align = max(int(device.device.mem_base_addr_align) // 8, 16)
+    if (not writable and device.device.type & cl.device_type.CPU
+            and array.ctypes.data % align == 0):
+        return cl.Buffer(device.ctx, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=array)
     flags = (mf.READ_WRITE if writable else mf.READ_ONLY) | mf.COPY_HOST_PTR
-    return cl.Buffer(device.ctx, flags, hostbuf=np.ascontiguousarray(array))
+    return cl.Buffer(device.ctx, flags, hostbuf=array)

@@ -17,7 +17,14 @@ from .device import Device, KernelTimings, Program
 from ..layout import function_space_records as FL
 
 RING_BUDGET = 256 << 20      # bytes of global-model rings per batch: caps the batch size
-SCRATCH_BUDGET = 256 << 20   # bytes of scratch per launch: sets the chunk size
+SCRATCH_BUDGET = 256 << 20   # bytes of scratch per launch: caps the chunk size
+# Work-groups per compute unit in one chunk: enough that the units finish together (the
+# work per ray varies by several times), few enough that the scratch stays small. A CPU
+# touches every scratch page a chunk uses: chunks of the whole batch (up to ~15,000 items
+# of 17.7 KB each for the knob) held ~250 MB resident where 16 groups a unit hold ~9 MB
+# on two cores, at the same paths/s (tools/bench_scenes.py). A GPU's many units still
+# reach SCRATCH_BUDGET first.
+GROUPS_PER_UNIT = 16
 
 
 def _fs_objects(objects: np.ndarray) -> np.ndarray:
@@ -97,7 +104,8 @@ class FunctionSpaceStages:
         if self.timings is not None:   # one kernel table for both programs
             self.program.timings = self.timings
         slice_bytes = 8 * defines["FS_SCRATCH_DOUBLES"]
-        chunk = max(1, min(self.batch, SCRATCH_BUDGET // (2 * slice_bytes)))
+        parallel = int(self.device.device.max_compute_units) * self.local * GROUPS_PER_UNIT
+        chunk = max(1, min(self.batch, SCRATCH_BUDGET // (2 * slice_bytes), parallel))
         self.chunk = int(-(-chunk // self.local) * self.local)
         self.scratch = cl.Buffer(self.device.ctx, cl.mem_flags.READ_WRITE,
                                  2 * slice_bytes * self.chunk)

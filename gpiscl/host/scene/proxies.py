@@ -12,6 +12,7 @@ import json
 
 import numpy as np
 
+from ..io.meshes import closed_mesh
 from .transforms import mesh_triangles
 
 # planes closer than this (relative to the mesh's size) are one face; vertices this far
@@ -36,10 +37,7 @@ def _analyse(file: str, transform_json: str):
     # outward normals: a closed mesh wound inwards has negative signed volume
     if np.sum(a * np.cross(b, c)) < 0.0:
         n, d = -n, -d
-    import trimesh
-    mesh = trimesh.Trimesh(vertices=verts, faces=np.arange(len(verts)).reshape(-1, 3),
-                           process=True)
-    if not mesh.is_watertight:
+    if not closed_mesh(tris):
         return None, lo, hi, "must be a closed (watertight) mesh to bound a GPIS"
     planes = np.unique(np.round(np.concatenate([n, d[:, None]], 1) / (_REL_TOL * size))
                        * (_REL_TOL * size), axis=0)
