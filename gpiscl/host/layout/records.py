@@ -121,6 +121,9 @@ PATH_STATE = Queue("path", (
     ("float4", "prev_pos"),   # last scattering vertex, for emitter pdfs (w = bsdf pdf, 0 = delta)
     ("int", "prev_env_nee"),  # 1: that vertex's light sampling covers environment lights
                               # too (a function-space mirror's does not: scatter.cl)
+    # a function-space rough conductor vertex (fs_normal_pdf.h, fs_conductor_light_pdf):
+    ("float4", "prev_n"),     # its sampled normal n0, w = p_Omega(n0) (0: any other vertex)
+    ("float4", "prev_v"),     # v = -(incoming direction), w = the Beckmann alpha
     ("int", "depth"),         # scattering events so far
     ("int", "medium"),        # GPIS object the ray travels in, or -1
     # the first scattering event, for AOVs (aov.py; written only when params.aov is set)

@@ -87,3 +87,56 @@ inline float3 fs_implied_gradient(FsNormalLaw L, float3 d, float3 h)
 {
     return (L.s / dot(h, d)) * h;
 }
+
+/* --- Rough conductor at a function-space hit ------------------------------------------
+ * The direct light at the vertex is the double integral over the GPIS normal n and the
+ * light direction l of F(n, l) = p_Omega(n) fcos(n; v, l) Le(l) V(l | g(n)), with fcos the
+ * Beckmann conductor of bsdf.h about n (Fresnel at the microfacet half vector
+ * m = normalize(v + l), not at n). The density of the whole direction, the convolution
+ * of p_Omega with the conductor's lobe, has no closed form, so the strategies work on
+ * pairs (n, l), where every density is closed:
+ *   A  the hit's sampled normal n0 and a light sample: p_A = p_Omega(n) p_L(l);
+ *   B  a light sample, then n around the half vector h = normalize(v + l) with the
+ *      Beckmann microfacet density q(n | l) = D(n.h) (n.h) (the lobe's own shape turned
+ *      around: n where fcos(n; v, l) peaks): p_B = p_L(l) q(n | l); its shadow ray
+ *      conditions on the gradient n implies, as the mirror's does (B is the mirror's
+ *      NEE blurred by the lobe: alpha -> 0 gives it back);
+ *   C  BSDF sampling: n0, then l from the lobe about n0: p_C = p_Omega(n) p_c(l | n).
+ * A is good where the GPIS normal is sharp and the lobe wide, B where the normal is
+ * spread and the lobe narrow (a glossy GPIS under a small light: A alone only catches
+ * the light when n0 happens to point at it). Next-event estimation picks A or B with
+ * probability 1/2 (one shadow ray per vertex), so its pairs have the mixture density
+ * p_AB = (p_A + p_B) / 2, and the power heuristic weighs p_AB against p_C: neither A
+ * nor B dominates where it is poor (p_AB >= p_A / 2 and >= p_B / 2). Dividing every
+ * density by p_Omega(n0) (common to A and C at n0), C's weight at a light needs only
+ *   p_AB / p_Omega(n0) = p_L(l) (1 + q(n0 | l) / p_Omega(n0)) / 2,
+ * which fs_conductor_light_pdf gives emission.cl and escaped_rays.cl from the path's
+ * prev_n (n0, p_Omega(n0)) and prev_v (v, alpha). Delta lights (p_L = 0) use A alone:
+ * B cannot sample them and C never hits them. */
+
+/* q(n | l): Beckmann density D(n.h) (n.h) of n about the half vector h, per steradian */
+inline float fs_lobe_normal_pdf(float3 n, float3 h, float alpha)
+{
+    float c = dot(n, h);
+    return c > 0.0f ? beckmann_d(c, alpha) * c : 0.0f;
+}
+
+/* n ~ q(. | l) about h from two uniforms (the microfacet sampling of bsdf.h) */
+inline float3 fs_lobe_normal_sample(float3 h, float alpha, float2 u)
+{
+    float tan2 = -alpha * alpha * log(1.0f - u.x), phi = 2.0f * PI_F * u.y;
+    float cm = 1.0f / sqrt(1.0f + tan2), sm = sqrt(fmax(1.0f - cm * cm, 0.0f));
+    float3 t, b;
+    make_frame(h, &t, &b);
+    return normalize(sm * cos(phi) * t + sm * sin(phi) * b + cm * h);
+}
+
+/* The light strategy's density relative to p_Omega(n0) for C's MIS weight: pdf_light
+ * (per light, already divided by the light count) unchanged unless the path's previous
+ * vertex was a function-space rough conductor (prev_n.w = p_Omega(n0) > 0). */
+inline float fs_conductor_light_pdf(float pdf_light, float4 prev_n, float4 prev_v, float3 l)
+{
+    if (!(prev_n.w > 0.0f)) return pdf_light;
+    float3 h = normalize(prev_v.xyz + l);
+    return pdf_light * 0.5f * (1.0f + fs_lobe_normal_pdf(prev_n.xyz, h, prev_v.w) / prev_n.w);
+}

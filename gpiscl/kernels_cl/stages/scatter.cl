@@ -78,6 +78,9 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
      * has no such density (the realization fixes the normal): its mirror stays delta. */
     int fs_hit = hp < 0 && gpis[GPIS_HIT_BASE - hp].sampler == GPIS_SAMPLER_FUNCTION_SPACE;
     int fs_mirror = fs_hit && mat->kind == MATERIAL_MIRROR;
+    /* a rough conductor there samples pairs (normal, light) with MIS (fs_normal_pdf.h) */
+    int fs_conductor = fs_hit && mat->kind == MATERIAL_ROUGH_CONDUCTOR;
+    float p_n0 = 0.0f;   /* fs_conductor: p_Omega of the sampled normal */
     FsNormalLaw law = fs_normal_law(in_hit_law_m[r], in_hit_law_a[r], in_hit_law_b[r]);
     if (mat->kind == MATERIAL_DIFFUSE || mat->kind == MATERIAL_ROUGH_CONDUCTOR || fs_mirror) {
         /* --- next-event estimation --- */
@@ -115,6 +118,28 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
             float w = (pdf_light > 0.0f)
                           ? power_heuristic(pdf_light / params->num_lights, pdf_f) : 1.0f;
             float inv_pdf = (pdf_light > 0.0f) ? 1.0f / pdf_light : 1.0f;
+            if (fs_conductor && pdf_light > 0.0f) {
+                /* strategy A (the sampled normal) or B (a normal about the half
+                 * vector), each with probability 1/2; all densities relative to the
+                 * light's pdf_L, i.e. p_AB / p_L = (p_Omega(nn) + q(nn | l)) / 2 */
+                float3 v = -wo, h = normalize(v + wl), nn = n;
+                if (ul.w >= 0.5f) {
+                    nn = fs_lobe_normal_sample(h, mat->roughness,
+                                               rng4(params->seed, pixel, sample, bounce,
+                                                    DIM_BSDF).zw);
+                    if (dot(nn, wo) < 0.0f)
+                        grad = (float4)(fs_implied_gradient(law, wo, nn), 1.0f);
+                }
+                float p_nn = fs_normal_pdf(law, wo, nn);
+                f = rough_conductor_eval(albedo, mat->eta.xyz, mat->k.xyz, mat->roughness, nn,
+                                         v, wl, &pdf_f);
+                float p_ab = 0.5f * (p_nn + fs_lobe_normal_pdf(nn, h, mat->roughness));
+                /* F / p_AB w_AB with F = p_Omega(nn) fcos Le: w_AB from p_AB against
+                 * p_C = p_Omega(nn) p_c(l | nn), both in units of pdf_L */
+                float pl = pdf_light / params->num_lights;
+                w = power_heuristic(pl * p_ab, p_nn * pdf_f);
+                f *= (p_ab > 0.0f) ? p_nn / p_ab : 0.0f;
+            }
             float3 c = beta * f * Le * (w * inv_pdf * params->num_lights);
             if (max3(c) > 0.0f) {
                 int k = atomic_inc(&counters[COUNT_SHADOW]);
@@ -141,6 +166,8 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
             beta *= rough_conductor_sample(albedo, mat->eta.xyz, mat->k.xyz, mat->roughness,
                                            n, -wo, ub.xy, &wi, &pdf_bsdf);
             if (!(max3(beta) > 0.0f)) return;   /* reflected below the surface */
+            /* C's MIS weight at a light needs p_Omega(n0) (fs_conductor_light_pdf) */
+            if (fs_conductor) p_n0 = fmax(fs_normal_pdf(law, wo, n), FLT_MIN);
         }
     } else {
         wi = wo - 2.0f * dot(wo, n) * n;
@@ -160,6 +187,8 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
     path_depth[p] = depth;
     path_prev_pos[p] = (float4)(x, pdf_bsdf);
     path_prev_env_nee[p] = !fs_mirror;
+    path_prev_n[p] = (float4)(n, p_n0);
+    path_prev_v[p] = (float4)(-wo, mat->roughness);
     int k = atomic_inc(&counters[COUNT_RAYS_OUT]);
     out_o[k] = (float4)(xo, 0.0f);
     out_d[k] = (float4)(wi, T_INFINITY);
