@@ -109,6 +109,9 @@ RENDER_PARAMS = Struct("RenderParams", (
     ("int", "num_gpis"),
     ("int", "realization"),    # >= 0: every path uses this one GPIS realization
     ("int", "aov"),            # 1: record first hits (aov.py) and add them to the film
+    ("int", "fs_nee"),         # 1: NEE at function-space hits may pick the normal
+                               # (fs_normal_pdf.h); 0: only the sampled one, the mirror
+                               # delta (the benchmarks' baseline, tools/bench_mirror_nee.py)
 ))
 
 # --- queues ---------------------------------------------------------------------------

@@ -76,7 +76,8 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
      * there is not a delta BSDF: its direction density is the normal's through the half
      * vector (fs_normal_pdf.h), and it gets next-event estimation and MIS. Weight space
      * has no such density (the realization fixes the normal): its mirror stays delta. */
-    int fs_hit = hp < 0 && gpis[GPIS_HIT_BASE - hp].sampler == GPIS_SAMPLER_FUNCTION_SPACE;
+    int fs_hit = hp < 0 && gpis[GPIS_HIT_BASE - hp].sampler == GPIS_SAMPLER_FUNCTION_SPACE
+                 && params->fs_nee;
     int fs_mirror = fs_hit && mat->kind == MATERIAL_MIRROR;
     /* a rough conductor there samples pairs (normal, light) with MIS (fs_normal_pdf.h) */
     int fs_conductor = fs_hit && mat->kind == MATERIAL_ROUGH_CONDUCTOR;
