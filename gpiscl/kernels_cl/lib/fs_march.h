@@ -69,7 +69,9 @@
  * bracket end (f(ta) ~ 0). The old secant slope's jitter noise (tilted normals at
  * refine >= 12) is gone too: s is drawn from the jittered model's own conditional.
  * The tangential components follow given f(x_h) = 0 and s (fs_sampling.h's closed form
- * for isotropic kernels without a posterior or global memory, else two appended rows).
+ * for isotropic kernels without a posterior or global memory, else two appended rows);
+ * their law given s (mean and 2x2 factor, the appended rows' before they are drawn) is
+ * returned with the hit (FsResult.law_*): the normal's density, fs_normal_pdf.h.
  * The global ring keeps this ray's rows: values, bisection points, f(x_h) = 0, s and the
  * tangential components.
  *

@@ -136,7 +136,7 @@ inline float3 fs_lobe_normal_sample(float3 h, float alpha, float2 u)
  * vertex was a function-space rough conductor (prev_n.w = p_Omega(n0) > 0). */
 inline float fs_conductor_light_pdf(float pdf_light, float4 prev_n, float4 prev_v, float3 l)
 {
-    if (!(prev_n.w > 0.0f)) return pdf_light;
+    if (!(prev_n.w > 0.0f) || !(pdf_light > 0.0f)) return pdf_light;   /* 0 * inf */
     float3 h = normalize(prev_v.xyz + l);
     return pdf_light * 0.5f * (1.0f + fs_lobe_normal_pdf(prev_n.xyz, h, prev_v.w) / prev_n.w);
 }

@@ -138,7 +138,7 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
                 /* F / p_AB w_AB with F = p_Omega(nn) fcos Le: w_AB from p_AB against
                  * p_C = p_Omega(nn) p_c(l | nn), both in units of pdf_L */
                 float pl = pdf_light / params->num_lights;
-                w = power_heuristic(pl * p_ab, p_nn * pdf_f);
+                w = (p_ab > 0.0f) ? power_heuristic(pl * p_ab, p_nn * pdf_f) : 0.0f;
                 f *= (p_ab > 0.0f) ? p_nn / p_ab : 0.0f;
             }
             float3 c = beta * f * Le * (w * inv_pdf * params->num_lights);
