@@ -53,11 +53,59 @@ __kernel void normal_law(__global const GpKernel* kp, __global const MeanNode* m
 """
 
 
+IMPLIED = r"""
+/* One flight to a hit, its vertex record, then the conditioning rows fs_begin gives a
+ * ray from the vertex along dnew: with the record as it is, and with the gradient that
+ * the tilted normal h = normalize(n + tilt) implies (a shadow ray's copy). out: hit,
+ * the implied gradient (3), rows of each (count, outside, then per row value, kind,
+ * direction (3)), 4 + 2 (2 + 5 cap) doubles. */
+__kernel void implied_rows(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
+                           int memory, int cap, __global const double* ray, uint seed,
+                           __global const double* tilt, __global const double* dnew,
+                           __global double* scratch, __global FsObs* rings,
+                           __global double* out)
+{
+    FsScratch S = fs_scratch(scratch, 0);
+    FsParams prm = {0, memory, cap, 6, 0.0, 1e-5};
+    FsRay r = {vload3(0, ray), vload3(1, ray), ray[6], ray[7]};
+    FsRng rng = {seed, 0u, 0u, 0u, 0u};
+    FsVertex v = {0};
+    FsResult res = fs_free_flight(kp[0], mean, mc, prm, r, v, rings, rng, S);
+    out[0] = res.hit && !res.status;
+    if (!out[0]) return;
+    v = fs_vertex_at_hit(prm, r, res, v, rings, S);
+    double3 dn = normalize(r.d), h = normalize(normalize(res.grad) + vload3(0, tilt));
+    double3 g = (res.law_s / dot(h, dn)) * h;
+    vstore3(g, 0, out + 1);
+    FsRay sr = {r.o + res.t * r.d, vload3(0, dnew), 0.0, 1.0};
+    for (int implied = 0; implied < 2; ++implied) {
+        FsVertex c = v;
+        if (implied) { c.grad = (float4)(convert_float3(g), 0.0f); c.implied = 1; }
+        double f0;
+        int outside, n_old;
+        int m = fs_begin(kp[0], mean, mc, prm, sr, c, rings, rng, S, &f0, &outside, &n_old);
+        __global double* o = out + 4 + implied * (2 + 5 * cap);
+        o[0] = m;
+        o[1] = outside;
+        for (int k = 0; k < m; ++k) {
+            o[2 + 5 * k] = S.rows[k].value;
+            o[3 + 5 * k] = S.rows[k].kind;
+            vstore3(fs_dir(S.rows + k), 0, o + 4 + 5 * k);
+        }
+    }
+}
+"""
+
+
 @functools.lru_cache(maxsize=None)
-def _program(ctx):
-    p = cl.Program(ctx, fs_sampler_source(LAW)).build(
+def _programs(ctx):
+    p = cl.Program(ctx, fs_sampler_source(LAW + IMPLIED)).build(
         options=fs_sampler_options(WINDOW_MAX, CAP_MAX))
-    return p.normal_law
+    return {k.function_name: k for k in p.all_kernels()}
+
+
+def _program(ctx):
+    return _programs(ctx)["normal_law"]
 
 
 D = np.array([1.0, 0.3, -0.2]) / np.linalg.norm([1.0, 0.3, -0.2])
@@ -127,6 +175,53 @@ def hemisphere(n_theta, n_phi, d=D):
     pts = (-ct[:, None, None] * d + st[:, None, None]
            * (np.cos(phi)[None, :, None] * t + np.sin(phi)[None, :, None] * b))
     return pts, (1.0 / n_theta) * (2 * np.pi / n_phi)
+
+
+@pytest.mark.parametrize("memory", ["renewal_plus", "global"])
+def test_shadow_rays_condition_on_the_implied_gradient(device, memory):
+    """A shadow ray's copy of the vertex record with the gradient a light sample's normal
+    h implies, g = s / (h.d) h: renewal_plus conditions on its slope along the new ray;
+    global replaces the ring's two tangential rows of the vertex by g's components and
+    keeps everything else (the slope row: g.d = s); the record itself is unchanged."""
+    kernel, mean = SquaredExponential(sigma=1.0, length_scale=1.0), Constant(0.3)
+    cap = 64
+    kp, mb, n_mean, scratch, rings = sampler_buffers(device, kernel, mean, cap, 1)
+    rb = _buf(device, np.array([0, 0, 0, *D, 0.0, 30.0], np.float64))
+    dnew = np.array([0.2, 0.9, 0.4]) / np.linalg.norm([0.2, 0.9, 0.4])
+    size = 4 + 2 * (2 + 5 * cap)
+    checked = 0
+    for seed in range(1, 6):
+        ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 8 * size)
+        _programs(device.ctx)["implied_rows"](
+            device.queue, (1,), None, kp, mb, np.int32(n_mean),
+            np.int32(GPIS_MEMORIES[memory]), np.int32(cap), rb, np.uint32(seed),
+            _buf(device, np.array([0.3, -0.2, 0.1])), _buf(device, dnew), scratch, rings, ob)
+        out = np.empty(size)
+        cl.enqueue_copy(device.queue, out, ob)
+        if not out[0]:
+            continue
+        g = out[1:4]
+        assert g @ D < 0
+        rows = []
+        for implied in range(2):
+            o = out[4 + implied * (2 + 5 * cap):]
+            m = int(o[0])
+            rows.append(o[2:2 + 5 * m].reshape(m, 5))
+        plain, shadow = rows
+        assert plain.shape == shadow.shape
+        g32 = g.astype(np.float32).astype(np.float64)   # FsVertex.grad is float
+        if memory == "renewal_plus":
+            assert len(shadow) == 2 and shadow[1, 1] == 1
+            np.testing.assert_allclose(shadow[1, 0], g32 @ dnew, rtol=1e-12)
+            assert abs(plain[1, 0] - shadow[1, 0]) > 1e-6   # h differs from the sample
+        else:
+            np.testing.assert_array_equal(plain[:-2], shadow[:-2])
+            assert np.all(shadow[-3:, 1] == 1)                    # slope, d_T f, d_B f
+            np.testing.assert_allclose(shadow[-3:, 2:] @ D, [1, 0, 0], atol=1e-12)
+            np.testing.assert_allclose(shadow[-2:, 0], shadow[-2:, 2:] @ g32, rtol=1e-10)
+            np.testing.assert_allclose(shadow[-3, 0], g @ D, rtol=1e-6)   # s itself
+        checked += 1
+    assert checked >= 3
 
 
 @pytest.mark.parametrize("case", list(CASES))
