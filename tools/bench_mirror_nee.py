@@ -23,18 +23,19 @@ The MSE, not the sample variance, is the measure: BSDF sampling under a sun meet
 check that the variants agree.
 
 Measured (PoCL CPU, 2 cores shared with other jobs; defaults: 32^2 px, 64 spp x 3,
-10 s, reference 60 s; two runs):
-  fs_mirror_ball_sun  MSE at equal time: bsdf 7.2e3x and 7.1e3x nee+mis's, sampled
-                      6.4e3x and 6.6e3x; at equal spp MSE*spp 52x and 51x (a lower
-                      bound: at 64 spp BSDF sampling has mostly not met the sun, so its
-                      error is the missing glint, not yet the fireflies'); paths/s
-                      nee+mis / bsdf 0.84 and 0.91; image means within 0.3% of the
-                      reference (bsdf, sampled +10-13%: fireflies, z ~0.9)
-  wedge_volume        (rough copper, alpha 0.1, tiny quad light; diffuse walls dominate
-                      the image) MSE at equal time: bsdf 2.0x (2 s run) / 2.8x / 3.1x,
-                      sampled 0.93x / 1.3x; at equal spp bsdf 3.4x / 3.2x, sampled
-                      1.07x / 1.07x: the GPIS normal spread (sigma / l = 0.1) and the lobe
-                      are alike there, so the lobe strategy adds little.
+10 s, reference 60 s; two runs, run 1 / run 2):
+  fs_mirror_ball_sun  MSE at equal time relative to nee+mis: bsdf 7.2e3 / 7.1e3, sampled
+                      6.4e3 / 6.6e3; MSE*spp at equal spp 52 / 51 (a lower bound: at 64
+                      spp BSDF sampling has mostly not met the sun, so its error is the
+                      missing glint, not yet the fireflies'); paths/s nee+mis / bsdf
+                      0.94 / 0.91; image mean against the reference: nee+mis -0.29% /
+                      -0.04%, bsdf +13.5% / +10.9% and sampled +11.1% / +9.6% (fireflies;
+                      z ~0.9 by their own sample variances)
+  wedge_volume        (rough copper, alpha 0.1, tiny quad light; the diffuse walls
+                      dominate the image) MSE at equal time relative to nee+mis: bsdf
+                      2.8 / 3.1, sampled 0.93 / 1.27; MSE*spp at equal spp: bsdf 3.4 /
+                      3.2, sampled 1.07 / 1.07: the GPIS normal spread (sigma / l = 0.1)
+                      and the lobe are alike there, so the lobe strategy adds little.
 """
 from __future__ import annotations
 
