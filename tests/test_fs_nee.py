@@ -9,6 +9,7 @@ import pyopencl as cl
 import pytest
 
 from gpiscl.host.gp import Constant, Plane, SquaredExponential
+from gpiscl.host.gp import function_space as FS
 from gpiscl.host.layout.records import GPIS_MEMORIES
 from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_source
 from stats import assert_agree, z_threshold
@@ -145,18 +146,9 @@ def normal_laws(device, case, n, seed=5):
         (out[ok, 3:6], out[ok, 6:9], out[ok, 9:12], out[ok, 12])
 
 
-def normal_pdf(n, law, d=D, jacobian=True):
-    """numpy twin of fs_normal_pdf (per steradian); n (..., 3), law arrays broadcast."""
-    m, a, b, s = law
-    c = n @ d
-    lam = s / c
-    r = lam[..., None] * (n - c[..., None] * d) - m
-    z1, z2 = np.sum(a * r, -1), np.sum(b * r, -1)
-    inv_det = np.linalg.norm(np.cross(a, b), axis=-1)
-    p = np.exp(-0.5 * (z1**2 + z2**2)) * inv_det / (2 * np.pi)
-    if jacobian:
-        p = p * s**2 / np.abs(c)**3
-    return np.where(c < 0, p, 0.0)
+def normal_pdf(n, law, jacobian=True):
+    """The numpy twin's density for rays along D."""
+    return FS.normal_pdf(n, D, law, jacobian)
 
 
 def frame(d):
