@@ -22,8 +22,8 @@ LAW = r"""
  * gradient and the law it was drawn from (FsResult.law_*), and whether it hit. */
 __kernel void normal_law(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
                          int memory, int cap, __global const double* ray, uint seed,
-                         int first, int restarts, __global double* scratch, __global FsObs* rings,
-                         __global double* out)
+                         int first, int restarts, __global double* scratch,
+                         __global FsObs* rings, __global double* out)
 {
     int i = get_global_id(0);
     FsScratch S = fs_scratch(scratch, i);
@@ -124,7 +124,8 @@ CASES = {
 
 
 def normal_laws(device, case, n, seed=5):
-    """(hit mask, sampled unit normals, laws (m, a, b, s)) of n device flights along D."""
+    """Sampled unit normals and their laws (m, a, b, s) at the last hit of those of n device
+    flights along D that reached it."""
     kernel, mean, memory, restarts = CASES[case]
     q = device.queue
     chunk = min(n, 1024)
