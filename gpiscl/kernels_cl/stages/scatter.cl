@@ -75,9 +75,11 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
     /* a function-space GPIS hit knows the law its normal was drawn from, so a mirror
      * there is not a delta BSDF: its direction density is the normal's through the half
      * vector (fs_normal_pdf.h), and it gets next-event estimation and MIS. Weight space
-     * has no such density (the realization fixes the normal): its mirror stays delta. */
+     * has no such density (the realization fixes the normal): its mirror stays delta,
+     * and so does a function-space hit whose sampler reports no law (law_s = 0: a free
+     * flight that does not fill FsResult.law_*). */
     int fs_hit = hp < 0 && gpis[GPIS_HIT_BASE - hp].sampler == GPIS_SAMPLER_FUNCTION_SPACE
-                 && params->fs_nee;
+                 && params->fs_nee && in_hit_law_m[r].w < 0.0f;
     int fs_mirror = fs_hit && mat->kind == MATERIAL_MIRROR;
     /* a rough conductor there samples pairs (normal, light) with MIS (fs_normal_pdf.h) */
     int fs_conductor = fs_hit && mat->kind == MATERIAL_ROUGH_CONDUCTOR;
