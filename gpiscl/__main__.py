@@ -197,7 +197,7 @@ def cmd_render(args) -> int:
             data["render"][key] = getattr(args, key)
     if args.realization == NO_REALIZATION:
         data["render"]["realization"] = None
-    arguments.check(arguments.CLI_SOURCE, arguments.cli_name, seed=args.seed,
+    arguments.check(arguments.CLI_SOURCE, arguments.cli_name, spp=args.spp, seed=args.seed,
                     exposure=args.exposure, resolution=args.resolution, realization=None
                     if args.realization == NO_REALIZATION else args.realization)
     scene = Scene.resolved(data, scene.source, scene.base_dir)
@@ -303,7 +303,7 @@ def cmd_uq(args) -> int:
     if args.spp < 2:
         raise SceneError("<command line>", "--spp", "must be >= 2: each realization needs a "
                          "sample variance to remove the Monte Carlo part")
-    arguments.check(arguments.CLI_SOURCE, arguments.cli_name, seed=args.seed,
+    arguments.check(arguments.CLI_SOURCE, arguments.cli_name, spp=args.spp, seed=args.seed,
                     exposure=args.exposure, resolution=args.resolution)
     if args.first < 0:
         raise SceneError("<command line>", "--first", "must be >= 0")

@@ -81,7 +81,16 @@ def test_truncated_environment_map_is_refused(tmp_path):
     data = (tmp_path / "full.exr").read_bytes()
     (tmp_path / "sky.exr").write_bytes(data[: len(data) // 2])
     light = [{"type": "environment_map", "file": "sky.exr"}]
-    refused(scene(tmp_path, lights=light), "lights[0].file", "truncated")
+    path = scene(tmp_path, lights=light)
+    refused(path, "lights[0].file", "truncated")
+    # from the shell: our one line and nothing else (OpenEXR printed its own two
+    # diagnostics, one on stdout and one on stderr, before it)
+    r = subprocess.run([sys.executable, "-m", "gpiscl", "render", str(path), "-o",
+                        str(tmp_path / "x.exr")], capture_output=True, text=True, cwd=ROOT,
+                       env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=120)
+    assert r.returncode == 2 and r.stdout == "" and r.stderr.count("\n") == 1, (r.stdout,
+                                                                              r.stderr)
+    assert "truncated" in r.stderr
 
 
 @pytest.mark.parametrize("voxel,reason", [(1e-300, "voxel_size"), (1e30, "voxel_size")])
@@ -216,3 +225,16 @@ def test_malformed_tungsten_input_is_a_scene_error(doc, key):
     with pytest.raises(SceneError) as info:
         convert_tungsten(doc, "in.json", {"type": "environment", "radiance": 0.5})
     assert info.value.file == "in.json" and info.value.key == key, str(info.value)
+
+
+def test_spp_beyond_int32_is_refused_in_the_scene_and_on_the_command_line(tmp_path):
+    """The device counts sample indices in int32: 2^31 spp rendered on (for hours) with
+    the index wrapping, from the command line and from a scene file alike."""
+    refused(scene(tmp_path, render={"spp": 2**31}), "render.spp", "must be < 2147483648")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    r = subprocess.run([sys.executable, "-m", "gpiscl", "render", "--spp", str(2**31), "-o",
+                        str(tmp_path / "x.exr")], capture_output=True, text=True, cwd=ROOT,
+                       env=env, timeout=120)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert "--spp" in r.stderr and "2147483648" in r.stderr
+    assert not (tmp_path / "x.exr").exists()

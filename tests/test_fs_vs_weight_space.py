@@ -29,7 +29,7 @@ M_FEATURES, N = 1024, 10_000
 def test01_first_hit_and_normal_match_weight_space(device, prg):
     """Two-sample KS on the hit distance and the three normal components (Bonferroni over
     4), global memory at the default adaptive step against M = 1024 features; a window
-    of 8 samples (at least 4 kept) so that most rays slide it."""
+    of 6 samples (at least 3 kept) so that most rays slide it."""
     ws = build(device, WS_FRESH)
     f0, hit = run(device, ws["ws_fresh"], N, *gp_args(device, SE, RAMP), np.int32(M_FEATURES),
                   buf(device, keys_for(N, 31)), np.float32(0.0), np.float32(6.0),
@@ -37,8 +37,9 @@ def test01_first_hit_and_normal_match_weight_space(device, prg):
     assert not np.isnan(hit).any(), "weight-space root search failed"
     keep = f0 >= 0.0
     t_ws = np.where(hit[keep, 3] < 1e29, hit[keep, 3], -1.0)
-    out = flights(device, prg, SE, RAMP, N, memory="global", window=8, cap=64, seed=33)
-    assert np.mean(out[:, 6] - 6 > 8) > 0.3, "most hits should slide the window"
+    out = flights(device, prg, SE, RAMP, N, memory="global", window=6, cap=64, seed=33)
+    print(f"rays sliding the window: {np.mean(out[:, 6] - 6 > 6):.3f}")
+    assert np.mean(out[:, 6] - 6 > 6) > 0.3, "most hits should slide the window"
     t_fs = out[:, 0]
     D, crit = ks_two_sample(t_fs, t_ws, 4)
     print(f"hit distance KS {D:.4f} (critical {crit:.4f})")

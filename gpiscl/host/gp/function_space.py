@@ -144,6 +144,7 @@ def step_size(kernel, d, c):
 # --- the adaptive march (fs_march.h) ----------------------------------------------------
 
 H_MAX, H_MIN, ELL_CORR, WINDOW = 2.0, 1e-3, math.exp(-0.5), 16
+RULE_SAMPLES = 4   # the step rule conditions on the last 4-8 samples (fs_rule_build)
 
 
 def return_rate(m, m1, s, r, g, outside):
@@ -171,37 +172,37 @@ def _moments(kernel, mean, x_rows, y_rows, x, d):
             L[n + 1, n + 1])
 
 
-def march_realization(kernel, mean, o, d, ts, F, tol, window=WINDOW):
+def march_realization(kernel, mean, o, d, ts, F, tol):
     """The step rule of fs_march.h applied to one realization F sampled densely at the
     equally spaced ts along the unit ray o + t d (F[0] >= 0): the march reads F where it
-    samples (steps rounded down to the grid, at least one cell), conditions on its last
-    `window` samples and goes on through every crossing. Returns the sampled grid indices
+    samples (steps rounded down to the grid, at least one cell), takes the rule's moments
+    given its last RULE_SAMPLES samples (the device's memory rows are absent here: the
+    ray starts fresh at F[0]) and goes on through every crossing. Returns the sampled grid indices
     and the missed down-crossings: those of the dense path inside a step whose ends do
     not show them (the event the tolerance bounds)."""
     o, d = np.asarray(o, float), np.asarray(d, float)
     dt = ts[1] - ts[0]
     ell = step_size(kernel, d, ELL_CORR)
     down = (F[:-1] >= 0.0) & (F[1:] < 0.0)          # dense down-crossings per cell
-    idx, i, h, grow, missed = [0], 0, 0.5 * ell, 1.0, 0
+    idx, i, h, grow, missed, first = [0], 0, 0.5 * ell, 1.0, 0, 0
     while i < len(ts) - 1:
-        rows = idx[-window:]
+        if len(idx) - first > 2 * RULE_SAMPLES:     # fs_rule_build: the last 4 again
+            first = len(idx) - RULE_SAMPLES
+        rows = idx[first:]
         xr, yr = [o + ts[j] * d for j in rows], F[rows]
         outside = F[i] >= 0.0
         h = min(grow * h, H_MAX * ell)
-        nu_end = None
         while True:
             k = max(1, min(int(h / dt), len(ts) - 1 - i))
             hs = k * dt
-            mid = return_rate(*_moments(kernel, mean, xr, yr, o + (ts[i] + 0.5 * hs) * d, d),
-                              outside)
-            if nu_end is None:
-                nu_end = return_rate(*_moments(kernel, mean, xr, yr, o + ts[i + k] * d, d),
-                                     outside)
-            ratio = (4.0 * mid + nu_end) / 6.0 * ell / tol
+            # Radau: (3h/4) nu(t + 2h/3), nu(t) = 0
+            node = o + (ts[i] + 2.0 * hs / 3.0) * d
+            ratio = 0.75 * return_rate(*_moments(kernel, mean, xr, yr, node, d), outside) \
+                * ell / tol
             if ratio <= 1.0 or h <= H_MIN * ell or k == 1:
                 grow = 2.0 if ratio < 0.05 else (1.5 if ratio < 0.3 else 1.1)
                 break
-            h, nu_end = 0.5 * hs, mid
+            h = 0.5 * hs
         missed += int(down[i:i + k].sum()) - int(F[i] >= 0.0 > F[i + k])
         i += k
         idx.append(i)

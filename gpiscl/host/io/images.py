@@ -4,7 +4,10 @@ The PNG writer needs only zlib and struct so previews work without Pillow.
 """
 from __future__ import annotations
 
+import contextlib
+import os
 import struct
+import sys
 import zlib
 
 import numpy as np
@@ -34,16 +37,52 @@ def write_exr(path, rgb, extra=None, attributes=None) -> None:
     OpenEXR.File(header, channels).write(str(path))
 
 
+@contextlib.contextmanager
+def _library_output_muted():
+    """OpenEXR's C++ core and binding print their own diagnostics of a damaged file
+    straight to the file descriptors ("EXR_ERR_BAD_CHUNK_LEADER ..." on 2, "Warning:
+    Exception raised reading pixel data ..." on 1), two lines besides the one-line error
+    the caller raises: both point at /dev/null while the library reads (scene loading runs
+    before any progress output)."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = {fd: os.dup(fd) for fd in (1, 2)}
+    try:
+        with open(os.devnull, "w") as null:
+            for fd in saved:
+                os.dup2(null.fileno(), fd)
+        yield
+    finally:
+        for fd, copy in saved.items():
+            os.dup2(copy, fd)
+            os.close(copy)
+
+
 def read_exr_attributes(path) -> dict:
     """The header attributes of an EXR file."""
-    return dict(OpenEXR.File(str(path)).header())
+    with _library_output_muted():
+        return dict(OpenEXR.File(str(path)).header())
+
+
+def read_exr_channel_names(path) -> set:
+    """The channel names of an EXR file, from its header where the binding can read a
+    header alone (OpenEXR 3.2's File reads the pixels too)."""
+    with _library_output_muted():
+        if hasattr(OpenEXR, "InputFile"):
+            f = OpenEXR.InputFile(str(path))
+            try:
+                return set(f.header()["channels"])
+            finally:
+                f.close()
+        return set(OpenEXR.File(str(path), separate_channels=True).channels())
 
 
 def read_exr(path) -> dict:
     """All channels of an EXR file as {name: (H,W) float32} (half channels are widened)."""
-    f = OpenEXR.File(str(path), separate_channels=True)
-    return {name: np.asarray(ch.pixels, dtype=np.float32)
-            for name, ch in f.channels().items()}
+    with _library_output_muted():
+        f = OpenEXR.File(str(path), separate_channels=True)
+        return {name: np.asarray(ch.pixels, dtype=np.float32)
+                for name, ch in f.channels().items()}
 
 
 def read_exr_rgb(path) -> np.ndarray:

@@ -16,6 +16,7 @@ fs_linalg.h). `scratch_doubles` sizes the slice.
 """
 from __future__ import annotations
 
+from ..gp import function_space as FS_TWIN
 from .struct import Struct
 
 FS_OBS = Struct("FsObs", (
@@ -41,11 +42,14 @@ STATUS = {"ok": 0, "not_pd": 1, "nan": 2, "rows": 3, "steps": 4}
 STRUCTS = (FS_OBS, FS_VERTEX)
 
 DEFAULT_WINDOW = 16       # samples conditioned on besides the memory (fs_march.h)
-DEFAULT_MISS_TOLERANCE = 1e-5   # expected missed crossings per along-ray length scale
+DEFAULT_MISS_TOLERANCE = 2e-6   # expected missed crossings per along-ray length scale: fs_march.h
 DEFAULT_REFINE = 6        # bisection steps in a crossing bracket: width step / 64
 DEFAULT_GLOBAL_CAP = 64   # observations the global model keeps
 HIT_ROWS = 4              # f(x_h), d_d f, d_T f, d_B f appended at a hit
-MIN_BISECT = 8            # FS_MIN_BISECT of fs_march.h
+MIN_BISECT = 8            # rows reserved for bisection: 2 l_d 2^-8 < the root width
+RULE_MEMORY = 4           # the step rule's own small system (fs_march.h): memory rows,
+RULE_SAMPLES = FS_TWIN.RULE_SAMPLES   # the ray's latest samples (the numpy twin's),
+RULE_ROWS = RULE_MEMORY + 2 * RULE_SAMPLES + 2   # and one (value, slope) pair
 
 
 def c_declarations() -> str:
@@ -55,14 +59,18 @@ def c_declarations() -> str:
     lines += [f"#define FS_OBS_{k.upper()} {v}" for k, v in OBS_KINDS.items()]
     lines += [f"#define FS_STATUS_{k.upper()} {v}" for k, v in STATUS.items()]
     lines.append(f"#define FS_HIT_ROWS {HIT_ROWS}")
+    lines.append(f"#define FS_MIN_BISECT {MIN_BISECT}")
+    lines.append(f"#define FS_RULE_MEMORY {RULE_MEMORY}")
+    lines.append(f"#define FS_RULE_SAMPLES {RULE_SAMPLES}")
+    lines.append(f"#define FS_RULE_ROWS {RULE_ROWS}")
     return "\n".join(lines) + "\n" + "\n".join(s.c_declaration() for s in STRUCTS)
 
 
 def max_rows(window: int, memory_cap: int, refine: int = DEFAULT_REFINE) -> int:
     """Rows of the largest system (fs_march.h): memory (<= max(cap, 2)), the window, the
-    refinement bisection (at least MIN_BISECT: fs_march.h narrows every bracket), the hit
-    rows and the step rule's two temporary rows."""
-    return max(memory_cap, 2) + window + max(refine, MIN_BISECT) + HIT_ROWS + 2
+    refinement bisection (at least MIN_BISECT: fs_march.h narrows every bracket) and the
+    hit rows; the step rule's small system takes the last RULE_ROWS rows of the slice."""
+    return max(memory_cap, 2) + window + max(refine, MIN_BISECT) + HIT_ROWS + RULE_ROWS
 
 
 def scratch_doubles(rows: int) -> int:

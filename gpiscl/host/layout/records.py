@@ -88,6 +88,8 @@ GPIS_OBJECT = Struct("GpisObject", (
     ("int", "proxy_first"),    # mesh proxy: its face planes (float4 n, w: n.x <= w) start
     ("int", "proxy_count"),    # at this record of the mean-node array; how many planes
     ("float", "miss_tolerance"),   # function space: expected missed crossings per l_d
+    ("int", "general"),        # function space: 1 keeps the general conditional sampler
+                               # where the Markov one applies (tests, benchmarks; no scene key)
 ))
 
 # Per-launch constants of the integrator.

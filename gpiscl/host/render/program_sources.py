@@ -28,11 +28,11 @@ GPIS_HEADERS = ("gpis_proxy.h", "ws_features.h", "ws_posterior.h", "ws_intersect
                 "ws_objects.h", "gpis_fields.h", "fs_normal_pdf.h")
 # The function-space stages (a second program, built only for scenes that use them).
 FS_STAGE_FILES = ("gpis_function_space.cl", "gpis_shadow_function_space.cl")
-FS_HEADERS = ("gpis_proxy.h", "fs_linalg.h", "fs_sampling.h", "fs_march.h", "fs_posterior.h",
-              "fs_objects.h")
+FS_HEADERS = ("gpis_proxy.h", "fs_linalg.h", "fs_sampling.h", "fs_march.h", "fs_markov.h",
+              "fs_posterior.h", "fs_objects.h")
 # The function-space sampler alone, for tests and benchmarks.
 FS_SAMPLER_HEADERS = ("compat.h", "rng.h", "gp_kernel.h", "gp_mean.h", "fs_linalg.h",
-                      "fs_sampling.h", "fs_march.h")
+                      "fs_sampling.h", "fs_march.h", "fs_markov.h")
 
 
 def kernel_source(name: str) -> str:

@@ -49,14 +49,9 @@ ALBEDO = Vector(broadcast=True, item=Number(ge=0, le=1))
 
 
 def _exr_problem(path):
-    import OpenEXR
+    from ..io.images import read_exr_channel_names
     try:
-        if hasattr(OpenEXR, "InputFile"):
-            f = OpenEXR.InputFile(path)
-            names = set(f.header()["channels"])
-            f.close()
-        else:
-            names = set(OpenEXR.File(path, separate_channels=True).channels())
+        names = read_exr_channel_names(path)
     except Exception:
         return "cannot read as an OpenEXR image"
     missing = [c for c in "RGB" if c not in names]
@@ -117,7 +112,7 @@ CAMERA = Record({
 }, checks=[_camera_frame])
 
 RENDER = Record({
-    "spp": Field(Int(ge=1), 16),
+    "spp": Field(Int(ge=1, lt=2**31), 16),   # the device counts sample indices in int32
     "max_depth": Field(Int(ge=1), 8),
     "seed": Field(Int(ge=0, lt=2**32), 0),
     # the PNG preview's curve (io/images.tonemap_srgb8); the EXR keeps linear radiance

@@ -30,26 +30,38 @@
  *   g^2 = w - c^2 / v    (its variance given f(s) = 0).
  * Inside (after an up-crossing has been seen, or a ray starting inside) the missed event
  * is up-then-down, bounded by the down-crossings: the same with m, m1 -> -m, -m1. The
- * integral is Simpson's rule on (t, t + h); nu(t) = 0 because f(t) is a row (its
- * conditional variance is the jitter), so only s = t + h/2 and t + h are evaluated, the
- * end last so that its value row is already factored when it is accepted. A step is
- * accepted when the bound is at most tol h / l_d, i.e. the mean miss rate over the step is
- * at most `miss_tolerance` expected misses per along-ray length scale l_d (SE: l /
+ * integral is the two-point Radau rule with the fixed node at t, where nu(t) = 0 because
+ * f(t) is a row: (3h/4) nu(t + 2h/3), exact for quadratics, one evaluation per try
+ * (Simpson's middle and end nodes took ~2.6 evaluations per step against ~1.6; on dense
+ * realizations both keep the measured misses below the tolerance, numpy twin). A step is
+ * accepted when the bound is at most tol h / l_d, i.e. the mean miss rate over the step
+ * is at most `miss_tolerance` expected misses per along-ray length scale l_d (SE: l /
  * sqrt(d'Ad); others: the lag of correlation e^-1/2, fs_step with an l(x) field's
  * smallest l on the ray). The first try grows the last step by 2, 1.5 or 1.1 as its
  * bound was below 5%, 30% or 100% of the tolerance (capped at FS_H_MAX l_d and at the
- * ray's end, and at fs_mean_step: the prior mean must not change faster than the two
- * nodes can see); a rejected try halves, its middle becoming the new end (one node
- * evaluation per rejection; floor FS_H_MIN l_d). So a
- * ray's expected misses are at most tol * (its length / l_d), and the crossing rate's
- * relative bias at most tol / (l_d * Rice's rate) = 2 pi tol e^(mu^2 / 2 sigma^2): the
- * default 1e-5 gives < 0.06% for mu / sigma <= 3 (measured misses are ~1/4 of the
- * bound at tol 3e-2). The bound is small where the mean heads down (a likely crossing
- * is bracketed anyway) and large where f hovers near 0 with an uncertain slope (grazing
- * pairs), which is exactly the event to control. Cost per step: two conditional
- * (value, slope) pairs, i.e. 4 rows instead of 1 for a fixed step, and 2 per rejection;
- * steps are ~0.8 l_d at mu = 0 and longer away from 0, against 0.46 l_d (c = 0.9) and
- * 0.14 l_d (c = 0.99) for the uniform grid.
+ * ray's end, and at fs_mean_step: the prior mean must not change faster than the node
+ * can see); a rejected try halves (floor FS_H_MIN l_d). So a ray's expected misses are
+ * at most tol * (its length / l_d), and the crossing rate's relative bias at most
+ * tol / (l_d * Rice's rate) = 2 pi tol e^(mu^2 / 2 sigma^2) for SE: the default 2e-6
+ * gives <= 0.11% for mu / sigma <= 3 (1e-5, the earlier default, allowed 0.57% there).
+ * The bound is small where the mean heads down (a likely crossing is bracketed anyway)
+ * and large where f hovers near 0 with an uncertain slope (grazing pairs), which is
+ * exactly the event to control.
+ * The rule's own system. The moments come from a small system R (fs_rule_build): the
+ * FS_RULE_MEMORY memory rows nearest the ray ahead and the ray's last FS_RULE_SAMPLES
+ * samples, each later sample appended as one row until R holds 2 FS_RULE_SAMPLES of them
+ * (then rebuilt). The value at the accepted end is drawn from the full system (memory +
+ * window), so only the step length, never the law of a value, depends on R. Why 4: in
+ * the numpy twin (SE, dense realizations, tol 1e-5 and 1e-3, mu / sigma = 0, 1, 2) the
+ * steps per length given the last 4 samples are within 1-7% of those given 16, with
+ * the same misses (none), while an evaluation costs O(|R|^2) instead of O((memory +
+ * window)^2). Cost per step: one row of the full system (the value) and ~1.6 evaluations
+ * of R (each a (value, slope) pair: one kernel jet per row of R); steps are ~0.6-1 l_d,
+ * against 0.46 l_d (c = 0.9) and 0.14 l_d (c = 0.99) for the uniform grid.
+ * A posteriori bridge check (the issue's second half): not done. A one-node bridge
+ * bound (the midpoint given both ends, ends' rates 0) missed 8e-3 crossings per l at
+ * tol 1e-3 in the numpy twin (the dip sits near an end where the midpoint cannot see
+ * it), so it would need 2-3 nodes per step: more than the up-front rule costs.
  * FsParams.step_corr > 0 replaces the rule by the fixed step of fs_step (correlation c
  * between neighbours, first step u dt, u uniform in (0, 1]): the old uniform grid, kept
  * as the benchmarks' baseline only (scenes cannot select it).
@@ -84,12 +96,16 @@
 #endif
 #define FS_MAX_STEPS 65535
 #ifndef FS_H_MAX
-#define FS_H_MAX 2.0               /* l_d: Simpson's two nodes resolve the mean's dips */
+#define FS_H_MAX 2.0               /* l_d */
 #endif
 #ifndef FS_MEAN_KAPPA
 #define FS_MEAN_KAPPA 6.0          /* fs_mean_step */
 #endif
 #define FS_MEAN_Z 6.0
+/* two-point Radau rule on [0, 1] with the fixed node at 0 (weight 1/4, where nu = 0) and
+ * the free one at 2/3 (weight 3/4): exact for quadratics, one evaluation per try */
+#define FS_RADAU_NODE (2.0 / 3.0)
+#define FS_RADAU_WEIGHT 0.75
 #define FS_H_MIN 1e-3              /* l_d: a floor for degenerate starts (f = 0 exactly) */
 #define FS_ELL_CORR 0.6065306597126334   /* e^-1/2: SE's lag is exactly l / sqrt(d'Ad) */
 #define FS_U_SLOPE 1100
@@ -99,14 +115,43 @@
 typedef struct { double m, m1, s, r, g; } FsMoments;   /* v = s^2, c = r s, g as above */
 
 /* Conditional moments of f and its slope along dn at ray parameter t given rows [0, n):
- * factoring rows n (value) and n + 1 (slope) is the forward solve and Schur complement. */
+ * factoring rows n (value) and n + 1 (slope) is the forward solve and Schur complement.
+ * A stationary prior takes both rows' covariances from one kernel jet per row (one exp)
+ * and the prior mean and its gradient from one evaluation; the rows' entries are those of
+ * fs_factor (same expressions as gp_cov), so the factor is the same. */
 inline int fs_moments(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
                       int n, FsRay ray, double3 dn, double t, FsMoments* M)
 {
     double3 x = ray.o + t * ray.d;
     S.rows[n] = fs_obs(x, dn, FS_OBS_VALUE, t);
     S.rows[n + 1] = fs_obs(x, dn, FS_OBS_DERIV, 0.0);
-    int st = fs_factor(p, mean, mc, S, n, n + 2);
+    int st;
+    if (S.post.n || gp_kernel_nonstationary(p)) {
+        st = fs_factor(p, mean, mc, S, n, n + 2);
+    } else {
+        float3 gm;
+        S.mu[n] = (double)gp_mean_eval(mean, mc, convert_float3(x), &gm);
+        S.mu[n + 1] = dot(convert_double3(gm), dn);
+        __global double* L0 = S.L + fs_tri(n);
+        __global double* L1 = S.L + fs_tri(n + 1);
+        for (int j = 0; j < n; ++j) {
+            __global const FsObs* rj = S.rows + j;
+            GpJet J = gp_kernel_jet(p, x - fs_pos(rj));
+            if (rj->kind == FS_OBS_DERIV) {
+                double3 u = fs_dir(rj);
+                L0[j] = -dot(u, J.G);
+                L1[j] = -(J.alpha * dot(u, J.g) * dot(dn, J.g) + dot(u * J.D, dn));
+            } else {
+                L0[j] = J.k;
+                L1[j] = dot(dn, J.G);
+            }
+        }
+        GpJet J0 = gp_kernel_jet(p, (double3)(0.0));
+        L0[n] = J0.k;
+        L1[n] = dot(dn, J0.G);
+        L1[n + 1] = -(J0.alpha * dot(dn, J0.g) * dot(dn, J0.g) + dot(dn * J0.D, dn));
+        st = fs_cholesky(S.L, n, n + 2, 0);
+    }
     if (st) return st;
     __global const double* L1 = S.L + fs_tri(n + 1);
     M->m = S.mu[n] + fs_row_dot(S.L, n, S.e, n);
@@ -117,19 +162,83 @@ inline int fs_moments(GpKernel p, __global const MeanNode* mean, int mc, FsScrat
     return FS_STATUS_OK;
 }
 
+/* The step rule's own system (rows [FS_MAX_ROWS - FS_RULE_ROWS, FS_MAX_ROWS) of the
+ * scratch slice, packed from 0): its triangle fits in the space of those rows of the
+ * main one, which the main system never reaches (max_rows reserves them). */
+inline FsScratch fs_rule_scratch(FsScratch S)
+{
+    int b = FS_MAX_ROWS - FS_RULE_ROWS;
+    FsScratch R = S;
+    R.rows = S.rows + b;
+    R.L = S.L + fs_tri(b);
+    R.e = S.e + b;
+    R.mu = S.mu + b;
+    R.fields = S.fields + 8 * b;
+    R.v = S.v + (size_t)b * S.post.n;
+    return R;
+}
+
+/* Build the rule's system: the FS_RULE_MEMORY memory rows (main rows [0, fixed)) nearest
+ * to the segment x(ta) .. x(ta + reach) in the kernel's metric (within 4 length scales;
+ * value rows before derivative rows at equal distance, so the row that pins f(ta) is
+ * kept), then the ray's last FS_RULE_SAMPLES samples (main rows [fixed, n)); factored
+ * and whitened at their values. Returns its row count; later samples are appended one
+ * row each until it holds 2 FS_RULE_SAMPLES samples (rebuilt at the next step). */
+inline int fs_rule_build(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
+                         FsScratch R, int fixed, int n, FsRay ray, double ta, double reach,
+                         double ell, int* status)
+{
+    double3 a = ray.o + ta * ray.d, seg = reach * ray.d;
+    double seg2 = dot(seg, seg);
+    double3 A = convert_double3(gp_aniso(p)), dn = ray.d / length(ray.d);
+    /* the kernel's length scale in the metric A, from the along-ray lag ell (per unit t):
+     * any kernel kind, the l(x) field's smallest l on the ray included */
+    double l2 = ell * ell * dot(ray.d, ray.d) * dot(A * dn, dn);
+    int pick[FS_RULE_MEMORY];
+    double key[FS_RULE_MEMORY];
+    int np = 0;
+    for (int i = 0; i < fixed; ++i) {
+        double3 x = fs_pos(S.rows + i);
+        double u = seg2 > 0.0 ? clamp(dot(x - a, seg) / seg2, 0.0, 1.0) : 0.0;
+        double3 r = x - (a + u * seg);
+        double k = dot(A * r, r) / l2;
+        if (!(k <= 16.0)) continue;
+        k += S.rows[i].kind == FS_OBS_DERIV ? 1e-9 : 0.0;
+        /* insertion into the sorted list of the nearest FS_RULE_MEMORY */
+        int j = np < FS_RULE_MEMORY ? np++ : FS_RULE_MEMORY;
+        while (j > 0 && key[j - 1] > k) {
+            if (j < FS_RULE_MEMORY) { key[j] = key[j - 1]; pick[j] = pick[j - 1]; }
+            --j;
+        }
+        if (j < FS_RULE_MEMORY) { key[j] = k; pick[j] = i; }
+    }
+    int m = 0;
+    for (int j = 0; j < np; ++j) R.rows[m++] = S.rows[pick[j]];
+    for (int i = max(fixed, n - FS_RULE_SAMPLES); i < n; ++i) R.rows[m++] = S.rows[i];
+    int st = fs_factor(p, mean, mc, R, 0, m);
+    if (st) { *status = st; return 0; }
+    for (int i = 0; i < m; ++i) fs_whiten_row(R.L, R.e, i, R.rows[i].value, R.mu[i]);
+    return m;
+}
+
 inline double fs_phi(double x) { return 0.3989422804014327 * exp(-0.5 * x * x); }
 
 /* Rice's rate (per unit length) of crossings from the side `outside` says back across 0:
- * up-crossings when outside, down-crossings inside. */
+ * up-crossings when outside, down-crossings inside. In float: the rate only decides a
+ * step against a tolerance, where 1e-6 relative is far below what matters, and PoCL's
+ * double exp and erfc made this function 40% of an evaluation (measured). A deep
+ * Gaussian tail underflows to a rate of 0, which is what it is next to any tolerance. */
+inline float fs_phif(float x) { return 0.39894228f * exp(-0.5f * x * x); }
+
 inline double fs_return_rate(FsMoments M, int outside)
 {
-    double m = outside ? M.m : -M.m, m1 = outside ? M.m1 : -M.m1;
     if (!(M.s > 0.0) || !(M.g > 0.0)) return 0.0;
-    double b = m1 - M.r / M.s * m, a = b / M.g;
+    double m = outside ? M.m : -M.m, m1 = outside ? M.m1 : -M.m1;
+    float z = (float)(m / M.s), a = (float)((m1 - M.r / M.s * m) / M.g);
     /* phi(a) + a Phi(a) cancels for a << 0: its asymptotic phi(a) / a^2 (1 - 3 / a^2) */
-    double e = a < -8.0 ? fs_phi(a) / (a * a) * (1.0 - 3.0 / (a * a))
-                        : fs_phi(a) + a * fs_q(-a);
-    return fs_phi(m / M.s) / M.s * M.g * e;
+    float e = a < -8.0f ? fs_phif(a) / (a * a) * (1.0f - 3.0f / (a * a))
+                        : fs_phif(a) + a * 0.5f * erfc(-a * 0.70710678f);
+    return (double)(fs_phif(z) * e) * (M.g / M.s);
 }
 
 /* The slope at a down-crossing: s < 0 with density proportional to |s| N(s; mean, sd^2).
@@ -145,24 +254,33 @@ inline double fs_downcrossing_slope(double mean, double sd, double2 u)
     double a = mean / sd;
     if (a > 30.0) return sd * log((1.0 - u.x) * (1.0 - u.y)) / a;
     double target = (1.0 - u.x) * fs_crossing_tail(a, a);   /* (1 - u) in (0, 1] */
-    double lo = 0.0, hi = fmax(-a, 0.0) + 12.0;
-    for (int k = 0; k < 64; ++k) {
-        double mid = 0.5 * (lo + hi);
-        if (fs_crossing_tail(mid + a, a) > target) lo = mid; else hi = mid;
+    /* Newton on S(y) = target (S' = -y phi(y + a)) inside the bisection bracket, a
+     * bisection step wherever Newton would leave it: ~6-10 evaluations of S instead of
+     * 64 (measured: the 64 took 5-10 us a hit, a third of a short flight) */
+    double lo = 0.0, hi = fmax(-a, 0.0) + 12.0, y = 0.5 * (lo + hi);
+    for (int k = 0; k < 100; ++k) {
+        double r = fs_crossing_tail(y + a, a) - target;
+        if (r > 0.0) lo = y; else hi = y;
+        double d = y * fs_phi(y + a), yn = d > 0.0 ? y + r / d : lo;
+        if (!(yn > lo && yn < hi)) yn = 0.5 * (lo + hi);
+        int done = fabs(yn - y) <= 1e-13 * (1.0 + y) || hi - lo <= 1e-13 * (1.0 + y);
+        y = yn;
+        if (done) break;
     }
-    return -sd * fmax(0.5 * (lo + hi), DBL_MIN);
+    return -sd * fmax(y, DBL_MIN);
 }
 
-/* The longest step the prior mean allows: Simpson's two nodes see the process only
- * where they are, so a mean that dips to 0 between them (a feature thinner than the
+/* The longest step the prior mean allows: the rule sees the process only at its node
+ * (t + 2h/3) and the samples at the step's ends, so a mean that dips to 0 between them (a feature thinner than the
  * step, with sigma << l: the knob's l = 1.4, sigma = 0.01) hides the rate's peak, and
  * steps of 2 l_d went through such features (the knob 6% too bright). With the mean's
  * Lipschitz bound `lip` (per unit t, gp_mean_lipschitz_on over the ray) the mean moves by
- * at most FS_MEAN_KAPPA = 6 sd over a step near its zero set, so Simpson's nodes are at
- * most 3 sd of mean apart: a mean that descends from 6 sd to 0 (anything it reaches
- * through) puts a node where it is <= 3 sd, whose rate rejects the step (the knob's
- * brightness is the same at 1, 2, 3 and 6 and with steps capped to 0.035 l, while the
- * cost falls from 21 to 8 samples per flight), and far from it the step is
+ * at most FS_MEAN_KAPPA = 6 sd over a step near its zero set, so t, the node and t + h
+ * are at most 4 sd of mean apart: a mean that dips to 0 between two of them has a node
+ * or a sample within 2 sd of its dip, whose rate rejects the step or whose value is
+ * likely below 0 (with Simpson's nodes, 3 sd: the knob's brightness was the same at
+ * kappa 1, 2, 3 and 6 and with steps capped to 0.035 l, while the cost fell from 21 to 8
+ * samples per flight), and far from it the step is
  * the sphere-tracing distance to |mean| = FS_MEAN_Z sd (a crossing there needs a
  * residual of that size: rate ~ e^{-Z^2/2} / l, far below any tolerance). sd is the
  * prior's at x (sigma(x) fields and a posterior included); a posterior's mean correction
@@ -195,7 +313,8 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
                                FsParams prm, FsRay ray, FsVertex v,
                                __global const FsObs* ring, FsRng rng, FsScratch S)
 {
-    FsResult res = {0, 0, ray.t1, (double3)(0.0), 0, 0, 0, 0, 0};
+    FsResult res = {0};
+    res.t = ray.t1;
     if (S.post.n > FS_POST_MAX) { res.status = FS_STATUS_ROWS; return res; }   /* no v cache */
     double fa;
     int outside, n_old;
@@ -205,7 +324,8 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
     double dt = prm.step_corr > 0.0 ? fs_step(p, ray, prm.step_corr) : 0.0;
     double3 dn = ray.d / dlen;
     if (!(ell > 0.0) || !isfinite(ell) || !isfinite(dt)) { res.status = FS_STATUS_NAN; return res; }
-    if (fixed + window + max(prm.refine, FS_MIN_BISECT) + FS_HIT_ROWS + 2 > FS_MAX_ROWS) {
+    if (fixed + window + max(prm.refine, FS_MIN_BISECT) + FS_HIT_ROWS + FS_RULE_ROWS
+        > FS_MAX_ROWS) {
         res.status = FS_STATUS_ROWS;
         return res;
     }
@@ -220,6 +340,8 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
     double lip = dt > 0.0 ? 0.0
         : (double)gp_mean_lipschitz_on(mean, mc, convert_float3(ray.o + ray.t0 * ray.d),
                                        convert_float3(ray.o + ray.t1 * ray.d)) * dlen;
+    FsScratch R = fs_rule_scratch(S);
+    int nr = 0, r_new = FS_RULE_SAMPLES + 1;   /* rows of R; samples since it was built */
     int step = 0;
     for (;; ++step) {
         if (ta >= ray.t1) return res;
@@ -230,48 +352,38 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
         }
         if (dt > 0.0) {                        /* uniform baseline: one row per step */
             tb = fmin(ta + h, ray.t1);
-            S.rows[n] = fs_obs(ray.o + tb * ray.d, dn, FS_OBS_VALUE, tb);
-            st = fs_factor(p, mean, mc, S, n, n + 1);
             h = dt;
         } else {
-            /* Simpson's nodes: the middle first, then the end, so that an accepted end's
-             * value row is the one factored last; a rejected step halves and its middle
-             * becomes the new end, whose rate is known (only the value row is factored
-             * again, at acceptance). */
+            /* the rule on its small system R (see "Step rule"): one Radau node per try */
             h = fmin(fmin(grow * h, FS_H_MAX * ell),
                      fs_mean_step(p, mean, mc, S, n, ray.o + ta * ray.d, dn, lip));
-            double nu_end = -1.0;
-            for (;;) {
+            if (r_new > FS_RULE_SAMPLES) {
+                nr = fs_rule_build(p, mean, mc, S, R, fixed, n, ray, ta,
+                                   FS_H_MAX * ell, ell, &st);
+                r_new = 0;
+            }
+            for (; !st;) {
                 int clipped = ta + h >= ray.t1;
                 double hs = clipped ? ray.t1 - ta : h;
                 FsMoments M;
-                st = fs_moments(p, mean, mc, S, n, ray, dn, ta + 0.5 * hs, &M);
+                st = fs_moments(p, mean, mc, R, nr, ray, dn, ta + FS_RADAU_NODE * hs, &M);
                 if (st) break;
-                double mid = fs_return_rate(M, outside);
                 res.evals++;
-                int fresh = nu_end < 0.0;
-                if (fresh) {
-                    st = fs_moments(p, mean, mc, S, n, ray, dn, ta + hs, &M);
-                    if (st) break;
-                    nu_end = fs_return_rate(M, outside);
-                    res.evals++;
-                }
-                /* Simpson with nu(ta) = 0: the mean rate (per length) times l_d (per t),
-                 * relative to the tolerance */
-                double r = (4.0 * mid + nu_end) / 6.0 * dlen * ell / tol;
+                /* Radau with nu(ta) = 0: the mean rate over the step (per length) times
+                 * l_d (per t), relative to the tolerance */
+                double r = FS_RADAU_WEIGHT * fs_return_rate(M, outside) * dlen * ell / tol;
                 if (r <= 1.0 || h <= FS_H_MIN * ell) {
                     tb = clipped ? ray.t1 : ta + hs;
-                    if (!fresh) {
-                        S.rows[n] = fs_obs(ray.o + tb * ray.d, dn, FS_OBS_VALUE, tb);
-                        st = fs_factor(p, mean, mc, S, n, n + 1);
-                    }
                     /* the next step's first try: grow where the bound is slack */
                     grow = r < 0.05 ? 2.0 : (r < 0.3 ? 1.5 : 1.1);
                     break;
                 }
                 h = 0.5 * hs;
-                nu_end = mid;
             }
+        }
+        if (!st) {
+            S.rows[n] = fs_obs(ray.o + tb * ray.d, dn, FS_OBS_VALUE, tb);
+            st = fs_factor(p, mean, mc, S, n, n + 1);
         }
         if (st) { res.status = st; return res; }
         fb = fs_sample_row(S.L, S.e, n, S.mu[n], fs_normal(rng, step, 0));
@@ -280,6 +392,11 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
         if (isnan(fb)) { res.status = FS_STATUS_NAN; return res; }
         ++n;
         if (outside && fb < 0.0) break;
+        if (dt <= 0.0 && r_new < FS_RULE_SAMPLES) {   /* else rebuilt at the next step */
+            fs_append(p, mean, mc, R, nr++, S.rows[n - 1], 1, 0.0, &res.status);
+            if (res.status) return res;
+        }
+        r_new++;
         outside = fb >= 0.0;
         ta = tb;
         fa = fb;
@@ -347,7 +464,7 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
     /* global: the ring takes this ray's rows, f(x_h) = 0 included: x_h is a draw of the
      * root's location, so f(x_h) = 0 is an observation of the realization (the old
      * interpolated root contradicted the bracket values by O(width^2 f'')), and the next
-     * ray's step rule needs f known at its start (Simpson's nu(t) = 0) */
+     * ray's step rule needs f known at its start (Radau's nu(t) = 0) */
     res.new_first = n_old;
     res.new_end = n + 4;
     return res;

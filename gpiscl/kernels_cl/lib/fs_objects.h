@@ -33,8 +33,13 @@ inline FsResult fs_object_flight(__constant RenderParams* params,
     S.post = fs_posterior_of(means, g->mean_first);   /* none: the prior */
     FsRng rng = {fs_object_seed(params->seed, k), (uint)pixel, (uint)sample,
                  (uint)params->bounce, stream};
-    FsResult res = fs_free_flight(kernels[k], means + g->mean_first, g->mean_count, pr, r, v,
-                                  ring, rng, S);
+    /* Matern 3/2 and 5/2 along a ray without off-ray conditioning: the exact Markov
+     * sampler (fs_markov.h); g->general keeps the general one (tests, benchmarks) */
+    FsResult res = !g->general && fs_markov_applies(kernels[k], pr, S)
+        ? fs_markov_free_flight(kernels[k], means + g->mean_first, g->mean_count, pr, r, v,
+                                rng, S)
+        : fs_free_flight(kernels[k], means + g->mean_first, g->mean_count, pr, r, v,
+                         ring, rng, S);
     atomic_inc(&counters[COUNT_FS_FLIGHTS]);
     atomic_add(&counters[COUNT_FS_SAMPLES], res.samples);
     atomic_add(&counters[COUNT_FS_EVALS], res.evals);

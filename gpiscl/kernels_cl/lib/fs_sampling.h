@@ -60,7 +60,7 @@
 typedef char fs_gp_real_must_be_double[sizeof(GP_REAL) == 8 ? 1 : -1];
 
 #ifndef FS_MAX_ROWS
-#define FS_MAX_ROWS 107
+#define FS_MAX_ROWS 115
 #endif
 #ifndef FS_POST_MAX
 #define FS_POST_MAX 0              /* observation rows of the largest posterior GPIS */

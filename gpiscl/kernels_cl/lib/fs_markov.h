@@ -1,0 +1,470 @@
+/* Function-space free flight for Matern 3/2 and 5/2 by the exact state-space (Markov)
+ * form of the process along the ray: O(1) work per sample, no Cholesky of ray rows, no
+ * window. Needs fs_sampling.h (start conditions, random numbers, fs_frame) and fs_march.h
+ * (fs_return_rate, fs_downcrossing_slope, FsMoments, the step-rule constants); its
+ * entry fs_markov_free_flight returns what fs_free_flight returns, and fs_objects.h
+ * dispatches to it where fs_markov_applies (below). Everything else (SE, RQ, ...,
+ * sigma(x) or l(x) fields, posteriors, global memory, the uniform baseline step) keeps
+ * the general conditional sampler of fs_march.h: global memory and posteriors condition
+ * on rows off the ray, which breaks the ray's Markov property, and fields make the
+ * process along the ray non-stationary.
+ *
+ * Why it is exact. A stationary Matern-(p + 1/2) kernel k(r) = k1(sqrt(r'Ar)) restricted
+ * to the line x + u dn (u world length, |dn| = 1) is the 1-D Matern k1 with
+ * lambda = sqrt(2 nu) sqrt(dn'A dn) / l (anisotropy included), the stationary solution of
+ * (D + lambda)^(p+1) Y = white noise of intensity q = sigma^2 (2 lambda)^(2p+1) (p!)^2 /
+ * (2p)!. Its state x = (Y, Y', .., Y^(p)) (derivatives along dn per world length) is
+ * Markov: given x(u), the state at u + h is N(A(h) x(u), Q(h)) with
+ *   A(h) = e^(F h) = e^(-lambda h) (I + h N + h^2 N^2 / 2),  N = F + lambda I nilpotent
+ *          (F: the companion matrix of (D + lambda)^(p+1)),
+ *   Q(h) = q int_0^h g(s) g(s)' ds,  g(s) = e^(F s) e_p = e^(-lambda s) G(s),
+ * G_0 = s^p / p!, G_{i+1} = G_i' - lambda G_i (the impulse response and its derivatives),
+ * so Q_ij = q sum_k c_ijk k! / (2 lambda)^(k+1) P(k + 1, 2 lambda h) with P the
+ * regularised incomplete gamma. P(k + 1, x) is summed as e^-x sum_{j > k} x^j / j! below
+ * x = 1 (fs_mk_gammas): the textbook Q = P_inf - A P_inf A' cancels to O(h^(2p+1)) (5/2 at
+ * 1e-3 l_d: Q_00 ~ 1e-14 sigma^2, ~14 of 16 digits lost), the series has no cancellation
+ * (Q's leading terms in h all have positive coefficients). Double throughout: Q(h)'s entries span
+ * h^(2p+1)..h, and bridges at 1e-2 l_d invert them (condition ~h^-2p); the Cholesky
+ * factors of these diagonally graded matrices keep their relative accuracy.
+ * tests/test_fs_markov.py checks A and Q against the kernel's derivative covariances.
+ * The residual Y = f - mu is this process exactly because the prior is stationary; the
+ * prior mean mu(x) and its slope along dn are added back at every node (gp_mean_eval).
+ *
+ * Start (the same law as fs_begin, whose draws it uses): a fresh ray conditions on
+ * f(x0) = v0 (truncated to >= 0), then draws the rest of the state from the stationary
+ * law given Y(x0) (Y' independent of Y; 5/2: Y'' | Y ~ N(-lambda^2 Y / 3, 8/9 sigma^2
+ * lambda^4)); renewal: f(x0) = 0 and fs_begin's truncated slope; renewal_plus: f(x0) = 0 and
+ * the vertex gradient's slope, exact for 3/2, with Y'' drawn as above for 5/2 (cov(Y',
+ * Y'') = 0 in P_inf, so Y'' depends on Y alone).
+ *
+ * Step rule: fs_march.h's, with the conditional moments of (f, f') at ta + h in closed
+ * form, m = mu + (A x)_0, m1 = mu' + (A x)_1, (v, c, w) = Q_00, Q_01, Q_11: O(1) per
+ * evaluation. Same growth factors, FS_H_MAX, FS_H_MIN, fs_mean_step's cap (sd = sigma),
+ * l_d = the lag of correlation e^-1/2 (FS_MK_ELL: lambda l_d, closed form).
+ *
+ * Hit: between a state with f >= 0 and one with f < 0, bisection by exact bridge
+ * sampling (the midpoint's state given both end states, fs_mk_bridge: precision
+ * Q1^-1 + A2' Q2^-1 A2, a sum of positive definite terms, so no cancellation) down to
+ * FS_ROOT_WIDTH l_d and at least `refine` times; the linear root x_h; the state at x_h
+ * given both ends and f(x_h) = 0 gives the slope's Gaussian (b, g^2), and the slope is
+ * drawn from its down-crossing law (fs_downcrossing_slope). Tangential components: in a
+ * frame T, B with T'A dn = B'A dn = T'AB = 0 (orthonormal in the metric A), d_T f and d_B f
+ * are uncorrelated with every value and derivative on the ray (cov(d_T f(x), f(x + u dn))
+ * = -2 k'(s) u T'A dn = 0), and with each other, so they are N(d_T mu, -2k'(0) T'AT)
+ * exactly, anisotropic kernels included; the gradient is the dual-basis combination of
+ * (slope, d_T f, d_B f). Isotropic: T, B are fs_frame's scaled, the same draws as fs_march.h.
+ * The vertex record is fs_vertex_at_hit's (position, gradient), which is what the
+ * renewal / renewal_plus start above reads.
+ *
+ * Random numbers: fs_march.h's segments (the step index) and blocks: slots 0..p the
+ * state noise of a step, FS_SLOT_REFINE + 2k + j (3/2) or 4k + j (5/2) bisection k (at
+ * most 33 or 16: a 2 l_d step needs 8), FS_SLOT_NORMAL and
+ * FS_U_SLOPE at the hit's step; the start's free components FS_MK_SLOT_START + j. */
+#define FS_MK_SLOT_START 600
+#define FS_MK_ELL32 1.3576766739458992   /* (1 + x) e^-x = e^-1/2 */
+#define FS_MK_ELL52 1.9262524514893138   /* (1 + x + x^2 / 3) e^-x = e^-1/2 */
+#define FS_MK_ROOT_CLAMP 1e-9            /* the root's fraction of the bracket, see fs_mk_hit */
+
+typedef struct {
+    int n;          /* state size p + 1 */
+    double lam;     /* per world length along the ray */
+    double s2;      /* sigma^2 */
+} FsMarkov;
+
+inline int fs_markov_applies(GpKernel p, FsParams prm, FsScratch S)
+{
+    return (p.kind == GP_KERNEL_MATERN32 || p.kind == GP_KERNEL_MATERN52)
+        && !gp_kernel_nonstationary(p) && !S.post.n && !(prm.step_corr > 0.0)
+        && (prm.memory == GPIS_MEMORY_NONE || prm.memory == GPIS_MEMORY_RENEWAL
+            || prm.memory == GPIS_MEMORY_RENEWAL_PLUS);
+}
+
+inline FsMarkov fs_markov_of(GpKernel p, double3 dn)
+{
+    FsMarkov m;
+    int five = p.kind == GP_KERNEL_MATERN52;
+    m.n = five ? 3 : 2;
+    m.lam = (five ? 2.23606797749979 : 1.7320508075688772) / (double)p.length_scale
+          * sqrt(dot(gp_aniso(p) * dn, dn));
+    m.s2 = (double)p.sigma2;
+    return m;
+}
+
+/* 1 / j (a multiplication instead of a division in the series) */
+__constant double fs_mk_recip[22] = {0.0, 1.0, 1.0 / 2, 1.0 / 3, 1.0 / 4, 1.0 / 5, 1.0 / 6,
+    1.0 / 7, 1.0 / 8, 1.0 / 9, 1.0 / 10, 1.0 / 11, 1.0 / 12, 1.0 / 13, 1.0 / 14, 1.0 / 15,
+    1.0 / 16, 1.0 / 17, 1.0 / 18, 1.0 / 19, 1.0 / 20, 1.0 / 21};
+
+/* P[k] = P(k + 1, x) = e^-x sum_{j > k} x^j / j!, k = 0..kmax (regularised lower
+ * incomplete gamma), in one pass: below x = 1 the series' upper tails (no cancellation
+ * as x -> 0; 20 terms: x^21 / 21! < 2e-20), above it 1 - the head (P(5, 1) = 0.0037:
+ * <= 2.5 digits lost, ~1e-13 relative). */
+inline void fs_mk_gammas(int kmax, double x, double ex, double* P)   /* ex = e^-x */
+{
+    double t = ex;   /* e^-x x^j / j! */
+    if (x >= 1.0) {
+        double head = 0.0;
+        for (int j = 0; j <= kmax; ++j) {
+            head += t;
+            P[j] = 1.0 - head;
+            t *= x * fs_mk_recip[j + 1];
+        }
+        return;
+    }
+    double term[21];
+    for (int j = 0; j < 21; ++j) { term[j] = t; t *= x * fs_mk_recip[j + 1]; }
+    double tail = 0.0;
+    for (int j = 20; j > 0; --j) {
+        tail += term[j];             /* sum_{i >= j} */
+        if (j - 1 <= kmax) P[j - 1] = tail;
+    }
+}
+
+/* A(h) and Q(h) of a step of h world lengths (header comment) */
+inline void fs_mk_transition(FsMarkov m, double h, double A[3][3], double Q[3][3])
+{
+    int n = m.n, p = n - 1;
+    double l = m.lam, e = exp(-l * h);
+    double N[3][3] = {{0.0}}, N2[3][3];
+    for (int i = 0; i < p; ++i) N[i][i + 1] = 1.0;
+    /* last row of F: -(lambda^3, 3 lambda^2, 3 lambda) or -(lambda^2, 2 lambda) */
+    if (p == 1) { N[1][0] = -l * l; N[1][1] = -2.0 * l; }
+    else { N[2][0] = -l * l * l; N[2][1] = -3.0 * l * l; N[2][2] = -3.0 * l; }
+    for (int i = 0; i < n; ++i) N[i][i] += l;
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j) {
+            double s = 0.0;
+            for (int k = 0; k < n; ++k) s += N[i][k] * N[k][j];
+            N2[i][j] = s;
+        }
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j)
+            A[i][j] = e * ((i == j ? 1.0 : 0.0) + h * N[i][j] + (p == 2 ? 0.5 * h * h * N2[i][j] : 0.0));
+    /* G_i(s) coefficients (ascending powers), G_0 = s^p / p! */
+    double G[3][3] = {{0.0}};
+    G[0][p] = p == 2 ? 0.5 : 1.0;
+    for (int i = 0; i < p; ++i)
+        for (int k = 0; k <= p; ++k)
+            G[i + 1][k] = (k + 1 <= p ? (double)(k + 1) * G[i][k + 1] : 0.0) - l * G[i][k];
+    /* I_k = int_0^h s^k e^{-2 lambda s} ds = k! / (2 lambda)^(k+1) P(k + 1, 2 lambda h) */
+    double I[5], Pg[5], fact = 1.0, pw = 2.0 * l;
+    fs_mk_gammas(2 * p, 2.0 * l * h, e * e, Pg);   /* e^-2 lambda h */
+    for (int k = 0; k <= 2 * p; ++k) {
+        I[k] = fact / pw * Pg[k];
+        fact *= (double)(k + 1);
+        pw *= 2.0 * l;
+    }
+    /* q = sigma^2 (2 lambda)^(2p+1) (p!)^2 / (2p)!: 4 s2 l^3, 16/3 s2 l^5 */
+    double q = p == 1 ? 4.0 * m.s2 * l * l * l : 16.0 / 3.0 * m.s2 * l * l * l * l * l;
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j <= i; ++j) {
+            double s = 0.0;
+            for (int a = 0; a <= p; ++a)
+                for (int b = 0; b <= p; ++b) s += G[i][a] * G[j][b] * I[a + b];
+            Q[i][j] = Q[j][i] = q * s;
+        }
+}
+
+/* Lower Cholesky factor of the n x n matrix a (n <= 3) in L; a non-positive pivot
+ * (rounding of a degenerate Q) gives a zero column. */
+inline void fs_mk_chol(int n, double a[3][3], double L[3][3])
+{
+    for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i) L[j][i] = 0.0;
+    for (int j = 0; j < n; ++j) {
+        double d = a[j][j];
+        for (int k = 0; k < j; ++k) d -= L[j][k] * L[j][k];
+        L[j][j] = d > 0.0 ? sqrt(d) : 0.0;
+        for (int i = j + 1; i < n; ++i) {
+            double s = a[i][j];
+            for (int k = 0; k < j; ++k) s -= L[i][k] * L[j][k];
+            L[i][j] = L[j][j] > 0.0 ? s / L[j][j] : 0.0;
+        }
+    }
+}
+
+/* x := L^-1 x (forward) or L^-T x (backward) on the first n entries */
+inline void fs_mk_forward(int n, double L[3][3], double* x)
+{
+    for (int i = 0; i < n; ++i) {
+        double s = x[i];
+        for (int k = 0; k < i; ++k) s -= L[i][k] * x[k];
+        x[i] = s / L[i][i];
+    }
+}
+
+inline void fs_mk_backward(int n, double L[3][3], double* x)
+{
+    for (int i = n - 1; i >= 0; --i) {
+        double s = x[i];
+        for (int k = i + 1; k < n; ++k) s -= L[k][i] * x[k];
+        x[i] = s / L[i][i];
+    }
+}
+
+/* The inverse of a positive definite n x n matrix through its Cholesky factor. */
+inline void fs_mk_inverse(int n, double a[3][3], double out[3][3])
+{
+    double L[3][3];
+    fs_mk_chol(n, a, L);
+    for (int j = 0; j < n; ++j) {
+        double c[3] = {0.0, 0.0, 0.0};
+        c[j] = 1.0;
+        fs_mk_forward(n, L, c);
+        fs_mk_backward(n, L, c);
+        for (int i = 0; i < n; ++i) out[i][j] = c[i];
+    }
+}
+
+/* fs_normal at slots slot .. slot + n - 1 (n <= 3, slot even), one Philox block and one
+ * Box-Muller pair per two slots: the same numbers, a third of the cost for 5/2. */
+inline void fs_mk_normals(FsRng rng, uint seg, uint slot, int n, double* z)
+{
+    for (int j = 0; j < n; j += 2) {
+        double2 u = fs_uniform2(rng, seg, (slot + (uint)j) >> 1);
+        double rad = sqrt(-2.0 * log(1.0 - u.x)), ang = 2.0 * M_PI * u.y;
+        z[j] = rad * cos(ang);
+        if (j + 1 < n) z[j + 1] = rad * sin(ang);
+    }
+}
+
+inline void fs_mk_copy(int n, double src[3][3], double dst[3][3])
+{
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j) dst[i][j] = src[i][j];
+}
+
+/* The state h world lengths on: x := A(h) x + chol(Q(h)) z, z from slots slot.. */
+inline void fs_mk_advance(FsMarkov m, double A[3][3], double Q[3][3], double* x,
+                          FsRng rng, uint seg, uint slot)
+{
+    double L[3][3], z[3], y[3];
+    fs_mk_chol(m.n, Q, L);
+    fs_mk_normals(rng, seg, slot, m.n, z);
+    for (int i = 0; i < m.n; ++i) {
+        double s = 0.0;
+        for (int k = 0; k < m.n; ++k) s += A[i][k] * x[k];
+        for (int k = 0; k <= i; ++k) s += L[i][k] * z[k];
+        y[i] = s;
+    }
+    for (int i = 0; i < m.n; ++i) x[i] = y[i];
+}
+
+/* The law of the state at a point h1 after xa and h2 before xb, in information form:
+ * precision Lam = Q1^-1 + A2' Q2^-1 A2 and eta = Q1^-1 A1 xa + A2' Q2^-1 xb (the mean
+ * is Lam^-1 eta). */
+inline void fs_mk_bridge(FsMarkov m, double h1, double h2, const double* xa,
+                         const double* xb, double Lam[3][3], double* eta)
+{
+    int n = m.n;
+    double A1[3][3], Q1[3][3], A2[3][3], Q2[3][3], P1[3][3], P2[3][3], a[3], w[3];
+    fs_mk_transition(m, h1, A1, Q1);
+    fs_mk_inverse(n, Q1, P1);
+    if (h2 == h1) {               /* a bisection's midpoint: both halves alike */
+        fs_mk_copy(n, A1, A2);
+        fs_mk_copy(n, P1, P2);
+    } else {
+        fs_mk_transition(m, h2, A2, Q2);
+        fs_mk_inverse(n, Q2, P2);
+    }
+    for (int i = 0; i < n; ++i) {
+        double s = 0.0;
+        for (int k = 0; k < n; ++k) s += A1[i][k] * xa[k];
+        a[i] = s;
+    }
+    for (int i = 0; i < n; ++i) {     /* w = P2 xb */
+        double s = 0.0;
+        for (int k = 0; k < n; ++k) s += P2[i][k] * xb[k];
+        w[i] = s;
+    }
+    for (int i = 0; i < n; ++i) {
+        double s = 0.0;
+        for (int k = 0; k < n; ++k) s += P1[i][k] * a[k] + A2[k][i] * w[k];
+        eta[i] = s;
+        for (int j = 0; j < n; ++j) {
+            double t = P1[i][j];
+            for (int k = 0; k < n; ++k)
+                for (int r = 0; r < n; ++r) t += A2[k][i] * P2[k][r] * A2[r][j];
+            Lam[i][j] = t;
+        }
+    }
+}
+
+/* A bridge draw: x = Lam^-1 eta + L^-T z, Lam = L L' (covariance Lam^-1) */
+inline void fs_mk_bridge_sample(FsMarkov m, double h1, double h2, const double* xa,
+                                const double* xb, FsRng rng, uint seg, uint slot, double* x)
+{
+    double Lam[3][3], L[3][3], eta[3];
+    fs_mk_bridge(m, h1, h2, xa, xb, Lam, eta);
+    fs_mk_chol(m.n, Lam, L);
+    fs_mk_forward(m.n, L, eta);
+    double z[3];
+    fs_mk_normals(rng, seg, slot, m.n, z);
+    for (int j = 0; j < m.n; ++j) eta[j] += z[j];
+    fs_mk_backward(m.n, L, eta);
+    for (int j = 0; j < m.n; ++j) x[j] = eta[j];
+}
+
+/* The residual slope's mean and standard deviation at the bridge point given both ends
+ * and Y = y0 there: the conditional of (Y', ..) has precision Lam[1:, 1:] and
+ * information eta[1:] - Lam[1:, 0] y0. */
+inline double fs_mk_bridge_slope(FsMarkov m, double h1, double h2, const double* xa,
+                                 const double* xb, double y0, double* sd)
+{
+    double Lam[3][3], eta[3], R[3][3], C[3][3];
+    fs_mk_bridge(m, h1, h2, xa, xb, Lam, eta);
+    int k = m.n - 1;
+    double b[3];
+    for (int i = 0; i < k; ++i) {
+        b[i] = eta[i + 1] - Lam[i + 1][0] * y0;
+        for (int j = 0; j < k; ++j) R[i][j] = Lam[i + 1][j + 1];
+    }
+    fs_mk_inverse(k, R, C);
+    double mean = 0.0;
+    for (int j = 0; j < k; ++j) mean += C[0][j] * b[j];
+    *sd = sqrt(fmax(C[0][0], 0.0));
+    return mean;
+}
+
+/* Conditional moments of (f, f') h on from state x (transition A, Q given), prior mean
+ * mu and its slope mu1 there. */
+inline FsMoments fs_mk_moments(FsMarkov m, double A[3][3], double Q[3][3], const double* x,
+                               double mu, double mu1)
+{
+    FsMoments M;
+    double y0 = 0.0, y1 = 0.0;
+    for (int k = 0; k < m.n; ++k) { y0 += A[0][k] * x[k]; y1 += A[1][k] * x[k]; }
+    M.m = mu + y0;
+    M.m1 = mu1 + y1;
+    M.s = sqrt(fmax(Q[0][0], 0.0));
+    M.r = M.s > 0.0 ? Q[0][1] / M.s : 0.0;
+    M.g = sqrt(fmax(Q[1][1] - M.r * M.r, 0.0));
+    return M;
+}
+
+/* The prior mean at ray parameter t and its slope along dn (per world length) */
+inline double fs_mk_mean(__global const MeanNode* mean, int mc, FsRay ray, double3 dn,
+                         double t, double* slope)
+{
+    float3 g;
+    float v = gp_mean_eval(mean, mc, convert_float3(ray.o + t * ray.d), &g);
+    *slope = dot(convert_double3(g), dn);
+    return (double)v;
+}
+
+/* The start state's free components given those set (Y, and Y' if `slope_set`):
+ * stationary conditionals, Y' ~ N(0, P_inf,11), Y'' ~ N(-lambda^2 Y / 3, 8 s2 lambda^4 / 9). */
+inline void fs_mk_start(FsMarkov m, double* x, int slope_set, FsRng rng)
+{
+    double l2 = m.lam * m.lam, var1 = m.n == 2 ? m.s2 * l2 : m.s2 * l2 / 3.0;
+    if (!slope_set) x[1] = sqrt(var1) * fs_normal(rng, 0, FS_MK_SLOT_START);
+    if (m.n == 3)
+        x[2] = -l2 / 3.0 * x[0]
+             + sqrt(8.0 / 9.0 * m.s2) * l2 * fs_normal(rng, 0, FS_MK_SLOT_START + 1);
+}
+
+inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean, int mc,
+                                      FsParams prm, FsRay ray, FsVertex v, FsRng rng,
+                                      FsScratch S)
+{
+    FsResult res = {0, 0, ray.t1, (double3)(0.0), 0, 0, 0, 0};
+    double dlen = length(ray.d);
+    double3 dn = ray.d / dlen;
+    FsMarkov m = fs_markov_of(p, dn);
+    /* l_d in t: the lag of correlation e^-1/2 (fs_march.h's length scale) */
+    double ell = (m.n == 2 ? FS_MK_ELL32 : FS_MK_ELL52) / (m.lam * dlen);
+    if (!(ell > 0.0) || !isfinite(ell)) { res.status = FS_STATUS_NAN; return res; }
+    double fa, x[3], xb[3], mu1;
+    int outside, n_old;
+    fs_begin(p, mean, mc, prm, ray, v, 0, rng, S, &fa, &outside, &n_old);
+    int with_slope = v.valid && (prm.memory == GPIS_MEMORY_RENEWAL
+                                 || prm.memory == GPIS_MEMORY_RENEWAL_PLUS);
+    double mu = fs_mk_mean(mean, mc, ray, dn, ray.t0, &mu1);
+    x[0] = fa - mu;
+    if (with_slope) x[1] = S.rows[1].value - mu1;
+    fs_mk_start(m, x, with_slope, rng);
+
+    double ta = ray.t0, tb = 0.0, fb = 0.0, mua = mu;
+    double h = 0.5 * ell, tol = (double)prm.miss_tol, grow = 1.0, sd = sqrt(m.s2);
+    double lip = (double)gp_mean_lipschitz_on(mean, mc, convert_float3(ray.o + ray.t0 * ray.d),
+                                              convert_float3(ray.o + ray.t1 * ray.d)) * dlen;
+    double Ae[3][3], Qe[3][3], Am[3][3], Qm[3][3], mue = 0.0, mu1e = 0.0;
+    int step = 0;
+    for (;; ++step) {
+        if (ta >= ray.t1) return res;
+        if (step >= FS_MAX_STEPS) { res.status = FS_STATUS_STEPS; return res; }
+        /* fs_march.h's rule; fs_mean_step with the prior sd sigma */
+        double hmean = lip > 0.0
+            ? fmax(FS_MEAN_KAPPA * sd, fabs(mua) - FS_MEAN_Z * sd) / lip : INFINITY;
+        h = fmin(fmin(grow * h, FS_H_MAX * ell), hmean);
+        for (;;) {
+            /* fs_march.h's Radau rule: one node at 2h/3 per try (nu(ta) = 0) */
+            int clipped = ta + h >= ray.t1;
+            double hs = clipped ? ray.t1 - ta : h, mu1m;
+            double mum = fs_mk_mean(mean, mc, ray, dn, ta + FS_RADAU_NODE * hs, &mu1m);
+            fs_mk_transition(m, FS_RADAU_NODE * hs * dlen, Am, Qm);
+            double r = FS_RADAU_WEIGHT
+                * fs_return_rate(fs_mk_moments(m, Am, Qm, x, mum, mu1m), outside)
+                * dlen * ell / tol;
+            res.evals++;
+            if (r <= 1.0 || h <= FS_H_MIN * ell) {
+                tb = clipped ? ray.t1 : ta + hs;
+                grow = r < 0.05 ? 2.0 : (r < 0.3 ? 1.5 : 1.1);
+                mue = fs_mk_mean(mean, mc, ray, dn, ta + hs, &mu1e);
+                fs_mk_transition(m, hs * dlen, Ae, Qe);
+                break;
+            }
+            h = 0.5 * hs;
+        }
+        for (int j = 0; j < m.n; ++j) xb[j] = x[j];
+        fs_mk_advance(m, Ae, Qe, xb, rng, (uint)step, 0u);
+        fb = mue + xb[0];
+        res.samples++;
+        if (isnan(fb)) { res.status = FS_STATUS_NAN; return res; }
+        if (outside && fb < 0.0) break;
+        outside = fb >= 0.0;
+        ta = tb;
+        fa = fb;
+        mua = mue;
+        for (int j = 0; j < m.n; ++j) x[j] = xb[j];
+    }
+
+    /* bisection by bridge draws in (ta, tb]: x is the state at ta, xb at tb */
+    /* an even number of slots per bisection (fs_mk_normals pairs them): 2 or 4 */
+    int stride = (m.n + 1) & ~1, kmax = (FS_SLOT_NORMAL - FS_SLOT_REFINE) / stride;
+    for (int k = 0; (k < prm.refine || tb - ta > FS_ROOT_WIDTH * ell) && k < kmax; ++k) {
+        double tm = 0.5 * (ta + tb), xm[3], mu1m;
+        double hh = 0.5 * (tb - ta) * dlen;     /* both halves, exactly equal */
+        fs_mk_bridge_sample(m, hh, hh, x, xb, rng, (uint)step,
+                            FS_SLOT_REFINE + (uint)(stride * k), xm);
+        double f = fs_mk_mean(mean, mc, ray, dn, tm, &mu1m) + xm[0];
+        res.samples++;
+        if (isnan(f)) { res.status = FS_STATUS_NAN; return res; }
+        if (f >= 0.0) { ta = tm; fa = f; for (int j = 0; j < m.n; ++j) x[j] = xm[j]; }
+        else { tb = tm; fb = f; for (int j = 0; j < m.n; ++j) xb[j] = xm[j]; }
+    }
+    /* the linear root, kept FS_MK_ROOT_CLAMP of the bracket off its ends (a bridge to
+     * an end point is degenerate: Q(0) = 0); moves x_h by < 1e-11 l_d */
+    double w = clamp(fa / (fa - fb), FS_MK_ROOT_CLAMP, 1.0 - FS_MK_ROOT_CLAMP);
+    res.hit = 1;
+    res.t = ta + (tb - ta) * w;
+    double3 xh = ray.o + res.t * ray.d;
+    double muh1, muh = fs_mk_mean(mean, mc, ray, dn, res.t, &muh1), gsd;
+    double b = muh1 + fs_mk_bridge_slope(m, (res.t - ta) * dlen, (tb - res.t) * dlen, x, xb,
+                                         -muh, &gsd);
+    double s = fs_downcrossing_slope(b, gsd, fs_uniform2(rng, step, FS_U_SLOPE));
+    /* tangential derivatives in a frame orthonormal in the metric A (header comment) */
+    double3 ra = sqrt(gp_aniso(p)), Tq, Bq;
+    fs_frame(normalize(ra * dn), &Tq, &Bq);
+    double3 T = Tq / ra, B = Bq / ra;
+    double z1 = fs_normal(rng, step, FS_SLOT_NORMAL), z2 = fs_normal(rng, step, FS_SLOT_NORMAL + 1);
+    double q1 = fs_prior_mean(mean, mc, xh, T, FS_OBS_DERIV) + sqrt(gp_cov(p, xh, T, 1, xh, T, 1)) * z1;
+    double q2 = fs_prior_mean(mean, mc, xh, B, FS_OBS_DERIV) + sqrt(gp_cov(p, xh, B, 1, xh, B, 1)) * z2;
+    /* the gradient with g.dn = s, g.T = q1, g.B = q2: the dual basis of (dn, T, B) */
+    double3 cTB = cross(T, B);
+    double det = dot(dn, cTB);
+    double3 tang = (q1 * cross(B, dn) + q2 * cross(dn, T)) / det;
+    /* fs_march.h: |s| at least 1e-5 of the tangential part, so the normal faces the ray */
+    res.grad = cTB / det * fmin(s, -1e-5 * length(tang)) + tang;
+    return res;
+}

@@ -1,0 +1,104 @@
+"""Function-space free flight alone: CPU microseconds per length scale of ray for the
+adaptive step (the default miss_tolerance and 1e-7) against the old uniform step at
+neighbour correlation 0.9 and 0.99, same run.
+
+    python tools/bench_free_flight.py [--rays 4096] [--repeats 7] [--levels 0 1 2 3]
+
+Fresh rays (renewal_plus memory, SE sigma = l = 1) of 30 length scales through a constant
+mean mu (the level, in sigma); a flight ends at its first crossing. Times are CPU seconds
+of this process (PoCL's CPU threads run here; time.process_time), so other users of a
+shared machine do not skew them; variants are interleaved and each repetition's ratio to
+uniform 0.9 is taken before the median. Also printed: GP values drawn and step-rule
+evaluations per flight.
+"""
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pyopencl as cl
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from gpiscl.host.gp import Constant, SquaredExponential  # noqa: E402
+from gpiscl.host.layout import function_space_records as FL  # noqa: E402
+from gpiscl.host.layout import gp_records  # noqa: E402
+from gpiscl.host.layout.records import GPIS_MEMORIES  # noqa: E402
+from gpiscl.host.render.device import Device  # noqa: E402
+from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_source  # noqa: E402
+
+WRAPPER = r"""
+__kernel void flight(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
+                     int memory, double t1, double step_corr, double tol, uint seed,
+                     __global double* scratch, __global double* out)
+{
+    int s = get_global_id(0);
+    FsParams prm = {FS_WINDOW, memory, 64, 6, step_corr, tol};
+    FsRay r = {(double3)(0.001 * s, 0.0, 0.0), (double3)(0.0, 0.0, 1.0), 0.0, t1};
+    FsRng rng = {seed, (uint)s, 0u, 0u, 0u};
+    FsVertex v = {0};
+    FsResult res = fs_free_flight(kp[0], mean, mc, prm, r, v, 0, rng, fs_scratch(scratch, s));
+    out[4 * s] = res.status ? -1.0 : res.samples;
+    out[4 * s + 1] = res.evals;
+    out[4 * s + 2] = res.t;
+    out[4 * s + 3] = res.hit;
+}
+"""
+LENGTH = 30.0
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rays", type=int, default=4096)
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--levels", type=float, nargs="*", default=[0.0, 1.0, 2.0, 3.0])
+    args = ap.parse_args()
+    dev = Device()
+    window = FL.DEFAULT_WINDOW
+    prog = cl.Program(dev.ctx, fs_sampler_source(WRAPPER)).build(
+        options=fs_sampler_options(window, 64))
+    flight = cl.Kernel(prog, "flight")
+    mf = cl.mem_flags
+    kp = cl.Buffer(dev.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR,
+                   hostbuf=gp_records.pack_kernel(SquaredExponential(sigma=1.0, length_scale=1.0)))
+    scratch = cl.Buffer(dev.ctx, mf.READ_WRITE,
+                        8 * FL.scratch_doubles(FL.max_rows(window, 64)) * args.rays)
+    out = cl.Buffer(dev.ctx, mf.WRITE_ONLY, 32 * args.rays)
+    variants = {f"adaptive {FL.DEFAULT_MISS_TOLERANCE:g}": (0.0, FL.DEFAULT_MISS_TOLERANCE),
+                "adaptive 1e-7": (0.0, 1e-7), "uniform 0.9": (0.9, 0.0),
+                "uniform 0.99": (0.99, 0.0)}
+    print(f"device: {dev.name}; {args.rays} rays of {LENGTH:g} l, median of {args.repeats}")
+    print(f"{'mu/sigma':>8} {'variant':16s}{'cpu us/l':>10s}{'/uniform 0.9':>14s}"
+          f"{'samples/flight':>16s}{'evals/flight':>14s}{'hit':>7s}")
+    for mu in args.levels:
+        nodes = gp_records.pack_mean(Constant(mu))
+        mb = cl.Buffer(dev.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=nodes)
+        runs = {k: [] for k in variants}
+        for rep in range(args.repeats + 1):           # the first is a warm-up
+            for name, (corr, tol) in variants.items():
+                t = time.process_time()
+                flight(dev.queue, (args.rays,), None, kp, mb, np.int32(len(nodes)),
+                       np.int32(GPIS_MEMORIES["renewal_plus"]), np.float64(LENGTH),
+                       np.float64(corr), np.float64(tol), np.uint32(rep), scratch, out)
+                dev.queue.finish()
+                sec = time.process_time() - t
+                r = np.empty((args.rays, 4))
+                cl.enqueue_copy(dev.queue, r, out)
+                assert (r[:, 0] >= 0).all(), "a free flight failed"
+                if rep:
+                    runs[name].append((sec / r[:, 2].sum() * 1e6, r[:, 0].mean(),
+                                       r[:, 1].mean(), r[:, 3].mean()))
+        base = [x[0] for x in runs["uniform 0.9"]]
+        for name, xs in runs.items():
+            us = [x[0] for x in xs]
+            ratio = statistics.median(a / b for a, b in zip(us, base))
+            print(f"{mu:8g} {name:16s}{statistics.median(us):10.3f}{ratio:14.2f}"
+                  f"{xs[0][1]:16.2f}{xs[0][2]:14.2f}{xs[0][3]:7.3f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
