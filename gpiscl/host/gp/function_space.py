@@ -7,7 +7,9 @@ and the adaptive step rule of fs_march.h (march_realization: applied to a given 
 realization, so that its misses can be counted). Used by the tests and tools; one ray at a
 time with np.linalg.cholesky (and a dense joint sample along a ray as the ground truth).
 Not mirrored: the device's bisection, hit slope and memory models (tested on the device
-against Rice's formula and dense joint samples, tests/test_fs_adaptive.py).
+against Rice's formula and dense joint samples, tests/test_fs_adaptive.py). normal_pdf is
+the twin of fs_normal_pdf.h (the density of a hit's normal given the law the device drew it
+from, tests/test_fs_nee.py).
 """
 from __future__ import annotations
 
@@ -245,3 +247,22 @@ def downcrossing_rate(kernel, level, d):
     d = np.asarray(d, float)
     lam2 = float(kernel.cov_dd(np.zeros(3), d, np.zeros(3), d))
     return math.exp(-level * level / (2.0 * var)) * math.sqrt(lam2 / var) / (2.0 * math.pi)
+
+
+# --- the normal's density at a hit (fs_normal_pdf.h) -------------------------------------
+
+def normal_pdf(n, d, law, jacobian=True):
+    """numpy twin of fs_normal_pdf: the density per steradian of the unit normal n (..., 3)
+    at a hit of a ray along unit d, for the law (m, a, b, s) of FsResult.law_* (arrays
+    that broadcast against n): p = N2(q(n); m_q, S_q) s^2 / |n.d|^3, 0 where n.d >= 0.
+    jacobian=False drops s^2 / |n.d|^3 (the tests' counterexample)."""
+    m, a, b, s = law
+    c = n @ d
+    lam = s / c
+    r = lam[..., None] * (n - c[..., None] * d) - m
+    z1, z2 = np.sum(a * r, -1), np.sum(b * r, -1)
+    inv_det = np.linalg.norm(np.cross(a, b), axis=-1)   # 1 / sqrt(det S_q)
+    p = np.exp(-0.5 * (z1**2 + z2**2)) * inv_det / (2 * np.pi)
+    if jacobian:
+        p = p * s**2 / np.abs(c)**3
+    return np.where(c < 0, p, 0.0)

@@ -33,7 +33,8 @@ FS_VERTEX = Struct("FsVertex", (
     ("int", "valid"),        # 0: no memory (fresh entry from free space or a surface)
     ("int", "obs_end"),      # global model: observations ever appended to the path's ring
     ("int", "obs_count"),    # global model: how many of them the ring still holds
-    ("int", "pad"),
+    ("int", "implied"),      # 1: grad is the gradient a shadow ray's normal implies, not
+                             # the sampled one (fs_normal_pdf.h; shadow rays only)
 ))
 
 OBS_KINDS = {"value": 0, "deriv": 1}

@@ -111,6 +111,9 @@ RENDER_PARAMS = Struct("RenderParams", (
     ("int", "num_gpis"),
     ("int", "realization"),    # >= 0: every path uses this one GPIS realization
     ("int", "aov"),            # 1: record first hits (aov.py) and add them to the film
+    ("int", "fs_nee"),         # 1: NEE at function-space hits may pick the normal
+                               # (fs_normal_pdf.h); 0: only the sampled one, the mirror
+                               # delta (the benchmarks' baseline, tools/bench_mirror_nee.py)
 ))
 
 # --- queues ---------------------------------------------------------------------------
@@ -121,6 +124,11 @@ PATH_STATE = Queue("path", (
     ("float4", "beta"),       # throughput
     ("float4", "radiance"),   # radiance gathered so far
     ("float4", "prev_pos"),   # last scattering vertex, for emitter pdfs (w = bsdf pdf, 0 = delta)
+    ("int", "prev_env_nee"),  # 1: that vertex's light sampling covers environment lights
+                              # too (a function-space mirror's does not: scatter.cl)
+    # a function-space rough conductor vertex (fs_normal_pdf.h, fs_conductor_light_pdf):
+    ("float4", "prev_n"),     # its sampled normal n0, w = p_Omega(n0) (0: any other vertex)
+    ("float4", "prev_v"),     # v = -(incoming direction), w = the Beckmann alpha
     ("int", "depth"),         # scattering events so far
     ("int", "medium"),        # GPIS object the ray travels in, or -1
     # the first scattering event, for AOVs (aov.py; written only when params.aov is set)
@@ -136,6 +144,11 @@ RAY_QUEUE = Queue("ray", (
     ("float", "hit_t"),
     ("int", "hit_prim"),      # >= 0 surface, -1 none, GPIS_HIT_BASE - k: GPIS object k
     ("float4", "hit_n"),      # GPIS hits: the sampled unit normal (outward)
+    # function-space GPIS hits: the law the normal was drawn from (FsResult.law_*,
+    # fs_normal_pdf.h): xyz the tangential mean law_m, w the slope law_s; law_a; law_b
+    ("float4", "hit_law_m"),
+    ("float4", "hit_law_a"),
+    ("float4", "hit_law_b"),
 ))
 
 INDEX_QUEUE = Queue("index", (
@@ -147,6 +160,10 @@ SHADOW_QUEUE = Queue("shadow", (
     ("float4", "d"),          # w = distance to the light sample
     ("float4", "contribution"),
     ("int", "path"),
+    # w = 1: xyz is the gradient the light sample's normal implies at a function-space
+    # vertex (fs_normal_pdf.h), which the shadow ray conditions on instead of the sampled
+    # one; w = 0: the vertex's own record
+    ("float4", "grad"),
 ))
 
 # --- enumerations shared with the device (emitted as #defines) ----------------------

@@ -147,6 +147,8 @@ class WavefrontIntegrator:
         realization = settings.get("realization")
         p["realization"] = -1 if realization is None else realization
         p["aov"] = 1 if aov else 0
+        # not a scene key: the baseline of tools/bench_mirror_nee.py
+        p["fs_nee"] = 1 if settings.get("fs_nee", True) else 0
         # null surfaces do not count as bounces, so allow extra iterations for them
         self.max_iterations = 4 * settings["max_depth"] + 64
         self.stats = RenderStats(pixels=self.num_pixels)

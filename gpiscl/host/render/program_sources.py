@@ -25,7 +25,7 @@ STAGE_FILES = ("generate_camera_rays.cl", "intersect.cl", "gpis_weight_space.cl"
                "queue_hits.cl", "escaped_rays.cl", "emission.cl", "scatter.cl",
                "gpis_shadow_weight_space.cl", "shadow_rays.cl", "accumulate.cl")
 GPIS_HEADERS = ("gpis_proxy.h", "ws_features.h", "ws_posterior.h", "ws_intersect.h",
-                "ws_objects.h", "gpis_fields.h")
+                "ws_objects.h", "gpis_fields.h", "fs_normal_pdf.h")
 # The function-space stages (a second program, built only for scenes that use them).
 FS_STAGE_FILES = ("gpis_function_space.cl", "gpis_shadow_function_space.cl")
 FS_HEADERS = ("gpis_proxy.h", "fs_linalg.h", "fs_sampling.h", "fs_march.h", "fs_markov.h",

@@ -1,5 +1,6 @@
 /* Surface BSDFs. Diffuse and mirror are two-sided: the shading normal is flipped to
- * the side the ray arrives from. The mirror is a delta BSDF (pdf 0 marks it). */
+ * the side the ray arrives from. The mirror is a delta BSDF (pdf 0 marks it), except at
+ * function-space GPIS hits, whose random normal gives it a density (fs_normal_pdf.h). */
 
 inline float3 cosine_hemisphere(float2 u, float3 n, float* pdf)
 {

@@ -81,7 +81,9 @@
  * bracket end (f(ta) ~ 0). The old secant slope's jitter noise (tilted normals at
  * refine >= 12) is gone too: s is drawn from the jittered model's own conditional.
  * The tangential components follow given f(x_h) = 0 and s (fs_sampling.h's closed form
- * for isotropic kernels without a posterior or global memory, else two appended rows).
+ * for isotropic kernels without a posterior or global memory, else two appended rows);
+ * their law given s (mean and 2x2 factor, the appended rows' before they are drawn) is
+ * returned with the hit (FsResult.law_*): the normal's density, fs_normal_pdf.h.
  * The global ring keeps this ray's rows: values, bisection points, f(x_h) = 0, s and the
  * tangential components.
  *
@@ -426,20 +428,39 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
     S.rows[n + 1].value = sd;
     fs_frame(dn, &T, &B);
     double z1 = fs_normal(rng, step, FS_SLOT_NORMAL), z2 = fs_normal(rng, step, FS_SLOT_NORMAL + 1);
-    double q1, q2;
+    /* (q1, q2) = m + L z with the 2x2 lower factor L = [[l11, 0], [l21, l22]] of their
+     * covariance given s: res.law_* keeps (m, L) for the normal's density */
+    double q1, q2, m1, m2, l11, l21, l22;
     if (fs_isotropic_radial(p) && !S.post.n && prm.memory != GPIS_MEMORY_GLOBAL) {
         /* every row on the ray: d_T f(x_h) is independent of them (fs_sampling.h) */
-        q1 = fs_prior_mean(mean, mc, x, T, FS_OBS_DERIV) + sqrt(gp_cov(p, x, T, 1, x, T, 1)) * z1;
-        q2 = fs_prior_mean(mean, mc, x, B, FS_OBS_DERIV) + sqrt(gp_cov(p, x, B, 1, x, B, 1)) * z2;
+        m1 = fs_prior_mean(mean, mc, x, T, FS_OBS_DERIV);
+        m2 = fs_prior_mean(mean, mc, x, B, FS_OBS_DERIV);
+        l11 = sqrt(gp_cov(p, x, T, 1, x, T, 1));
+        l21 = 0.0;
+        l22 = sqrt(gp_cov(p, x, B, 1, x, B, 1));
+        q1 = m1 + l11 * z1;
+        q2 = m2 + l22 * z2;
     } else {
+        /* the general conditional (anisotropic, fields, posterior, global memory): two
+         * appended rows, each given everything before it; their conditional mean given
+         * the rows up to s and the trailing 2x2 block of the factor are its (m, L) */
         q1 = fs_append(p, mean, mc, S, n + 2, fs_obs(x, T, FS_OBS_DERIV, 0.0), 0, z1, &res.status);
         q2 = fs_append(p, mean, mc, S, n + 3, fs_obs(x, B, FS_OBS_DERIV, 0.0), 0, z2, &res.status);
         if (res.status) return res;
+        m1 = S.mu[n + 2] + fs_row_dot(S.L, n + 2, S.e, n + 2);
+        m2 = S.mu[n + 3] + fs_row_dot(S.L, n + 3, S.e, n + 2);
+        l11 = fs_diag(S.L, n + 2);
+        l21 = S.L[fs_tri(n + 3) + n + 2];
+        l22 = fs_diag(S.L, n + 3);
     }
     /* s < 0 always; |s| below 1e-5 of the tangential part (probability ~1e-10: the law's
      * density vanishes like |s| at 0) is raised to it so that the normal still faces the
      * ray after rounding to float (the scatter stage kills a normal that does not) */
-    res.grad = T * q1 + B * q2 + dn * fmin(sd, -1e-5 * sqrt(q1 * q1 + q2 * q2));
+    res.law_s = fmin(sd, -1e-5 * sqrt(q1 * q1 + q2 * q2));
+    res.grad = T * q1 + B * q2 + dn * res.law_s;
+    res.law_m = T * m1 + B * m2;
+    res.law_a = T / l11;
+    res.law_b = (B - (l21 / l11) * T) / l22;
     /* global: the ring takes this ray's rows, f(x_h) = 0 included: x_h is a draw of the
      * root's location, so f(x_h) = 0 is an observation of the realization (the old
      * interpolated root contradicted the bracket values by O(width^2 f'')), and the next

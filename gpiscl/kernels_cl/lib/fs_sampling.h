@@ -119,6 +119,15 @@ typedef struct {
     double3 grad;           /* sampled gradient of f at the hit (outward, grad . d < 0) */
     int samples, evals;     /* work done: GP values drawn, step-rule moment evaluations */
     int new_first, new_end;  /* global: rows [new_first, new_end) join the memory */
+    /* The law the hit's normal was drawn from (fs_march.h, "Hit"; its density is
+     * fs_normal_pdf.h): the slope along the unit ray direction, law_s < 0, pinned; the
+     * tangential gradient g_t = g - (g.d) d ~ N(law_m, S_q) in the plane normal to d,
+     * given as world vectors: law_m the mean, and law_a, law_b with
+     * (law_a . (g_t - law_m), law_b . (g_t - law_m)) ~ N(0, I_2), i.e. the rows of
+     * L^-1 (S_q = L L^T in the frame T, B of fs_frame(d)) written in world space, so the
+     * scatter stage needs no frame: |law_a x law_b| = 1 / sqrt(det S_q). */
+    double law_s;
+    double3 law_m, law_a, law_b;
 } FsResult;
 
 inline FsScratch fs_scratch(__global double* base, int item)
@@ -429,6 +438,12 @@ inline int fs_begin(GpKernel p, __global const MeanNode* mean, int mc, FsParams 
     if (v.valid && prm.memory == GPIS_MEMORY_GLOBAL && v.obs_count > 0 && ring) {
         int cnt = min(v.obs_count, prm.cap);
         for (int k = 0; k < cnt; ++k) S.rows[k] = ring[(v.obs_end - cnt + k) % prm.cap];
+        /* a shadow ray of a normal other than the sampled one (fs_normal_pdf.h): the
+         * ring's last two rows are the vertex's tangential derivatives (fs_march.h
+         * appends f = 0, the slope, d_T f, d_B f), which take the implied gradient's
+         * values; the slope row stays (the implied gradient keeps it, g . d = s) */
+        for (int k = max(cnt - 2, 0); v.implied && k < cnt; ++k)
+            S.rows[k].value = dot(g, fs_dir(S.rows + k));
         *n_old = cnt;
         *f0 = v.pos.w;
         *outside = dot(g, d) >= 0.0;
@@ -480,7 +495,7 @@ inline FsVertex fs_vertex_at_hit(FsParams prm, FsRay ray, FsResult r, FsVertex p
     v.valid = 1;
     v.obs_end = prev.valid ? prev.obs_end : 0;
     v.obs_count = prev.valid ? prev.obs_count : 0;
-    v.pad = 0;
+    v.implied = 0;
     if (prm.memory == GPIS_MEMORY_GLOBAL && ring && r.hit) {
         int k = r.new_end - r.new_first;   /* contiguous: values, bisection, gradient */
         for (int i = 0; i < k; ++i) {

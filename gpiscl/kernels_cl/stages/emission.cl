@@ -1,6 +1,7 @@
 /* From: hit queue.  To: radiance emitted by area lights that rays hit, weighted by MIS
- * against light sampling from the previous vertex, and by GPIS emission fields where
- * rays meet a realization (never light-sampled, so with weight 1). */
+ * against light sampling from the previous vertex (path_prev_pos.w: the BSDF sample's
+ * density, 0 for a delta; a function-space mirror has one, fs_normal_pdf.h), and by GPIS
+ * emission fields where rays meet a realization (never light-sampled, so with weight 1). */
 __kernel void emission(__constant RenderParams* params, PATH_PARAMS(path), RAY_PARAMS(in),
                        INDEX_PARAMS(hits), __global int* counters,
                        __global const Primitive* prims, __global const Light* lights,
@@ -30,7 +31,11 @@ __kernel void emission(__constant RenderParams* params, PATH_PARAMS(path), RAY_P
     float pdf_light;
     float3 Le = area_light_radiance(&lights[prim->light], prev.xyz, x,
                                     primitive_normal(prim, x), d, &pdf_light);
+    /* after a function-space rough conductor the light strategy's density is that of
+     * its (normal, light) pairs (fs_normal_pdf.h) */
     float w = (prev.w > 0.0f && params->nee)
-                  ? power_heuristic(prev.w, pdf_light / params->num_lights) : 1.0f;
+                  ? power_heuristic(prev.w, fs_conductor_light_pdf(
+                        pdf_light / params->num_lights, path_prev_n[p], path_prev_v[p], d))
+                  : 1.0f;
     path_radiance[p] += (float4)(w * path_beta[p].xyz * Le, 0.0f);
 }

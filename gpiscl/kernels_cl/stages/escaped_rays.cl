@@ -18,8 +18,14 @@ __kernel void escaped_rays(__constant RenderParams* params, PATH_PARAMS(path),
     for (int k = 0; k < params->num_lights; ++k) {
         float pdf_light;
         float3 Le = infinite_light_radiance(&lights[k], m, d, &pdf_light);
-        float w = (pdf_bsdf > 0.0f && params->nee)
-                      ? power_heuristic(pdf_bsdf, pdf_light / params->num_lights) : 1.0f;
+        /* a function-space mirror leaves environments to BSDF sampling (scatter.cl); a
+         * function-space rough conductor's light strategy samples pairs (normal, light)
+         * (fs_normal_pdf.h) */
+        int env = lights[k].kind == LIGHT_ENVIRONMENT || lights[k].kind == LIGHT_ENVIRONMENT_MAP;
+        float w = (pdf_bsdf > 0.0f && params->nee && (path_prev_env_nee[p] || !env))
+                      ? power_heuristic(pdf_bsdf, fs_conductor_light_pdf(
+                            pdf_light / params->num_lights, path_prev_n[p], path_prev_v[p], d))
+                      : 1.0f;
         L += w * Le;
     }
     path_radiance[p] += (float4)(path_beta[p].xyz * L, 0.0f);

@@ -1,6 +1,6 @@
 /* From: ray queue `in` with surface (and weight-space) hits.  To: hits moved to the
  * first zero crossing sampled along the ray inside a function-space GPIS proxy, with the
- * sampled normal (hit_prim = GPIS_HIT_BASE - k); the path's vertex record (FsVertex, and
+ * sampled normal (hit_prim = GPIS_HIT_BASE - k) and the law it was drawn from; the path's vertex record (FsVertex, and
  * for the global model its ring of observations) becomes that hit, or "none" when the
  * ray's final hit is anything else.
  *
@@ -58,6 +58,10 @@ __kernel void gpis_function_space(__constant RenderParams* params, int first, in
     in_hit_t[i] = t_hit;
     in_hit_prim[i] = GPIS_HIT_BASE - best;
     in_hit_n[i] = (float4)(convert_float3(normalize(best_res.grad)), 0.0f);
+    /* the normal's law, for next-event estimation and MIS (fs_normal_pdf.h) */
+    in_hit_law_m[i] = (float4)(convert_float3(best_res.law_m), (float)best_res.law_s);
+    in_hit_law_a[i] = (float4)(convert_float3(best_res.law_a), 0.0f);
+    in_hit_law_b[i] = (float4)(convert_float3(best_res.law_b), 0.0f);
     vertex[p] = fs_vertex_at_hit(best_prm, best_ray, best_res, vk == best ? prev : none, ring,
                                  fs_scratch(scratch, 2 * item + (slot ^ 1)));
     vertex_object[p] = best;

@@ -4,7 +4,10 @@
  *
  * Shadow rays read the path's vertex record and ring and never write them: the
  * continuation ray from the same vertex (next iteration) is conditioned on exactly what
- * it would have been without NEE.
+ * it would have been without NEE. A light sample that picked the vertex's normal itself
+ * (a mirror at a function-space hit, fs_normal_pdf.h) conditions its shadow ray on the
+ * gradient that normal implies: a private copy of the record carries it (grad, and
+ * `implied` for the global model's ring rows, fs_begin).
  *
  * Why a 0/1 sample is unbiased: the NEE term of a vertex is E[c V], where c is the
  * light sample's contribution (fixed by the path prefix) and V the indicator that the
@@ -34,6 +37,11 @@ __kernel void gpis_shadow_function_space(__constant RenderParams* params, int fi
     float4 o = shadow_o[i], d = shadow_d[i];
     int p = shadow_path[i], vk = vertex_object[p];
     FsVertex none = {0}, prev = vertex[p];
+    float4 g = shadow_grad[i];
+    if (g.w > 0.0f) {   /* a light sample that chose its own normal (fs_normal_pdf.h) */
+        prev.grad = (float4)(g.xyz, 0.0f);
+        prev.implied = 1;
+    }
     __global const FsObs* ring = rings + (size_t)p * ring_stride;
     FsScratch S = fs_scratch(scratch, item);
     for (int k = 0; k < params->num_gpis; ++k) {
