@@ -8,7 +8,7 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from gpiscl.host.gp import Constant, Plane, SquaredExponential
+from gpiscl.host.gp import Constant, Matern32, Plane, SquaredExponential
 from gpiscl.host.gp import function_space as FS
 from gpiscl.host.layout.records import GPIS_MEMORIES
 from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_source
@@ -35,8 +35,10 @@ __kernel void normal_law(__global const GpKernel* kp, __global const MeanNode* m
     for (int k = 0; k < 16; ++k) o[k] = 0.0;
     for (int b = 0; b <= restarts; ++b) {
         rng.bounce = (uint)b;
-        FsResult res = fs_free_flight(kp[0], mean, mc, prm, r, v, rings + (size_t)i * cap,
-                                      rng, S);
+        /* as fs_object_flight: Matern without off-ray conditioning takes fs_markov.h */
+        FsResult res = fs_markov_applies(kp[0], prm, S)
+            ? fs_markov_free_flight(kp[0], mean, mc, prm, r, v, rng, S)
+            : fs_free_flight(kp[0], mean, mc, prm, r, v, rings + (size_t)i * cap, rng, S);
         if (res.status) { o[15] = -1.0; return; }
         if (!res.hit) return;
         vstore3(res.grad, 0, o);
@@ -120,6 +122,11 @@ CASES = {
     "anisotropic": (SquaredExponential(sigma=0.8, length_scale=1.0, aniso=(1.0, 4.0, 0.5)),
                     Plane(point=(2.0, 0, 0), normal=(-1.0, -0.4, 0.3), scale=0.5), "none", 0),
     "global": (SquaredExponential(sigma=1.0, length_scale=1.0), Constant(0.3), "global", 2),
+    # the Markov sampler's law (fs_markov.h: a frame orthonormal in the metric A, so the
+    # tangential mean depends on the pinned slope), anisotropic
+    "markov": (Matern32(sigma=0.8, length_scale=1.0, aniso=(1.0, 4.0, 0.5)),
+               Plane(point=(2.0, 0, 0), normal=(-1.0, -0.4, 0.3), scale=0.5), "renewal_plus",
+               0),
 }
 
 
@@ -286,7 +293,7 @@ def test_sampled_normals_match_the_pdf(device, case):
     assert chi2b > 3 * chi2_threshold(dfb), f"{case}: no-Jacobian pdf passes ({chi2b:.1f}, df {dfb})"
 
 
-def lit_scene(memory, bsdf, spp, nee, seed, radius=0.3):
+def lit_scene(memory, bsdf, spp, nee, seed, radius=0.3, kernel=None):
     """The rough GPIS ball of test_fs_render under a sphere light (radius 0.3 at distance
     2.4: small), nothing else: every pixel is light reflected by the micro-BSDF."""
     from test_fs_render import gpis_scene
@@ -295,6 +302,8 @@ def lit_scene(memory, bsdf, spp, nee, seed, radius=0.3):
     scene = gpis_scene(fs(memory), "mirror", 1.0, light, spp=spp, seed=seed,
                        max_depth=64, rr_start=3)
     scene["shapes"][0]["bsdf"] = bsdf
+    if kernel:
+        scene["shapes"][0]["kernel"] = kernel
     scene["render"]["nee"] = nee
     return scene
 
@@ -303,12 +312,17 @@ MIRROR = {"type": "mirror", "albedo": 0.9}
 CONDUCTOR = {"type": "rough_conductor", "material": "Au", "roughness": 0.3}
 
 
-@pytest.mark.parametrize("bsdf,memory,radius", [
-    (MIRROR, "renewal_plus", 0.3), (MIRROR, "global", 0.3), (MIRROR, "none", 0.3),
-    (CONDUCTOR, "renewal_plus", 0.3), (CONDUCTOR, "renewal_plus", 0.8)],
+# the Markov sampler's hits (Matern 3/2, anisotropic: its own law of the normal)
+MATERN = {"type": "matern32", "sigma": 0.3, "length_scale": 0.2, "aniso": [1.0, 2.0, 0.7]}
+
+
+@pytest.mark.parametrize("bsdf,memory,radius,kernel", [
+    (MIRROR, "renewal_plus", 0.3, None), (MIRROR, "global", 0.3, None),
+    (MIRROR, "none", 0.3, None), (CONDUCTOR, "renewal_plus", 0.3, None),
+    (CONDUCTOR, "renewal_plus", 0.8, None), (MIRROR, "renewal_plus", 0.3, MATERN)],
     ids=["mirror-renewal_plus", "mirror-global", "mirror-none", "conductor-renewal_plus",
-         "conductor-large-light"])
-def test_nee_with_mis_equals_bsdf_sampling(device, bsdf, memory, radius):
+         "conductor-large-light", "mirror-markov"])
+def test_nee_with_mis_equals_bsdf_sampling(device, bsdf, memory, radius, kernel):
     """NEE + MIS against BSDF sampling alone, per 4x4 block (z-test from the per-pixel
     sample variances) and over the whole image. The mirror's light samples pick their
     own normal (the half vector) and condition their shadow rays on its gradient; the
@@ -318,8 +332,8 @@ def test_nee_with_mis_equals_bsdf_sampling(device, bsdf, memory, radius):
     samples meet the light often, fails (image z 12.8) when BSDF sampling's weight
     ignores the lobe strategy's density (fs_conductor_light_pdf without q)."""
     spp = 256
-    a = run(lit_scene(memory, bsdf, spp, True, seed=21, radius=radius), device)
-    b = run(lit_scene(memory, bsdf, spp, False, seed=22, radius=radius), device)
+    a = run(lit_scene(memory, bsdf, spp, True, seed=21, radius=radius, kernel=kernel), device)
+    b = run(lit_scene(memory, bsdf, spp, False, seed=22, radius=radius, kernel=kernel), device)
     assert a.stats.killed_paths == 0 and b.stats.killed_paths == 0
     assert b.image.mean.max() > 0.05, "the light is seen through the ball"
     assert_agree(a.image.mean, a.image.stderr, b.image.mean, b.image.stderr, block=4,

@@ -465,6 +465,19 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
     double det = dot(dn, cTB);
     double3 tang = (q1 * cross(B, dn) + q2 * cross(dn, T)) / det;
     /* fs_march.h: |s| at least 1e-5 of the tangential part, so the normal faces the ray */
-    res.grad = cTB / det * fmin(s, -1e-5 * length(tang)) + tang;
+    res.law_s = fmin(s, -1e-5 * length(tang));
+    res.grad = cTB / det * res.law_s + tang;
+    /* the law the normal was drawn from, for next-event estimation (fs_normal_pdf.h):
+     * given s, g_t = g - s dn = s (u0 - dn) + q1 u1 + q2 u2 with the dual basis u0 =
+     * (T x B) / det, u1 = (B x dn) / det, u2 = (dn x T) / det (u1, u2 in the plane normal
+     * to dn) and independent q1, q2; law_a, law_b are the plane's dual vectors of u1, u2
+     * scaled by 1 / sd, so (law_a . r, law_b . r) = (z1, z2) for r = g_t - law_m.
+     * Isotropic: u0 = dn, u1 = T, u2 = B, fs_march.h's law. */
+    double3 u1 = cross(B, dn) / det, u2 = cross(dn, T) / det;
+    double D = dot(cross(u1, u2), dn);
+    res.law_m = res.law_s * (cTB / det - dn) + (q1 - sqrt(gp_cov(p, xh, T, 1, xh, T, 1)) * z1) * u1
+              + (q2 - sqrt(gp_cov(p, xh, B, 1, xh, B, 1)) * z2) * u2;
+    res.law_a = cross(u2, dn) / (D * sqrt(gp_cov(p, xh, T, 1, xh, T, 1)));
+    res.law_b = cross(dn, u1) / (D * sqrt(gp_cov(p, xh, B, 1, xh, B, 1)));
     return res;
 }

@@ -79,7 +79,10 @@ inline float fs_mirror_pdf(FsNormalLaw L, float3 d, float3 wl, float3* h)
     *h = v / len;
     float c = dot(*h, d);
     if (!(c < 0.0f)) return 0.0f;
-    return fs_normal_pdf(L, d, *h) / (4.0f * -c);
+    /* capped after the division too: at a nearly grazing h (|c| ~ 1e-30) the quotient
+     * overflowed to inf, and the power heuristic's inf / inf made emission.cl's weight
+     * NaN (2-40 non-finite paths in 6e4 under a small light, renewal memory) */
+    return fmin(fs_normal_pdf(L, d, *h) / (4.0f * -c), FS_PDF_MAX);
 }
 
 /* The gradient normal h implies (h . d < 0): same slope along d. */
