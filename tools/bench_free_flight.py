@@ -31,13 +31,15 @@ from gpiscl.host.layout.records import GPIS_MEMORIES  # noqa: E402
 from gpiscl.host.render.device import Device  # noqa: E402
 from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_source  # noqa: E402
 
+# one fresh flight per item along z (also tools/bench_function_space.py's): samples, rule
+# evaluations, the hit distance (or t1) and whether it hit; samples < 0: a failed solve
 WRAPPER = r"""
 __kernel void flight(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
-                     int memory, double t1, double step_corr, double tol, uint seed,
-                     __global double* scratch, __global double* out)
+                     int window, int memory, int cap, double t1, double step_corr,
+                     double tol, uint seed, __global double* scratch, __global double* out)
 {
     int s = get_global_id(0);
-    FsParams prm = {FS_WINDOW, memory, 64, 6, step_corr, tol};
+    FsParams prm = {window, memory, cap, 6, step_corr, tol};
     FsRay r = {(double3)(0.001 * s, 0.0, 0.0), (double3)(0.0, 0.0, 1.0), 0.0, t1};
     FsRng rng = {seed, (uint)s, 0u, 0u, 0u};
     FsVertex v = {0};
@@ -82,8 +84,9 @@ def main():
             for name, (corr, tol) in variants.items():
                 t = time.process_time()
                 flight(dev.queue, (args.rays,), None, kp, mb, np.int32(len(nodes)),
-                       np.int32(GPIS_MEMORIES["renewal_plus"]), np.float64(LENGTH),
-                       np.float64(corr), np.float64(tol), np.uint32(rep), scratch, out)
+                       np.int32(window), np.int32(GPIS_MEMORIES["renewal_plus"]), np.int32(64),
+                       np.float64(LENGTH), np.float64(corr), np.float64(tol), np.uint32(rep),
+                       scratch, out)
                 dev.queue.finish()
                 sec = time.process_time() - t
                 r = np.empty((args.rays, 4))

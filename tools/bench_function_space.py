@@ -6,7 +6,8 @@
    on a value and a slope at the ray origin (the renewal_plus memory at a vertex): build
    the (N + 2)^2 covariance, Cholesky, whiten, sample. numpy does the same systems batched
    (covariances vectorised over the batch, np.linalg.cholesky on the stack).
-2. Free-flight samples/s: fs_free_flight (fs_march.h, adaptive step, window N) over long
+2. Free-flight samples/s: fs_free_flight (fs_march.h, adaptive step, window N; the wrapper is
+   tools/bench_free_flight.py's) over long
    rays that rarely hit (mean 3 sigma); renewal_plus and global (cap 64) memory; evals/s
    counts the step rule's moment evaluations. The numpy column is the batched segment
    pipeline's rate times N (for scale).
@@ -38,6 +39,7 @@ from gpiscl.host.gp import function_space as FS  # noqa: E402
 from gpiscl.host.layout import function_space_records as FL  # noqa: E402
 from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_source  # noqa: E402
 from gpiscl.host.layout.records import GPIS_MEMORIES  # noqa: E402
+from bench_free_flight import WRAPPER as FLIGHT  # noqa: E402  (tools/ is the script's path)
 
 WRAPPERS = r"""
 __kernel void segment(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
@@ -61,19 +63,6 @@ __kernel void segment(__global const GpKernel* kp, __global const MeanNode* mean
     out[s] = st ? NAN : acc;
 }
 
-__kernel void flight(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
-                     int n, int memory, int cap, double t1, uint seed,
-                     __global double* scratch, __global int* out)
-{
-    int s = get_global_id(0);
-    FsParams prm = {n, memory, cap, 6, 0.0, 1e-5};
-    FsRay r = {(double3)(0.001 * s, 0.0, 0.0), (double3)(0.0, 0.0, 1.0), 0.0, t1};
-    FsRng rng = {seed, (uint)s, 0u, 0u, 0u};
-    FsVertex v = {0};
-    FsResult res = fs_free_flight(kp[0], mean, mc, prm, r, v, 0, rng, fs_scratch(scratch, s));
-    out[2 * s] = res.status ? -1 : res.samples;
-    out[2 * s + 1] = res.evals;
-}
 """
 KERNEL = SquaredExponential(sigma=1.0, length_scale=1.0)
 MEAN = Sphere(center=(0.0, 0.0, 0.0), radius=0.5)
@@ -158,7 +147,7 @@ def main():
     args = ap.parse_args()
     dev = Device()
     print(f"device: {dev.name}")
-    p = cl.Program(dev.ctx, fs_sampler_source(WRAPPERS)).build(options=fs_sampler_options(128, 64))
+    p = cl.Program(dev.ctx, fs_sampler_source(WRAPPERS + FLIGHT)).build(options=fs_sampler_options(128, 64))
     k = {kk.function_name: kk for kk in p.all_kernels()}
     nodes = gp_records.pack_mean(MEAN)
     mf = cl.mem_flags
@@ -176,7 +165,7 @@ def main():
     print(f"{'N':>5}{'batch':>8}{'device seg/s':>15}{'numpy seg/s':>15}{'ratio':>8}"
           f"{'chol-only/s':>16}{'ratio':>8}{'device samples/s':>19}")
     numpy_rate = {}
-    for n in (8, 32, 128):
+    for n in (8, 16, 32, 128):
         batch = args.batch if n <= 32 else args.batch // 16
         scratch = cl.Buffer(dev.ctx, mf.READ_WRITE, 8 * stride * batch)
         out = cl.Buffer(dev.ctx, mf.WRITE_ONLY, 8 * batch)
@@ -205,7 +194,7 @@ def main():
         for memory in ("renewal_plus", "global"):
             rays = args.batch // 4 if n <= 32 else args.batch // 16
             scratch = cl.Buffer(dev.ctx, mf.READ_WRITE, 8 * stride * rays)
-            out = cl.Buffer(dev.ctx, mf.WRITE_ONLY, 8 * rays)
+            out = cl.Buffer(dev.ctx, mf.WRITE_ONLY, 32 * rays)
             far = Constant(3.0)
             far_nodes = gp_records.pack_mean(far)
             fb = cl.Buffer(dev.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=far_nodes)
@@ -213,10 +202,11 @@ def main():
             def run_flight():
                 k["flight"](q, (rays,), (16,), kp, fb, np.int32(len(far_nodes)), np.int32(n),
                             np.int32(GPIS_MEMORIES[memory]), np.int32(64), np.float64(60.0),
+                            np.float64(0.0), np.float64(FL.DEFAULT_MISS_TOLERANCE),
                             np.uint32(5), scratch, out)
                 q.finish()
             t = median_time(run_flight, args.repeats)
-            res = np.empty((rays, 2), np.int32)
+            res = np.empty((rays, 4))
             cl.enqueue_copy(q, res, out)
             assert (res[:, 0] >= 0).all(), "a free flight failed"
             samples, segs = res[:, 0].sum(), res[:, 1].sum()
