@@ -60,10 +60,7 @@ POST_MAX, SAMPLES, CAP = 256, 8, 8
 
 
 def defines(post_max=POST_MAX):
-    d = FL.defines(SAMPLES, CAP)
-    d["FS_POST_MAX"] = post_max
-    d["FS_SCRATCH_DOUBLES"] += d["FS_MAX_ROWS"] * post_max
-    return d
+    return FL.defines(SAMPLES, CAP, post_rows=post_max)
 
 
 @pytest.fixture(scope="module")

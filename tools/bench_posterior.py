@@ -87,9 +87,7 @@ def device_cost(sizes, rays: int):
             post = Posterior(kernel, mean, surface_observations(0.9 * d, noise=1e-4))
             block = PC.pack_posterior(post)
             nodes, first = np.concatenate([block, prog]), len(block)
-        defs = FL.defines(16, 8)
-        defs["FS_POST_MAX"] = n
-        defs["FS_SCRATCH_DOUBLES"] += defs["FS_MAX_ROWS"] * n
+        defs = FL.defines(16, 8, post_rows=n)
         opts = [f"-I{PYOPENCL_CL_DIR}"] + [f"-D{k}={v}" for k, v in sorted(defs.items())]
         k = cl.Program(dev.ctx, src).build(options=opts).flight
         mf = cl.mem_flags

@@ -73,15 +73,18 @@ def max_rows(window: int, memory_cap: int, refine: int = DEFAULT_REFINE) -> int:
     return max(memory_cap, 2) + window + max(refine, MIN_BISECT) + HIT_ROWS + RULE_ROWS
 
 
-def scratch_doubles(rows: int) -> int:
+def scratch_doubles(rows: int, post_rows: int = 0) -> int:
     """Doubles per work item for `rows` rows: FsObs rows (8 doubles each), the packed
-    lower triangle, the whitened vector e, the prior means and the rows' kernel-field
-    multipliers (8 doubles each; FsScratch in fs_sampling.h)."""
-    return 8 * rows + rows * (rows + 1) // 2 + 2 * rows + 8 * rows
+    lower triangle, the whitened vector e, the prior means, the rows' kernel-field
+    multipliers (8 doubles each) and, for a posterior of `post_rows` observation rows,
+    each row's cached solve against them (FsScratch in fs_sampling.h)."""
+    return 8 * rows + rows * (rows + 1) // 2 + 2 * rows + 8 * rows + rows * post_rows
 
 
-def defines(window_max: int, memory_cap: int, refine: int = DEFAULT_REFINE) -> dict:
-    """-D options of a program that includes fs_sampling.h."""
+def defines(window_max: int, memory_cap: int, refine: int = DEFAULT_REFINE,
+            post_rows: int = 0) -> dict:
+    """-D options of a program that includes fs_sampling.h (post_rows: the largest
+    posterior's observation rows, 0 without one)."""
     rows = max_rows(window_max, memory_cap, refine)
     return {"GP_REAL": "double", "FS_MAX_ROWS": rows, "FS_MAX_WINDOW": window_max,
-            "FS_SCRATCH_DOUBLES": scratch_doubles(rows)}
+            "FS_POST_MAX": post_rows, "FS_SCRATCH_DOUBLES": scratch_doubles(rows, post_rows)}

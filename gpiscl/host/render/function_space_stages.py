@@ -95,10 +95,9 @@ class FunctionSpaceStages:
         (fs_sampling.h, FsScratch.v) to every scratch slice."""
         fs = _fs_objects(self.objects)
         rows_cap = self.stride if self.stride > 1 else 2
-        defines = FL.defines(int(fs["window"].max()), rows_cap, int(fs["refine"].max()))
         self.post_rows = post_rows
-        defines["FS_POST_MAX"] = self.post_rows
-        defines["FS_SCRATCH_DOUBLES"] += defines["FS_MAX_ROWS"] * self.post_rows
+        defines = FL.defines(int(fs["window"].max()), rows_cap, int(fs["refine"].max()),
+                             post_rows)
         self.program = Program(self.device, FS_STAGE_FILES, defines=defines,
                                extra_headers=FS_HEADERS, extra_c=FL.c_declarations())
         if self.timings is not None:   # one kernel table for both programs
