@@ -318,10 +318,11 @@ MATERN = {"type": "matern32", "sigma": 0.3, "length_scale": 0.2, "aniso": [1.0, 
 
 @pytest.mark.parametrize("bsdf,memory,radius,kernel", [
     (MIRROR, "renewal_plus", 0.3, None), (MIRROR, "global", 0.3, None),
-    (MIRROR, "none", 0.3, None), (CONDUCTOR, "renewal_plus", 0.3, None),
-    (CONDUCTOR, "renewal_plus", 0.8, None), (MIRROR, "renewal_plus", 0.3, MATERN)],
-    ids=["mirror-renewal_plus", "mirror-global", "mirror-none", "conductor-renewal_plus",
-         "conductor-large-light", "mirror-markov"])
+    (MIRROR, "none", 0.3, None), (MIRROR, "renewal", 0.3, None),
+    (CONDUCTOR, "renewal_plus", 0.3, None), (CONDUCTOR, "renewal_plus", 0.8, None),
+    (MIRROR, "renewal_plus", 0.3, MATERN)],
+    ids=["mirror-renewal_plus", "mirror-global", "mirror-none", "mirror-renewal",
+         "conductor-renewal_plus", "conductor-large-light", "mirror-markov"])
 def test_nee_with_mis_equals_bsdf_sampling(device, bsdf, memory, radius, kernel):
     """NEE + MIS against BSDF sampling alone, per 4x4 block (z-test from the per-pixel
     sample variances) and over the whole image. The mirror's light samples pick their
