@@ -116,9 +116,9 @@ typedef struct { double m, m1, s, r, g; } FsMoments;   /* v = s^2, c = r s, g as
 
 /* Conditional moments of f and its slope along dn at ray parameter t given rows [0, n):
  * factoring rows n (value) and n + 1 (slope) is the forward solve and Schur complement.
- * A stationary prior takes both rows' covariances from one kernel jet per row (one exp)
- * and the prior mean and its gradient from one evaluation; the rows' entries are those of
- * fs_factor (same expressions as gp_cov), so the factor is the same. */
+ * A stationary prior takes both rows' covariances from one kernel jet per row (one exp,
+ * gp_jet_cov: the expressions gp_cov uses) and the prior mean and its gradient from one
+ * evaluation, so the factor is fs_factor's. */
 inline int fs_moments(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
                       int n, FsRay ray, double3 dn, double t, FsMoments* M)
 {
@@ -137,19 +137,14 @@ inline int fs_moments(GpKernel p, __global const MeanNode* mean, int mc, FsScrat
         for (int j = 0; j < n; ++j) {
             __global const FsObs* rj = S.rows + j;
             GpJet J = gp_kernel_jet(p, x - fs_pos(rj));
-            if (rj->kind == FS_OBS_DERIV) {
-                double3 u = fs_dir(rj);
-                L0[j] = -dot(u, J.G);
-                L1[j] = -(J.alpha * dot(u, J.g) * dot(dn, J.g) + dot(u * J.D, dn));
-            } else {
-                L0[j] = J.k;
-                L1[j] = dot(dn, J.G);
-            }
+            int dj = rj->kind == FS_OBS_DERIV;
+            L0[j] = gp_jet_cov(J, fs_dir(rj), dj, dn, 0);
+            L1[j] = gp_jet_cov(J, fs_dir(rj), dj, dn, 1);
         }
         GpJet J0 = gp_kernel_jet(p, (double3)(0.0));
         L0[n] = J0.k;
-        L1[n] = dot(dn, J0.G);
-        L1[n + 1] = -(J0.alpha * dot(dn, J0.g) * dot(dn, J0.g) + dot(dn * J0.D, dn));
+        L1[n] = gp_jet_cov(J0, dn, 0, dn, 1);
+        L1[n + 1] = gp_jet_cov(J0, dn, 1, dn, 1);
         st = fs_cholesky(S.L, n, n + 2, 0);
     }
     if (st) return st;

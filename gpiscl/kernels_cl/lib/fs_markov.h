@@ -458,8 +458,9 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
     fs_frame(normalize(ra * dn), &Tq, &Bq);
     double3 T = Tq / ra, B = Bq / ra;
     double z1 = fs_normal(rng, step, FS_SLOT_NORMAL), z2 = fs_normal(rng, step, FS_SLOT_NORMAL + 1);
-    double q1 = fs_prior_mean(mean, mc, xh, T, FS_OBS_DERIV) + sqrt(gp_cov(p, xh, T, 1, xh, T, 1)) * z1;
-    double q2 = fs_prior_mean(mean, mc, xh, B, FS_OBS_DERIV) + sqrt(gp_cov(p, xh, B, 1, xh, B, 1)) * z2;
+    double m1 = fs_prior_mean(mean, mc, xh, T, FS_OBS_DERIV), sd1 = sqrt(gp_cov(p, xh, T, 1, xh, T, 1));
+    double m2 = fs_prior_mean(mean, mc, xh, B, FS_OBS_DERIV), sd2 = sqrt(gp_cov(p, xh, B, 1, xh, B, 1));
+    double q1 = m1 + sd1 * z1, q2 = m2 + sd2 * z2;
     /* the gradient with g.dn = s, g.T = q1, g.B = q2: the dual basis of (dn, T, B) */
     double3 cTB = cross(T, B);
     double det = dot(dn, cTB);
@@ -475,9 +476,8 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
      * Isotropic: u0 = dn, u1 = T, u2 = B, fs_march.h's law. */
     double3 u1 = cross(B, dn) / det, u2 = cross(dn, T) / det;
     double D = dot(cross(u1, u2), dn);
-    res.law_m = res.law_s * (cTB / det - dn) + (q1 - sqrt(gp_cov(p, xh, T, 1, xh, T, 1)) * z1) * u1
-              + (q2 - sqrt(gp_cov(p, xh, B, 1, xh, B, 1)) * z2) * u2;
-    res.law_a = cross(u2, dn) / (D * sqrt(gp_cov(p, xh, T, 1, xh, T, 1)));
-    res.law_b = cross(dn, u1) / (D * sqrt(gp_cov(p, xh, B, 1, xh, B, 1)));
+    res.law_m = res.law_s * (cTB / det - dn) + m1 * u1 + m2 * u2;
+    res.law_a = cross(u2, dn) / (D * sd1);
+    res.law_b = cross(dn, u1) / (D * sd2);
     return res;
 }

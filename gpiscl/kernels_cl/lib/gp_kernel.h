@@ -256,33 +256,14 @@ inline GP_REAL gp_cov_ns(GpKernel p, GP_REAL3 a, GP_REAL3 u, int da,
                         gp_fields_analytic(p, b));
 }
 
-/* cov(f(a), f(b)) */
-inline GP_REAL gp_cov_vv(GpKernel p, GP_REAL3 a, GP_REAL3 b)
+/* The entry of a stationary kernel between observation a (a value if !da, else the
+ * derivative along u) and b (likewise along v), from the jet at b - a: callers that need
+ * several entries at one lag evaluate the jet (one exp) once. */
+inline GP_REAL gp_jet_cov(GpJet j, GP_REAL3 u, int da, GP_REAL3 v, int db)
 {
-    if (gp_kernel_nonstationary(p)) return gp_cov_ns(p, a, a, 0, b, b, 0);
-    return gp_kernel_value(p, b - a);
-}
-
-/* cov(d_u f(a), f(b)) */
-inline GP_REAL gp_cov_dv(GpKernel p, GP_REAL3 a, GP_REAL3 u, GP_REAL3 b)
-{
-    if (gp_kernel_nonstationary(p)) return gp_cov_ns(p, a, u, 1, b, u, 0);
-    return -dot(u, gp_kernel_jet(p, b - a).G);
-}
-
-/* cov(f(a), d_v f(b)) */
-inline GP_REAL gp_cov_vd(GpKernel p, GP_REAL3 a, GP_REAL3 b, GP_REAL3 v)
-{
-    if (gp_kernel_nonstationary(p)) return gp_cov_ns(p, a, v, 0, b, v, 1);
-    return dot(v, gp_kernel_jet(p, b - a).G);
-}
-
-/* cov(d_u f(a), d_v f(b)) */
-inline GP_REAL gp_cov_dd(GpKernel p, GP_REAL3 a, GP_REAL3 u, GP_REAL3 b, GP_REAL3 v)
-{
-    if (gp_kernel_nonstationary(p)) return gp_cov_ns(p, a, u, 1, b, v, 1);
-    GpJet j = gp_kernel_jet(p, b - a);
-    return -(j.alpha * dot(u, j.g) * dot(v, j.g) + dot(u * j.D, v));
+    if (!da && !db) return j.k;
+    if (da && db) return -(j.alpha * dot(u, j.g) * dot(v, j.g) + dot(u * j.D, v));
+    return da ? -dot(u, j.G) : dot(v, j.G);
 }
 
 /* One entry of a joint covariance matrix: observation x is a value (dx == 0) or the
@@ -292,9 +273,22 @@ inline GP_REAL gp_cov(GpKernel p, GP_REAL3 a, GP_REAL3 u, int da,
 {
     if (gp_kernel_nonstationary(p)) return gp_cov_ns(p, a, u, da, b, v, db);
     if (!da && !db) return gp_kernel_value(p, b - a);
-    GpJet j = gp_kernel_jet(p, b - a);
-    if (da && db) return -(j.alpha * dot(u, j.g) * dot(v, j.g) + dot(u * j.D, v));
-    return da ? -dot(u, j.G) : dot(v, j.G);
+    return gp_jet_cov(gp_kernel_jet(p, b - a), u, da, v, db);
+}
+
+/* The four kinds of entry by name (tests/test_gp_device.py) */
+inline GP_REAL gp_cov_vv(GpKernel p, GP_REAL3 a, GP_REAL3 b) { return gp_cov(p, a, a, 0, b, b, 0); }
+inline GP_REAL gp_cov_dv(GpKernel p, GP_REAL3 a, GP_REAL3 u, GP_REAL3 b)
+{
+    return gp_cov(p, a, u, 1, b, u, 0);
+}
+inline GP_REAL gp_cov_vd(GpKernel p, GP_REAL3 a, GP_REAL3 b, GP_REAL3 v)
+{
+    return gp_cov(p, a, v, 0, b, v, 1);
+}
+inline GP_REAL gp_cov_dd(GpKernel p, GP_REAL3 a, GP_REAL3 u, GP_REAL3 b, GP_REAL3 v)
+{
+    return gp_cov(p, a, u, 1, b, v, 1);
 }
 
 /* gp_cov with the fields at a and b given (ignored by stationary kernels) */
