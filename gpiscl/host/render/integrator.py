@@ -120,7 +120,7 @@ class WavefrontIntegrator:
         self.weight_space = gpis.uses("weight_space")
         self.function_space = None
         if gpis.uses("function_space"):
-            self.batch = min(self.batch, gpis_function_space.max_batch(gpis.objects))
+            self.batch = min(self.batch, gpis_function_space.max_batch(gpis.objects, device))
             self.function_space = gpis_function_space.FunctionSpaceStages(
                 device, gpis.objects, self.batch, self.program.timings,
                 mean_nodes=gpis.mean_nodes)   # sizes a posterior's program up front
