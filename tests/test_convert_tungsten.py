@@ -53,6 +53,20 @@ def test_csg_scene_maps_every_gp_setting():
     assert any("checker" in n for n in notes) and any("environment" in n for n in notes)
 
 
+@pytest.mark.parametrize("v,kind", [(1.5, "matern32"), (2.5, "matern52")])
+def test_matern_covariances_map_by_smoothness(v, kind):
+    """Their matern {sigma, v, lengthScale, aniso} -> ours, the same sigma and l (both
+    scale r by sqrt(2 v) / l), with a note on their lgamma normalisation."""
+    doc = _with(GP + ["left", "covariance"], {"type": "matern", "sigma": 0.05, "v": v,
+                                              "lengthScale": 0.3, "aniso": [1, 2, 1]})
+    scene, notes = convert_tungsten(doc, str(CSG), SKY)
+    gpis = [s for s in load_scene(scene).data["shapes"] if s["type"] == "gpis"]
+    k = gpis[0]["kernel"]
+    assert (k["type"], k["sigma"], k["length_scale"]) == (kind, 0.05, 0.3)
+    assert k["aniso"] == [1, 2, 1]
+    assert any("lgamma" in n for n in notes)
+
+
 def test_converted_scene_renders(device):
     scene, _ = convert_tungsten(authors_scene(), str(CSG), SKY)
     res = render_result(scene, spp=2, resolution=(12, 12), device=device)
@@ -80,6 +94,14 @@ BAD = [
      "media[0].gaussian_process.right.covariance.smoothness", "the reference ignores it"),
     (_with(GP + ["left", "covariance"], {"type": "periodic", "w": 1.0}),
      "media[0].gaussian_process.left.covariance.type", "radial"),
+    (_with(GP + ["left", "covariance"], {"type": "matern", "sigma": 0.1}),
+     "media[0].gaussian_process.left.covariance.v", "smoothness 1 is not supported"),
+    (_with(GP + ["left", "covariance"], {"type": "matern", "v": 0.5}),
+     "media[0].gaussian_process.left.covariance.v", "v = 1.5 and 2.5"),
+    (_with(GP + ["left", "covariance"], {"type": "matern", "v": 1.5, "nu": 2}),
+     "media[0].gaussian_process.left.covariance.nu", "unknown matern key"),
+    (_with(GP + ["left", "covariance"], {"type": "matern", "v": 2.5, "lengthScale": -1}),
+     "media[0].gaussian_process.left.covariance.lengthScale", "must be > 0"),
     (_with(["media", 0, "correlation_context"], "parrot"),
      "media[0].correlation_context", "unknown memory model"),
     (_with(["media", 0, "phase_function", "bsdf", "type"], "plastic"),

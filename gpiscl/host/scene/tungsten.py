@@ -59,7 +59,9 @@ Mapping (../shared/design/REFERENCE-ALGORITHMS.md section 8 describes their form
             all positive, a box-shaped shell around the bunny; the grid's transform -> a
             transform mean)
   kernels squared_exponential, rational_quadratic (a -> alpha), thin_plate (R -> radius),
-          with sigma, lengthScale and aniso; the reference's kernels and ours agree there;
+          matern with v = 1.5 / 2.5 -> matern32 / matern52 (other v: an error; their
+          renderer normalises its Matern with lgamma(v), noted),
+          with sigma, lengthScale and aniso; SE, RQ and thin plate agree with ours;
           their knob's `roughness` (which their renderer ignores, keeping l = 1) is read as
           intended, the Beckmann alpha = sqrt(2) sigma / l, so l = sqrt(2) sigma / roughness
           when no lengthScale is given (as scenes/knob.json does; noted);
@@ -98,6 +100,10 @@ KERNEL_KEYS = {
                            "aniso": "aniso"},
     "thin_plate": {"sigma": "sigma", "R": "radius", "aniso": "aniso"},
 }
+# their "matern" {sigma, v, lengthScale, aniso}: our Matern kernels, by v (nu); theirs
+# scales with sqrt(2 v) r / l as ours do, so sigma and l carry over unchanged
+MATERN_KEYS = {"sigma": "sigma", "lengthScale": "length_scale", "aniso": "aniso", "v": None}
+MATERNS = {1.5: "matern32", 2.5: "matern52"}
 
 
 MESH_MEAN_KEYS = ("type", "file", "transform", "signed", "min")
@@ -479,6 +485,8 @@ class _Converter:
         kind = k.get("type")
         if kind == "nonstationary":
             return self.nonstationary_kernel(k, key)
+        if kind == "matern":
+            return self.matern_kernel(k, key)
         if kind not in KERNEL_KEYS:
             why = (" (the reference's periodic kernel is radial; gpiscl's is a product over "
                    "axes)" if kind == "periodic" else "")
@@ -494,6 +502,30 @@ class _Converter:
                                             else self.number(k, name, key, None, gt=0))
         if "roughness" in k:
             out.update(self.roughness_length(k, key, out))
+        return out
+
+    def matern_kernel(self, k: dict, key: str) -> dict:
+        """Their Matern {sigma, v, lengthScale, aniso} (v defaults to 1 there) for v = 3/2
+        and 5/2, the smoothnesses gpiscl has in closed form."""
+        v = self.number(k, "v", key, 1.0, gt=0)
+        kind = next((name for nu, name in MATERNS.items() if abs(v - nu) < 1e-6), None)
+        if kind is None:
+            self.fail(f"{key}.v", f"Matern smoothness {v:g} is not supported (gpiscl has "
+                      "v = 1.5 and 2.5: matern32, matern52)")
+        out = {"type": kind}
+        for name in k:
+            if name not in ("type", *MATERN_KEYS):
+                self.fail(f"{key}.{name}", "unknown matern key (the reference ignores it; "
+                          f"expected one of: {', '.join(MATERN_KEYS)})")
+            if MATERN_KEYS.get(name):
+                out[MATERN_KEYS[name]] = (self.vector(k, name, key, None) if name == "aniso"
+                                          else self.number(k, name, key, None, gt=0))
+        # their double-precision covariance divides by lgamma(v), not Gamma(v) (negative
+        # for v = 1.5: -0.12), and the float paths drop sigma^2, so their images of it are
+        # not of a Matern GP; the parameters name one, which is what is rendered here
+        self.notes.append(f"{key}: matern v = {v:g} -> {kind}; their renderer normalises "
+                          "it with lgamma(v) instead of Gamma(v), so its images of this "
+                          "covariance differ from a Matern GP's (gpiscl renders the Matern)")
         return out
 
     def roughness_length(self, k: dict, key: str, out: dict) -> dict:
