@@ -3,7 +3,7 @@
     {"type": "gpis", "proxy": {...}, "mean": {...}, "kernel": {...},
      "sampler": {"type": "weight_space", "features": null}, "bsdf": {...}}
     sampler alternative: {"type": "function_space", "memory": "renewal_plus",
-                          "memory_cap": 64, "miss_tolerance": 2e-6, "refine": 6}
+                          "memory_cap": 64, "miss_tolerance": 2e-6, "refine": 0}
 
 The proxy must bound the object: a realization is only searched inside it, and a ray
 that enters the proxy where f < 0 counts as starting inside (it must first come back out),

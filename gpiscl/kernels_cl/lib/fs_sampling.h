@@ -128,6 +128,7 @@ typedef struct {
      * scatter stage needs no frame: |law_a x law_b| = 1 / sqrt(det S_q). */
     double law_s;
     double3 law_m, law_a, law_b;
+    int roots;              /* of `samples`: drawn by the root search at the hit */
 } FsResult;
 
 inline FsScratch fs_scratch(__global double* base, int item)
