@@ -57,7 +57,12 @@
  * the same misses (none), while an evaluation costs O(|R|^2) instead of O((memory +
  * window)^2). Cost per step: one row of the full system (the value) and ~1.6 evaluations
  * of R (each a (value, slope) pair: one kernel jet per row of R); steps are ~0.6-1 l_d,
- * against 0.46 l_d (c = 0.9) and 0.14 l_d (c = 0.99) for the uniform grid.
+ * against 0.46 l_d (c = 0.9) and 0.14 l_d (c = 0.99) for the uniform grid. A row's
+ * prior mean, field multipliers and posterior solve are computed once, when it is
+ * drawn (fs_row_prep), and travel with it into R, into the slid window and into the
+ * next step's mean cap (fs_row_copy, fs_mean_step_row): before, each sample's mean
+ * program and posterior solve ran up to four times (its row, R's append, R's rebuild,
+ * the cap at the next step's start) and each slid row's once more.
  * A posteriori bridge check (the issue's second half): not done. A one-node bridge
  * bound (the midpoint given both ends, ends' rates 0) missed 8e-3 crossings per l at
  * tol 1e-3 in the numpy twin (the dip sits near an end where the midpoint cannot see
@@ -184,7 +189,9 @@ inline FsScratch fs_rule_scratch(FsScratch S)
  * value rows before derivative rows at equal distance, so the row that pins f(ta) is
  * kept), then the ray's last FS_RULE_SAMPLES samples (main rows [fixed, n)); factored
  * and whitened at their values. Returns its row count; later samples are appended one
- * row each until it holds 2 FS_RULE_SAMPLES samples (rebuilt at the next step). */
+ * row each until it holds 2 FS_RULE_SAMPLES samples (rebuilt at the next step). Rows
+ * come with their means, fields and posterior solves (fs_row_copy): only covariances
+ * are computed. */
 inline int fs_rule_build(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
                          FsScratch R, int fixed, int n, FsRay ray, double ta, double reach,
                          double ell, int* status)
@@ -213,13 +220,26 @@ inline int fs_rule_build(GpKernel p, __global const MeanNode* mean, int mc, FsSc
         }
         if (j < FS_RULE_MEMORY) { key[j] = k; pick[j] = i; }
     }
-    int m = 0;
-    for (int j = 0; j < np; ++j) R.rows[m++] = S.rows[pick[j]];
-    for (int i = max(fixed, n - FS_RULE_SAMPLES); i < n; ++i) R.rows[m++] = S.rows[i];
-    int st = fs_factor(p, mean, mc, R, 0, m);
+    int m = 0;   /* rows come with their own numbers (fs_row_copy) */
+    for (int j = 0; j < np; ++j) fs_row_copy(p, S, pick[j], R, m++);
+    for (int i = max(fixed, n - FS_RULE_SAMPLES); i < n; ++i) fs_row_copy(p, S, i, R, m++);
+    int st = fs_factor_known(p, mean, R, 0, m);
     if (st) { *status = st; return 0; }
     for (int i = 0; i < m; ++i) fs_whiten_row(R.L, R.e, i, R.rows[i].value, R.mu[i]);
     return m;
+}
+
+/* Append the main system's row k (a sample just drawn) to R as its row i, whitened at
+ * its value: its own numbers come along (fs_row_copy), so the same numbers as
+ * fs_append(R, i, S.rows[k], observed), bit for bit, without evaluating the mean, the
+ * fields and the posterior solve at that point a second time. */
+inline int fs_rule_append(GpKernel p, __global const MeanNode* mean, FsScratch S, int k,
+                          FsScratch R, int i)
+{
+    fs_row_copy(p, S, k, R, i);
+    int st = fs_factor_known(p, mean, R, i, i + 1);
+    if (!st) fs_whiten_row(R.L, R.e, i, R.rows[i].value, R.mu[i]);
+    return st;
 }
 
 inline double fs_phi(double x) { return 0.3989422804014327 * exp(-0.5 * x * x); }
@@ -294,13 +314,31 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
     return fmax(FS_MEAN_KAPPA * sd, fabs(m) - FS_MEAN_Z * sd) / lip;
 }
 
+/* fs_mean_step at the value row k of S (the step's start, a sample of this ray): its own
+ * numbers (fs_row_prep) are in S, so neither the mean program nor the O(observations^2)
+ * solve runs again there; the same numbers as fs_mean_var's, bit for bit (the same
+ * operations on the same point). */
+inline double fs_mean_step_row(GpKernel p, __global const MeanNode* mean, FsScratch S, int k,
+                               double3 dn, double lip)
+{
+    if (!(lip > 0.0)) return INFINITY;
+    double3 x = fs_pos(S.rows + k);
+    GpFieldsAt fx = gp_kernel_nonstationary(p) ? fs_row_fields(S, k) : fs_fields(p, mean, x);
+    double var = gp_cov_at(p, x, dn, FS_OBS_VALUE, fx, x, dn, FS_OBS_VALUE, fx);
+    if (S.post.n) var -= fs_post_dot(fs_post_v(S, k), fs_post_v(S, k), S.post.n);
+    double sd = sqrt(fmax(var, 0.0)), m = S.mu[k];
+    return fmax(FS_MEAN_KAPPA * sd, fabs(m) - FS_MEAN_Z * sd) / lip;
+}
+
 /* Drop the older half of the window: rows [n - keep, n) move to [fixed, fixed + keep)
- * and are refactored and whitened (their values are known); returns the new row count. */
+ * with their own numbers (fs_row_copy) and are refactored and whitened (their values are
+ * known); returns the new row count. */
 inline int fs_slide(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
                     int fixed, int n, int keep, int* status)
 {
-    for (int i = 0; i < keep; ++i) S.rows[fixed + i] = S.rows[n - keep + i];
-    int st = fs_factor(p, mean, mc, S, fixed, fixed + keep);
+    /* ascending: a row's source n - keep + i is never below its target fixed + i */
+    for (int i = 0; i < keep; ++i) fs_row_copy(p, S, n - keep + i, S, fixed + i);
+    int st = fs_factor_known(p, mean, S, fixed, fixed + keep);
     if (st) { *status = st; return n; }
     for (int i = fixed; i < fixed + keep; ++i)
         fs_whiten_row(S.L, S.e, i, S.rows[i].value, S.mu[i]);
@@ -380,8 +418,10 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
             h = dt;
         } else {
             /* the rule on its small system R (see "Step rule"): one Radau node per try */
+            /* after the first step the start is row n - 1 (its mean is known) */
             h = fmin(fmin(grow * h, FS_H_MAX * ell),
-                     fs_mean_step(p, mean, mc, S, n, ray.o + ta * ray.d, dn, lip));
+                     n > fixed ? fs_mean_step_row(p, mean, S, n - 1, dn, lip)
+                               : fs_mean_step(p, mean, mc, S, n, ray.o + ta * ray.d, dn, lip));
             if (r_new > FS_RULE_SAMPLES) {
                 nr = fs_rule_build(p, mean, mc, S, R, fixed, n, ray, ta,
                                    FS_H_MAX * ell, ell, &st);
@@ -418,8 +458,8 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
         ++n;
         if (outside && fb < 0.0) break;
         if (dt <= 0.0 && r_new < FS_RULE_SAMPLES) {   /* else rebuilt at the next step */
-            fs_append(p, mean, mc, R, nr++, S.rows[n - 1], 1, 0.0, &res.status);
-            if (res.status) return res;
+            st = fs_rule_append(p, mean, S, n - 1, R, nr++);
+            if (st) { res.status = st; return res; }
         }
         r_new++;
         outside = fb >= 0.0;
