@@ -83,7 +83,11 @@
  * the cost, not the law. Points per hit from a 0.45 l_d bracket (numpy twin, SE,
  * conditional draws): bisection 6.0, this 2.8 / 3.0 / 3.3 at mu / sigma = 0 / 1 / 2
  * (regula falsi without the offset stalls at one end; offset 0.25 / 0.6 widths, inverse
- * quadratic interpolation or ITP's own w^2 offset took 0.0-0.5 more). The slope along the ray at x_h is drawn from its exact law at a
+ * quadratic interpolation or ITP's own w^2 offset took 0.0-0.5 more). On the device
+ * (tools/bench_free_flight.py, fresh rays, SE): 2.9 / 3.1 / 3.3 / 3.6 per hit at mu /
+ * sigma = 0 / 1 / 2 / 3 after adaptive steps, 2.2 after the 0.14 l_d steps of the
+ * uniform 0.99 grid, where bisection took 6 (the old default refine) or 5.5 (refine 0).
+ * The slope along the ray at x_h is drawn from its exact law at a
  * down-crossing given all rows and f(x_h) = 0: s < 0 with density |s| N(s; b, g^2)
  * (Kac-Rice: crossings are met in proportion to |f'|), by inverting its CDF
  * (fs_downcrossing_slope). Negative by construction, so no normal faces away under any
