@@ -7,6 +7,10 @@
 See help(gpiscl.render_result), gpiscl.write_image, gpiscl.uq, gpiscl.load_scene.
 """
 from .version import __version__  # noqa: F401
+from .opencl_vendors import prefer_system_pocl
+
+# before anything imports pyopencl (every gpiscl module is imported after this package)
+prefer_system_pocl()
 __all__ = ["Scene", "SceneError", "load_scene", "render", "render_result", "write_image",
            "uq"]
 

@@ -46,7 +46,7 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
         device, shared between calls).
     batch_size : int, optional
         The most paths traced at once, in [1, 2**24]; batches are sized to take about
-        0.5 s each below it (default 262144).
+        0.5 s each below it (default 32768 on a CPU, 262144 elsewhere).
     time_limit : float, optional
         Stop after this many seconds of rendering (> 0, finite); holds to within one batch.
     progress : callable or bool, optional

@@ -12,6 +12,20 @@ def z_threshold(num_tests: int, alpha: float = ALPHA) -> float:
     return NormalDist().inv_cdf(1.0 - alpha / (2.0 * num_tests))
 
 
+def image_mean_se(*stderrs) -> float:
+    """Standard error of the difference of whole-image means (over pixels and channels)
+    of independent renders, from their per-pixel standard errors. A pixel's channels come
+    from the same paths, so they are not independent: taken as fully correlated (exact for
+    grey scenes, whose channels are equal; an upper bound otherwise). Treating them as
+    independent made the error sqrt(3) too small for grey scenes."""
+    var = 0.0
+    for se in stderrs:
+        se = np.asarray(se, np.float64)
+        per_pixel = se.sum(axis=-1) if se.ndim == 3 else se
+        var += float((per_pixel**2).sum()) / se.size**2
+    return float(np.sqrt(var))
+
+
 def block_means(image, stderr, block: int):
     """Means of block x block tiles and their standard errors (pixels independent)."""
     h, w = image.shape[:2]

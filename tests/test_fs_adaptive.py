@@ -12,6 +12,7 @@ import pyopencl as cl
 import pytest
 from scipy import special
 
+from gpiscl.host.compile.gpis import sampler_window
 from gpiscl.host.gp import Constant, Matern32, Matern52, RationalQuadratic, SquaredExponential
 from gpiscl.host.gp import function_space as FS
 from gpiscl.host.layout import function_space_records as FL
@@ -62,9 +63,12 @@ def expected_crossings(kind, mu, L, nt=6000, nz=600):
 
 
 def run_crossings(device, prg, kernel, mu, n, L, memory="global", refine=6, c=0.0,
-                  tol=FL.DEFAULT_MISS_TOLERANCE, seed=1, cap=64):
+                  tol=FL.DEFAULT_MISS_TOLERANCE, seed=1, cap=64, window=None):
     """Per ray (out of n): hits, sum and sum of squares of slopes after the first hit,
-    GP samples, moment evaluations (crossings wrapper of test_fs_sampling)."""
+    GP samples, moment evaluations (crossings wrapper of test_fs_sampling). The window is
+    the one scenes compile for the kernel unless given."""
+    if window is None:
+        window = sampler_window({"type": kernel.kind})
     q = device.queue
     rb = _buf(device, np.array([0, 0, 0, 1, 0, 0, 0, L], np.float64))
     chunk = max(1, min(n, 4096))
@@ -73,7 +77,7 @@ def run_crossings(device, prg, kernel, mu, n, L, memory="global", refine=6, c=0.
     for first in range(0, n, chunk):
         m = min(chunk, n - first)
         ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 48 * m)
-        prg["crossings"](q, (m,), None, kp, mb, np.int32(n_mean),
+        prg["crossings"](q, (m,), None, kp, mb, np.int32(n_mean), np.int32(window),
                          np.int32(GPIS_MEMORIES[memory]), np.int32(cap), np.int32(refine),
                          np.float64(c), np.float64(tol), rb, np.uint32(seed), np.int32(first),
                          scratch, rings, ob)

@@ -2,7 +2,6 @@
 sampled normal, p_Omega(n) = N2(q(n); m_q, S_q) s^2 / |n.d|^3, against quadrature and
 against normals the device draws; renders with NEE + MIS against BSDF sampling alone."""
 import functools
-import math
 
 import numpy as np
 import pyopencl as cl
@@ -12,7 +11,7 @@ from gpiscl.host.gp import Constant, Matern32, Plane, SquaredExponential
 from gpiscl.host.gp import function_space as FS
 from gpiscl.host.layout.records import GPIS_MEMORIES
 from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_source
-from stats import assert_agree, z_threshold
+from stats import assert_agree, image_mean_se
 from test_fs_render import fs, run
 from test_fs_sampling import CAP_MAX, WINDOW_MAX, _buf, chi2_threshold, sampler_buffers
 
@@ -344,6 +343,5 @@ def test_nee_with_mis_equals_bsdf_sampling(device, bsdf, memory, radius, kernel)
 
 
 def whole(img):
-    """The image's mean and its standard error (pixels independent)."""
-    return (np.array([img.mean.mean()]),
-            np.array([np.sqrt((img.stderr.astype(np.float64) ** 2).sum()) / img.mean.size]))
+    """The image's mean and its standard error (stats.image_mean_se)."""
+    return np.array([img.mean.mean()]), np.array([image_mean_se(img.stderr)])

@@ -81,13 +81,13 @@ __kernel void slope_draw(double mean, double sd, uint seed, __global double* out
  * after the first (far from the start condition), GP samples, moment evaluations and
  * the status. */
 __kernel void crossings(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
-                        int memory, int cap, int refine, double c, double tol,
+                        int window, int memory, int cap, int refine, double c, double tol,
                         __global const double* ray, uint seed, int first,
                         __global double* scratch, __global FsObs* rings, __global double* out)
 {
     int i = get_global_id(0);
     FsScratch S = fs_scratch(scratch, i);
-    FsParams prm = {0, memory, cap, refine, c, tol};
+    FsParams prm = {window, memory, cap, refine, c, tol};
     FsRay r = {vload3(0, ray), vload3(1, ray), 0.0, ray[7]};
     FsRng rng = {seed, (uint)(first + i), 0u, 0u, 0u};
     FsVertex v = {0};

@@ -15,7 +15,7 @@ from gpiscl.host.gp import Matern52, Plane, Sphere, SquaredExponential
 from gpiscl.host.gp import weight_space as ws
 from gpiscl.host.layout.gp_records import pack_kernel, pack_mean
 from reference import pixel_rays
-from stats import assert_agree, z_threshold
+from stats import assert_agree, image_mean_se, z_threshold
 from test_ws_features import build, buf
 
 KERNELS = {
@@ -64,7 +64,7 @@ def test_white_furnace(device, kernel, bsdf):
     assert_agree(img.mean, img.stderr, np.ones_like(img.mean), block=4,
                  what=f"{kernel} {bsdf} furnace")
     # the whole image at once is the sharper test of a small bias
-    se = math.sqrt(np.sum(img.stderr.astype(float) ** 2)) / img.stderr.size
+    se = image_mean_se(img.stderr)
     assert abs(img.mean.mean() - 1.0) <= z_threshold(1) * se
 
 

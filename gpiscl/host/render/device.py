@@ -31,7 +31,7 @@ def _pick(spec: str | None):
     devices = list_devices()
     if not devices:
         raise DeviceError("no OpenCL platform found; install the CPU runtime with "
-                          "pip install 'pyopencl[pocl]'")
+                          "pip install 'pyopencl[pocl]'" + _drivers_limited())
     if spec:
         parts = spec.split(":")
         if ":" in spec and all(p.isdigit() for p in parts):
@@ -59,8 +59,16 @@ def _pick(spec: str | None):
     if pocls:
         raise DeviceError("no PoCL device here can compile for this CPU (PyPI's PoCL 3.0 "
                           "predates it); install the distribution's PoCL (Debian, Ubuntu: "
-                          "apt-get install pocl-opencl-icd) or choose another --device")
+                          "apt-get install pocl-opencl-icd) or choose another --device"
+                          + _drivers_limited())
     return devices[0][3]
+
+
+def _drivers_limited() -> str:
+    """The clause that says OCL_ICD_VENDORS chose the drivers (gpiscl/opencl_vendors.py
+    sets it to the system's when the system has a PoCL, leaving PyPI's out)."""
+    chosen = os.environ.get("OCL_ICD_VENDORS")
+    return f" (only the drivers in OCL_ICD_VENDORS={chosen} were loaded)" if chosen else ""
 
 
 @functools.lru_cache(maxsize=None)

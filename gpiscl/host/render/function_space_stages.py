@@ -16,8 +16,13 @@ from .program_sources import FS_HEADERS, FS_STAGE_FILES
 from .device import Device, KernelTimings, Program
 from ..layout import function_space_records as FL
 
-RING_BUDGET = 256 << 20      # bytes of global-model rings per batch: caps the batch size
-SCRATCH_BUDGET = 256 << 20   # bytes of scratch per launch: caps the chunk size
+# Bytes of global-model rings per batch (cap the batch) and of scratch per launch (cap the
+# chunk). On a CPU the device's memory is the process's and every page a batch or a chunk
+# touches stays resident, while 16 MB already keeps two cores busy: the global-memory room
+# (4 KB of ring a path, 58 KB of scratch per item) held 59 MB of scratch and 32 MB of
+# rings at 256 MB budgets, 16 + 16 MB at these, at the same paths/s (see the commit).
+RING_BUDGET = {"cpu": 16 << 20, "other": 256 << 20}
+SCRATCH_BUDGET = {"cpu": 16 << 20, "other": 256 << 20}
 # Work-groups per compute unit in one chunk: enough that the units finish together (the
 # work per ray varies by several times), few enough that the scratch stays small. A CPU
 # touches every scratch page a chunk uses: chunks of the whole batch (up to ~15,000 items
@@ -38,9 +43,15 @@ def ring_stride(objects: np.ndarray) -> int:
     return int(glob["memory_cap"].max()) if len(glob) else 1
 
 
-def max_batch(objects: np.ndarray) -> int:
-    """The largest batch whose rings fit RING_BUDGET."""
-    return max(1, RING_BUDGET // (ring_stride(objects) * FL.FS_OBS.dtype.itemsize))
+def budget(table: dict, device: Device) -> int:
+    """A byte budget of RING_BUDGET or SCRATCH_BUDGET for the device's kind."""
+    return table["cpu" if device.device.type & cl.device_type.CPU else "other"]
+
+
+def max_batch(objects: np.ndarray, device: Device) -> int:
+    """The largest batch whose rings fit the device's RING_BUDGET."""
+    return max(1, budget(RING_BUDGET, device)
+               // (ring_stride(objects) * FL.FS_OBS.dtype.itemsize))
 
 
 def posterior_rows_on_device(device: Device, objects: np.ndarray, means) -> int:
@@ -104,7 +115,7 @@ class FunctionSpaceStages:
             self.program.timings = self.timings
         slice_bytes = 8 * defines["FS_SCRATCH_DOUBLES"]
         parallel = int(self.device.device.max_compute_units) * self.local * GROUPS_PER_UNIT
-        chunk = max(1, min(self.batch, SCRATCH_BUDGET // (2 * slice_bytes), parallel))
+        chunk = max(1, min(self.batch, budget(SCRATCH_BUDGET, self.device) // (2 * slice_bytes), parallel))
         self.chunk = int(-(-chunk // self.local) * self.local)
         self.scratch = cl.Buffer(self.device.ctx, cl.mem_flags.READ_WRITE,
                                  2 * slice_bytes * self.chunk)
