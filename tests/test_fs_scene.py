@@ -19,10 +19,10 @@ def test01_defaults_are_filled_and_compiled():
     s = load_scene(scene({"type": "function_space"}))
     assert s.data["shapes"][0]["sampler"] == {
         "type": "function_space", "memory": "renewal_plus", "memory_cap": 64,
-        "miss_tolerance": 2e-6, "refine": 6}
+        "miss_tolerance": 2e-6, "refine": 0}
     o = compile_scene(s.data).gpis.objects[0]
     assert o["sampler"] == layouts.GPIS_SAMPLERS["function_space"]
-    assert (o["window"], o["memory_cap"], o["refine"]) == (16, 64, 6)
+    assert (o["window"], o["memory_cap"], o["refine"]) == (16, 64, 0)
     assert o["memory"] == layouts.GPIS_MEMORIES["renewal_plus"]
     assert abs(o["miss_tolerance"] - 2e-6) < 1e-12 and o["step_corr"] == 0   # adaptive
 

@@ -9,7 +9,20 @@ mean mu (the level, in sigma); a flight ends at its first crossing. Times are CP
 of this process (PoCL's CPU threads run here; time.process_time), so other users of a
 shared machine do not skew them; variants are interleaved and each repetition's ratio to
 uniform 0.9 is taken before the median. Also printed: GP values drawn and step-rule
-evaluations per flight.
+evaluations per flight, and how many of those values the root search at the hit drew.
+
+Measured (PoCL CPU, 2-core shared machine, 2026-12-02, after the root search of fs_march.h
+and the slope inversion's fix): CPU us per length scale, adaptive 2e-6 / uniform 0.9 /
+uniform 0.99, samples per flight (of which root search) in brackets:
+    mu 0: 2.87 (6.97, 2.90) / 2.27 (9.31, 2.82) / 5.36 (20.65, 2.15)
+    mu 1: 2.02 (12.61, 3.04) / 1.65 (20.82, 2.94) / 5.00 (58.12, 2.15)
+    mu 2: 1.70 (23.92, 1.65) / 1.78 (50.48, 1.57) / 5.65 (154.71, 1.13)
+    mu 3: 1.29 (24.67, 0.19) / 1.73 (64.99, 0.17) / 5.24 (206.58, 0.14)
+The same flights before (main at 2ecaf8b, refine 6, bisection), run right after: adaptive
+samples per flight 10.36 / 15.77 / 25.41 / 24.82 at mu 0 / 1 / 2 / 3. Same process,
+interleaved (both samplers built in one run, medians of 7 ratios), CPU time per flight
+after / before: adaptive 0.69 / 0.78 / 0.91 / 1.00, uniform 0.9 0.62 / 0.80 / 0.96 / 0.96,
+uniform 0.99 0.71 / 0.90 / 0.98 / 1.00.
 """
 from __future__ import annotations
 
@@ -32,22 +45,24 @@ from gpiscl.host.render.device import Device  # noqa: E402
 from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_source  # noqa: E402
 
 # one fresh flight per item along z (also tools/bench_function_space.py's): samples, rule
-# evaluations, the hit distance (or t1) and whether it hit; samples < 0: a failed solve
+# evaluations, the hit distance (or t1), whether it hit and the samples of the root
+# search; samples < 0: a failed solve
 WRAPPER = r"""
 __kernel void flight(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
                      int window, int memory, int cap, double t1, double step_corr,
                      double tol, uint seed, __global double* scratch, __global double* out)
 {
     int s = get_global_id(0);
-    FsParams prm = {window, memory, cap, 6, step_corr, tol};
+    FsParams prm = {window, memory, cap, FS_DEFAULT_REFINE, step_corr, tol};
     FsRay r = {(double3)(0.001 * s, 0.0, 0.0), (double3)(0.0, 0.0, 1.0), 0.0, t1};
     FsRng rng = {seed, (uint)s, 0u, 0u, 0u};
     FsVertex v = {0};
     FsResult res = fs_free_flight(kp[0], mean, mc, prm, r, v, 0, rng, fs_scratch(scratch, s));
-    out[4 * s] = res.status ? -1.0 : res.samples;
-    out[4 * s + 1] = res.evals;
-    out[4 * s + 2] = res.t;
-    out[4 * s + 3] = res.hit;
+    out[5 * s] = res.status ? -1.0 : res.samples;
+    out[5 * s + 1] = res.evals;
+    out[5 * s + 2] = res.t;
+    out[5 * s + 3] = res.hit;
+    out[5 * s + 4] = res.roots;
 }
 """
 LENGTH = 30.0
@@ -62,20 +77,20 @@ def main():
     dev = Device()
     window = FL.DEFAULT_WINDOW
     prog = cl.Program(dev.ctx, fs_sampler_source(WRAPPER)).build(
-        options=fs_sampler_options(window, 64))
+        options=fs_sampler_options(window, 64) + [f"-DFS_DEFAULT_REFINE={FL.DEFAULT_REFINE}"])
     flight = cl.Kernel(prog, "flight")
     mf = cl.mem_flags
     kp = cl.Buffer(dev.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR,
                    hostbuf=gp_records.pack_kernel(SquaredExponential(sigma=1.0, length_scale=1.0)))
     scratch = cl.Buffer(dev.ctx, mf.READ_WRITE,
                         8 * FL.scratch_doubles(FL.max_rows(window, 64)) * args.rays)
-    out = cl.Buffer(dev.ctx, mf.WRITE_ONLY, 32 * args.rays)
+    out = cl.Buffer(dev.ctx, mf.WRITE_ONLY, 40 * args.rays)
     variants = {f"adaptive {FL.DEFAULT_MISS_TOLERANCE:g}": (0.0, FL.DEFAULT_MISS_TOLERANCE),
                 "adaptive 1e-7": (0.0, 1e-7), "uniform 0.9": (0.9, 0.0),
                 "uniform 0.99": (0.99, 0.0)}
     print(f"device: {dev.name}; {args.rays} rays of {LENGTH:g} l, median of {args.repeats}")
     print(f"{'mu/sigma':>8} {'variant':16s}{'cpu us/l':>10s}{'/uniform 0.9':>14s}"
-          f"{'samples/flight':>16s}{'evals/flight':>14s}{'hit':>7s}")
+          f"{'samples/flight':>16s}{'of which root':>15s}{'evals/flight':>14s}{'hit':>7s}")
     for mu in args.levels:
         nodes = gp_records.pack_mean(Constant(mu))
         mb = cl.Buffer(dev.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=nodes)
@@ -89,18 +104,18 @@ def main():
                        scratch, out)
                 dev.queue.finish()
                 sec = time.process_time() - t
-                r = np.empty((args.rays, 4))
+                r = np.empty((args.rays, 5))
                 cl.enqueue_copy(dev.queue, r, out)
                 assert (r[:, 0] >= 0).all(), "a free flight failed"
                 if rep:
                     runs[name].append((sec / r[:, 2].sum() * 1e6, r[:, 0].mean(),
-                                       r[:, 1].mean(), r[:, 3].mean()))
+                                       r[:, 1].mean(), r[:, 3].mean(), r[:, 4].mean()))
         base = [x[0] for x in runs["uniform 0.9"]]
         for name, xs in runs.items():
             us = [x[0] for x in xs]
             ratio = statistics.median(a / b for a, b in zip(us, base))
             print(f"{mu:8g} {name:16s}{statistics.median(us):10.3f}{ratio:14.2f}"
-                  f"{xs[0][1]:16.2f}{xs[0][2]:14.2f}{xs[0][3]:7.3f}", flush=True)
+                  f"{xs[0][1]:16.2f}{xs[0][4]:15.2f}{xs[0][2]:14.2f}{xs[0][3]:7.3f}", flush=True)
 
 
 if __name__ == "__main__":

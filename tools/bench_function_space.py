@@ -147,7 +147,8 @@ def main():
     args = ap.parse_args()
     dev = Device()
     print(f"device: {dev.name}")
-    p = cl.Program(dev.ctx, fs_sampler_source(WRAPPERS + FLIGHT)).build(options=fs_sampler_options(128, 64))
+    p = cl.Program(dev.ctx, fs_sampler_source(WRAPPERS + FLIGHT)).build(
+        options=fs_sampler_options(128, 64) + [f"-DFS_DEFAULT_REFINE={FL.DEFAULT_REFINE}"])
     k = {kk.function_name: kk for kk in p.all_kernels()}
     nodes = gp_records.pack_mean(MEAN)
     mf = cl.mem_flags
@@ -194,7 +195,7 @@ def main():
         for memory in ("renewal_plus", "global"):
             rays = args.batch // 4 if n <= 32 else args.batch // 16
             scratch = cl.Buffer(dev.ctx, mf.READ_WRITE, 8 * stride * rays)
-            out = cl.Buffer(dev.ctx, mf.WRITE_ONLY, 32 * rays)
+            out = cl.Buffer(dev.ctx, mf.WRITE_ONLY, 40 * rays)
             far = Constant(3.0)
             far_nodes = gp_records.pack_mean(far)
             fb = cl.Buffer(dev.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=far_nodes)
@@ -206,7 +207,7 @@ def main():
                             np.uint32(5), scratch, out)
                 q.finish()
             t = median_time(run_flight, args.repeats)
-            res = np.empty((rays, 4))
+            res = np.empty((rays, 5))
             cl.enqueue_copy(q, res, out)
             assert (res[:, 0] >= 0).all(), "a free flight failed"
             samples, segs = res[:, 0].sum(), res[:, 1].sum()

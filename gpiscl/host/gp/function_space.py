@@ -6,8 +6,9 @@ of correlation c (the uniform baseline, and the length scale l_d of the adaptive
 and the adaptive step rule of fs_march.h (march_realization: applied to a given dense
 realization, so that its misses can be counted). Used by the tests and tools; one ray at a
 time with np.linalg.cholesky (and a dense joint sample along a ray as the ground truth).
-Not mirrored: the device's bisection, hit slope and memory models (tested on the device
-against Rice's formula and dense joint samples, tests/test_fs_adaptive.py). normal_pdf is
+root_point / root_search mirror the device's root search at a crossing (fs_root_point).
+Not mirrored: the hit slope and memory models (tested on the device against Rice's
+formula and dense joint samples, tests/test_fs_adaptive.py). normal_pdf is
 the twin of fs_normal_pdf.h (the density of a hit's normal given the law the device drew it
 from, tests/test_fs_nee.py).
 """
@@ -145,6 +146,9 @@ def step_size(kernel, d, c):
 
 H_MAX, H_MIN, ELL_CORR, WINDOW = 2.0, 1e-3, math.exp(-0.5), 16
 RULE_SAMPLES = 4   # the step rule conditions on the last 4-8 samples (fs_rule_build)
+# the root search (fs_root_point): final bracket (l_d), the regula falsi point's offset
+# toward the midpoint (root widths) and the points allowed beyond bisection's worst case
+ROOT_WIDTH, ROOT_OFFSET, ROOT_SLACK = 1e-2, 0.45, 2
 
 
 def return_rate(m, m1, s, r, g, outside):
@@ -209,6 +213,53 @@ def march_realization(kernel, mean, o, d, ts, F, tol):
     return np.array(idx), missed
 
 
+def root_budget(w0, width):
+    """Points the root search may need from a bracket of width w0 (fs_root_budget)."""
+    return max(math.ceil(math.log2(w0 / width)), 0) + ROOT_SLACK
+
+
+def root_point(ta, tb, fa, fb, width, k, kmax):
+    """The root search's point k in the bracket (ta, tb), f(ta) = fa >= 0 > fb = f(tb)
+    (fs_root_point): regula falsi moved ROOT_OFFSET widths toward the midpoint, projected
+    onto ITP's interval about the midpoint, from the values already drawn only."""
+    w = tb - ta
+    mid = ta + 0.5 * w
+    xf = ta + w * (fa / (fa - fb))
+    x = xf + math.copysign(min(ROOT_OFFSET * width, abs(mid - xf)), mid - xf)
+    r = max(0.5 * width * (1.0 - 1e-12) * math.ldexp(1.0, kmax - k) - 0.5 * w, 0.0)
+    return x if abs(x - mid) <= r else mid + math.copysign(r, x - mid)
+
+
+def root_search(draw, ta, tb, fa, fb, width, refine=0):
+    """fs_march.h's search for the crossing in (ta, tb]: draw(t) returns f(t) drawn given
+    everything drawn before (the caller's conditioning); returns the final bracket
+    (ta, tb, fa, fb) and the points drawn, in order."""
+    kmax, k, points = root_budget(tb - ta, width), 0, []
+    while k < refine or tb - ta > width:
+        t = root_point(ta, tb, fa, fb, width, k, kmax)
+        f = draw(t)
+        points.append((t, f))
+        ta, fa, tb, fb = (t, f, tb, fb) if f >= 0.0 else (ta, fa, t, f)
+        k += 1
+    return ta, tb, fa, fb, points
+
+
+def conditional_draws(kernel, mean, o, d, ts, fs, rng):
+    """draw(t) for root_search: f(o + t d) given the values fs at ts (both lists, which
+    grow with every draw), from the exact jittered conditional (numpy Cholesky)."""
+    o, d = np.asarray(o, float), np.asarray(d, float)
+
+    def draw(t):
+        x = [o + s * d for s in ts] + [o + t * d]
+        K, mu = observation_matrix(kernel, mean, x, [d] * len(x), [False] * len(x))
+        m, c = conditional(K, mu, np.asarray(fs), len(ts))
+        f = float(m[0] + math.sqrt(max(c[0, 0], 0.0)) * rng.standard_normal())
+        ts.append(t)
+        fs.append(f)
+        return f
+    return draw
+
+
 def _frame(n):
     sign = math.copysign(1.0, n[2])
     a = -1.0 / (sign + n[2])
@@ -217,17 +268,20 @@ def _frame(n):
             np.array([c, sign + n[1] * n[1] * a, -n[1]]))
 
 
-def dense_first_hits(kernel, mean, o, d, t0, t1, n_points, n_samples, rng, chunk=4096):
+def dense_first_hits(kernel, mean, o, d, t0, t1, n_points, n_samples, rng, chunk=4096,
+                     slopes=False):
     """Ground truth: first f >= 0 -> f < 0 crossing of dense joint samples at n_points
     equally spaced parameters, given f(t0) >= 0 (rejection: exactly the start condition),
-    linear interpolation within the cell; inf where there is none."""
+    linear interpolation within the cell; inf where there is none. slopes=True also
+    returns the slope per unit t there (the cell's difference quotient; nan if none)."""
     o, d = np.asarray(o, float), np.asarray(d, float)
     ts = np.linspace(t0, t1, n_points)
     x = o + ts[:, None] * d
     K = jittered(covariance_matrix(kernel, x))
     L = np.linalg.cholesky(K).astype(np.float32)
     mu = mean.value(x)[:, None]
-    out = []
+    out, out_s = [], []
+    dt = ts[1] - ts[0]
     while sum(len(h) for h in out) < n_samples:
         F = mu + L @ rng.standard_normal((n_points, chunk), dtype=np.float32)
         F = F[:, F[0] >= 0.0]
@@ -236,8 +290,11 @@ def dense_first_hits(kernel, mean, o, d, t0, t1, n_points, n_samples, rng, chunk
         cols = np.arange(F.shape[1])
         j = np.maximum(first, 1)
         fa, fb = F[j - 1, cols], F[j, cols]
-        th = ts[j - 1] + (ts[1] - ts[0]) * fa / (fa - fb)
+        th = ts[j - 1] + dt * fa / (fa - fb)
         out.append(np.where(first > 0, th, np.inf))
+        out_s.append(np.where(first > 0, (fb - fa) / dt, np.nan))
+    if slopes:
+        return np.concatenate(out)[:n_samples], np.concatenate(out_s)[:n_samples]
     return np.concatenate(out)[:n_samples]
 
 

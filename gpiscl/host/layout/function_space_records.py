@@ -43,10 +43,12 @@ STRUCTS = (FS_OBS, FS_VERTEX)
 
 DEFAULT_WINDOW = 16       # samples conditioned on besides the memory (fs_march.h)
 DEFAULT_MISS_TOLERANCE = 2e-6   # expected missed crossings per along-ray length scale: fs_march.h
-DEFAULT_REFINE = 6        # bisection steps in a crossing bracket: width step / 64
+DEFAULT_REFINE = 0        # root-search points forced in a crossing bracket besides those
+                          # that narrow it to the root width (fs_march.h, "Hit")
 DEFAULT_GLOBAL_CAP = 64   # observations the global model keeps
 HIT_ROWS = 4              # f(x_h), d_d f, d_T f, d_B f appended at a hit
-MIN_BISECT = 8            # rows reserved for bisection: 2 l_d 2^-8 < the root width
+# rows reserved for the root search: its worst case from a 2 l_d step (fs_root_budget)
+MIN_BISECT = FS_TWIN.root_budget(FS_TWIN.H_MAX, FS_TWIN.ROOT_WIDTH)
 RULE_MEMORY = 4           # the step rule's own small system (fs_march.h): memory rows,
 RULE_SAMPLES = FS_TWIN.RULE_SAMPLES   # the ray's latest samples (the numpy twin's),
 RULE_ROWS = RULE_MEMORY + 2 * RULE_SAMPLES + 2   # and one (value, slope) pair
@@ -60,6 +62,9 @@ def c_declarations() -> str:
     lines += [f"#define FS_STATUS_{k.upper()} {v}" for k, v in STATUS.items()]
     lines.append(f"#define FS_HIT_ROWS {HIT_ROWS}")
     lines.append(f"#define FS_MIN_BISECT {MIN_BISECT}")
+    lines.append(f"#define FS_ROOT_WIDTH {FS_TWIN.ROOT_WIDTH!r}")
+    lines.append(f"#define FS_ROOT_OFFSET {FS_TWIN.ROOT_OFFSET!r}")
+    lines.append(f"#define FS_ROOT_SLACK {FS_TWIN.ROOT_SLACK}")
     lines.append(f"#define FS_RULE_MEMORY {RULE_MEMORY}")
     lines.append(f"#define FS_RULE_SAMPLES {RULE_SAMPLES}")
     lines.append(f"#define FS_RULE_ROWS {RULE_ROWS}")
@@ -68,7 +73,7 @@ def c_declarations() -> str:
 
 def max_rows(window: int, memory_cap: int, refine: int = DEFAULT_REFINE) -> int:
     """Rows of the largest system (fs_march.h): memory (<= max(cap, 2)), the window, the
-    refinement bisection (at least MIN_BISECT: fs_march.h narrows every bracket) and the
+    root search (at least MIN_BISECT: fs_march.h narrows every bracket) and the
     hit rows; the step rule's small system takes the last RULE_ROWS rows of the slice."""
     return max(memory_cap, 2) + window + max(refine, MIN_BISECT) + HIT_ROWS + RULE_ROWS
 

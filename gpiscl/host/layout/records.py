@@ -78,7 +78,7 @@ GPIS_OBJECT = Struct("GpisObject", (
     ("int", "order_count"),
     ("float", "tolerance"),    # root refinement tolerance (world units)
     ("int", "memory_cap"),     # function space, global memory: observations kept
-    ("int", "refine"),         # function space: bisection steps in a crossing bracket
+    ("int", "refine"),         # function space: root-search points forced in a crossing bracket
     ("float", "step_corr"),    # function space: > 0 the uniform baseline step (benchmarks)
     ("int", "color_field"),    # albedo multiplier: its MeanNode record, 0 = none (scene/colour_fields.py)
     ("int", "emission_field"), # emitted radiance: its MeanNode record, 0 = none

@@ -3,7 +3,7 @@
     {"type": "gpis", "proxy": {...}, "mean": {...}, "kernel": {...},
      "sampler": {"type": "weight_space", "features": null}, "bsdf": {...}}
     sampler alternative: {"type": "function_space", "memory": "renewal_plus",
-                          "memory_cap": 64, "miss_tolerance": 2e-6, "refine": 6}
+                          "memory_cap": 64, "miss_tolerance": 2e-6, "refine": 0}
 
 The proxy must bound the object: a realization is only searched inside it, and a ray
 that enters the proxy where f < 0 counts as starting inside (it must first come back out),
@@ -192,7 +192,8 @@ SAMPLERS = Tagged("sampler", {
     # Values of f sampled one at a time along rays, each conditioned on the memory and the
     # ray's previous samples, with an adaptive step (fs_march.h pins the rule): the memory
     # model, the global model's observation cap, the expected missed crossings per
-    # along-ray length scale, and crossing bisection steps.
+    # along-ray length scale, and root-search points forced in a crossing bracket (0: the
+    # root width alone decides).
     "function_space": _FunctionSpaceSampler({
         "memory": Field(Enum("none", "renewal", "renewal_plus", "global"), "renewal_plus"),
         "memory_cap": Field(Int(ge=8, le=512), FSL.DEFAULT_GLOBAL_CAP),

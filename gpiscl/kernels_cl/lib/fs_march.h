@@ -57,7 +57,12 @@
  * the same misses (none), while an evaluation costs O(|R|^2) instead of O((memory +
  * window)^2). Cost per step: one row of the full system (the value) and ~1.6 evaluations
  * of R (each a (value, slope) pair: one kernel jet per row of R); steps are ~0.6-1 l_d,
- * against 0.46 l_d (c = 0.9) and 0.14 l_d (c = 0.99) for the uniform grid.
+ * against 0.46 l_d (c = 0.9) and 0.14 l_d (c = 0.99) for the uniform grid. A row's
+ * prior mean, field multipliers and posterior solve are computed once, when it is
+ * drawn (fs_row_prep), and travel with it into R, into the slid window and into the
+ * next step's mean cap (fs_row_copy, fs_mean_step_row): before, each sample's mean
+ * program and posterior solve ran up to four times (its row, R's append, R's rebuild,
+ * the cap at the next step's start) and each slid row's once more.
  * A posteriori bridge check (the issue's second half): not done. A one-node bridge
  * bound (the midpoint given both ends, ends' rates 0) missed 8e-3 crossings per l at
  * tol 1e-3 in the numpy twin (the dip sits near an end where the midpoint cannot see
@@ -66,11 +71,23 @@
  * between neighbours, first step u dt, u uniform in (0, 1]): the old uniform grid, kept
  * as the benchmarks' baseline only (scenes cannot select it).
  *
- * Hit. The first sample f < 0 after f >= 0 brackets the crossing. Bisection points are
- * drawn conditioned on everything: `refine` of them, and more until the bracket is below
- * FS_ROOT_WIDTH = 1e-2 l_d (at most 8 from a 2 l_d step), so the linear root is off by
+ * Hit. The first sample f < 0 after f >= 0 brackets the crossing. The root search draws
+ * points in the bracket, each conditioned on everything, until the bracket is below
+ * FS_ROOT_WIDTH = 1e-2 l_d (and at least `refine` of them), so the linear root is off by
  * ~1e-5 sigma, the jitter's size, and every `refine` gives the same laws (refine only
- * adds bisections). The slope along the ray at x_h is drawn from its exact law at a
+ * adds points). Each point is chosen from values already drawn (fs_root_point: the
+ * bracket's regula falsi point, moved FS_ROOT_OFFSET = 0.45 root widths toward the
+ * midpoint, projected as ITP does so that no bracket needs more than bisection's count
+ * plus FS_ROOT_SLACK = 2), and the value there is drawn from its exact conditional, so
+ * the law of the values is the GP's at whatever points are chosen: the choice changes
+ * the cost, not the law. Points per hit from a 0.45 l_d bracket (numpy twin, SE,
+ * conditional draws): bisection 6.0, this 2.8 / 3.0 / 3.3 at mu / sigma = 0 / 1 / 2
+ * (regula falsi without the offset stalls at one end; offset 0.25 / 0.6 widths, inverse
+ * quadratic interpolation or ITP's own w^2 offset took 0.0-0.5 more). On the device
+ * (tools/bench_free_flight.py, fresh rays, SE): 2.9 / 3.1 / 3.3 / 3.6 per hit at mu /
+ * sigma = 0 / 1 / 2 / 3 after adaptive steps, 2.2 after the 0.14 l_d steps of the
+ * uniform 0.99 grid, where bisection took 6 (the old default refine) or 5.5 (refine 0).
+ * The slope along the ray at x_h is drawn from its exact law at a
  * down-crossing given all rows and f(x_h) = 0: s < 0 with density |s| N(s; b, g^2)
  * (Kac-Rice: crossings are met in proportion to |f'|), by inverting its CDF
  * (fs_downcrossing_slope). Negative by construction, so no normal faces away under any
@@ -109,8 +126,6 @@
 #define FS_H_MIN 1e-3              /* l_d: a floor for degenerate starts (f = 0 exactly) */
 #define FS_ELL_CORR 0.6065306597126334   /* e^-1/2: SE's lag is exactly l / sqrt(d'Ad) */
 #define FS_U_SLOPE 1100
-#define FS_ROOT_WIDTH 1e-2         /* l_d: final bracket, see "Hit" above */
-#define FS_MIN_BISECT 8            /* rows reserved for bisection: 2 l_d 2^-8 < FS_ROOT_WIDTH */
 
 typedef struct { double m, m1, s, r, g; } FsMoments;   /* v = s^2, c = r s, g as above */
 
@@ -178,7 +193,9 @@ inline FsScratch fs_rule_scratch(FsScratch S)
  * value rows before derivative rows at equal distance, so the row that pins f(ta) is
  * kept), then the ray's last FS_RULE_SAMPLES samples (main rows [fixed, n)); factored
  * and whitened at their values. Returns its row count; later samples are appended one
- * row each until it holds 2 FS_RULE_SAMPLES samples (rebuilt at the next step). */
+ * row each until it holds 2 FS_RULE_SAMPLES samples (rebuilt at the next step). Rows
+ * come with their means, fields and posterior solves (fs_row_copy): only covariances
+ * are computed. */
 inline int fs_rule_build(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
                          FsScratch R, int fixed, int n, FsRay ray, double ta, double reach,
                          double ell, int* status)
@@ -207,13 +224,26 @@ inline int fs_rule_build(GpKernel p, __global const MeanNode* mean, int mc, FsSc
         }
         if (j < FS_RULE_MEMORY) { key[j] = k; pick[j] = i; }
     }
-    int m = 0;
-    for (int j = 0; j < np; ++j) R.rows[m++] = S.rows[pick[j]];
-    for (int i = max(fixed, n - FS_RULE_SAMPLES); i < n; ++i) R.rows[m++] = S.rows[i];
-    int st = fs_factor(p, mean, mc, R, 0, m);
+    int m = 0;   /* rows come with their own numbers (fs_row_copy) */
+    for (int j = 0; j < np; ++j) fs_row_copy(p, S, pick[j], R, m++);
+    for (int i = max(fixed, n - FS_RULE_SAMPLES); i < n; ++i) fs_row_copy(p, S, i, R, m++);
+    int st = fs_factor_known(p, mean, R, 0, m);
     if (st) { *status = st; return 0; }
     for (int i = 0; i < m; ++i) fs_whiten_row(R.L, R.e, i, R.rows[i].value, R.mu[i]);
     return m;
+}
+
+/* Append the main system's row k (a sample just drawn) to R as its row i, whitened at
+ * its value: its own numbers come along (fs_row_copy), so the same numbers as
+ * fs_append(R, i, S.rows[k], observed), bit for bit, without evaluating the mean, the
+ * fields and the posterior solve at that point a second time. */
+inline int fs_rule_append(GpKernel p, __global const MeanNode* mean, FsScratch S, int k,
+                          FsScratch R, int i)
+{
+    fs_row_copy(p, S, k, R, i);
+    int st = fs_factor_known(p, mean, R, i, i + 1);
+    if (!st) fs_whiten_row(R.L, R.e, i, R.rows[i].value, R.mu[i]);
+    return st;
 }
 
 inline double fs_phi(double x) { return 0.3989422804014327 * exp(-0.5 * x * x); }
@@ -249,16 +279,21 @@ inline double fs_downcrossing_slope(double mean, double sd, double2 u)
     double a = mean / sd;
     if (a > 30.0) return sd * log((1.0 - u.x) * (1.0 - u.y)) / a;
     double target = (1.0 - u.x) * fs_crossing_tail(a, a);   /* (1 - u) in (0, 1] */
-    /* Newton on S(y) = target (S' = -y phi(y + a)) inside the bisection bracket, a
-     * bisection step wherever Newton would leave it: ~6-10 evaluations of S instead of
-     * 64 (measured: the 64 took 5-10 us a hit, a third of a short flight) */
-    double lo = 0.0, hi = fmax(-a, 0.0) + 12.0, y = 0.5 * (lo + hi);
+    /* Newton on S(y) = target (S' = -y phi(y + a), the same phi as S's) inside the
+     * bisection bracket, a bisection step wherever Newton would leave it, from the
+     * density's mode (1/y = y + a), which lies near the median. Ends when Newton's own
+     * step is below 1e-13 (1 + y): testing the step taken instead ran on by bisection
+     * for ~15 evaluations whenever the converged Newton step rounded onto a bracket end
+     * (17-24 evaluations of S a draw at a in [-300, 0], now 5.3-5.6, numpy replica). */
+    double lo = 0.0, hi = fmax(-a, 0.0) + 12.0, y = 0.5 * (sqrt(a * a + 4.0) - a);
     for (int k = 0; k < 100; ++k) {
-        double r = fs_crossing_tail(y + a, a) - target;
+        double ph = fs_phi(y + a), r = ph - a * fs_q(y + a) - target, d = y * ph;
         if (r > 0.0) lo = y; else hi = y;
-        double d = y * fs_phi(y + a), yn = d > 0.0 ? y + r / d : lo;
+        double step = d > 0.0 ? r / d : -INFINITY;
+        if (fabs(step) <= 1e-13 * (1.0 + y)) { y += step; break; }
+        double yn = y + step;
         if (!(yn > lo && yn < hi)) yn = 0.5 * (lo + hi);
-        int done = fabs(yn - y) <= 1e-13 * (1.0 + y) || hi - lo <= 1e-13 * (1.0 + y);
+        int done = hi - lo <= 1e-13 * (1.0 + y);
         y = yn;
         if (done) break;
     }
@@ -288,17 +323,59 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
     return fmax(FS_MEAN_KAPPA * sd, fabs(m) - FS_MEAN_Z * sd) / lip;
 }
 
+/* fs_mean_step at the value row k of S (the step's start, a sample of this ray): its own
+ * numbers (fs_row_prep) are in S, so neither the mean program nor the O(observations^2)
+ * solve runs again there; the same numbers as fs_mean_var's, bit for bit (the same
+ * operations on the same point). */
+inline double fs_mean_step_row(GpKernel p, __global const MeanNode* mean, FsScratch S, int k,
+                               double3 dn, double lip)
+{
+    if (!(lip > 0.0)) return INFINITY;
+    double3 x = fs_pos(S.rows + k);
+    GpFieldsAt fx = gp_kernel_nonstationary(p) ? fs_row_fields(S, k) : fs_fields(p, mean, x);
+    double var = gp_cov_at(p, x, dn, FS_OBS_VALUE, fx, x, dn, FS_OBS_VALUE, fx);
+    if (S.post.n) var -= fs_post_dot(fs_post_v(S, k), fs_post_v(S, k), S.post.n);
+    double sd = sqrt(fmax(var, 0.0)), m = S.mu[k];
+    return fmax(FS_MEAN_KAPPA * sd, fabs(m) - FS_MEAN_Z * sd) / lip;
+}
+
 /* Drop the older half of the window: rows [n - keep, n) move to [fixed, fixed + keep)
- * and are refactored and whitened (their values are known); returns the new row count. */
+ * with their own numbers (fs_row_copy) and are refactored and whitened (their values are
+ * known); returns the new row count. */
 inline int fs_slide(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
                     int fixed, int n, int keep, int* status)
 {
-    for (int i = 0; i < keep; ++i) S.rows[fixed + i] = S.rows[n - keep + i];
-    int st = fs_factor(p, mean, mc, S, fixed, fixed + keep);
+    /* ascending: a row's source n - keep + i is never below its target fixed + i */
+    for (int i = 0; i < keep; ++i) fs_row_copy(p, S, n - keep + i, S, fixed + i);
+    int st = fs_factor_known(p, mean, S, fixed, fixed + keep);
     if (st) { *status = st; return n; }
     for (int i = fixed; i < fixed + keep; ++i)
         fs_whiten_row(S.L, S.e, i, S.rows[i].value, S.mu[i]);
     return fixed + keep;
+}
+
+/* The root search's next point in the bracket (ta, tb) (f(ta) = fa >= 0 > fb = f(tb)),
+ * a function of values already drawn only (see "Hit"): the regula falsi point moved
+ * FS_ROOT_OFFSET root widths toward the bracket's midpoint (so that the end the secant
+ * approaches from is overshot and both ends close in), projected onto the interval
+ * about the midpoint that keeps the bracket within bisection's worst case plus
+ * FS_ROOT_SLACK points (ITP, Oliveira and Takahashi 2020): point k of kmax =
+ * fs_root_budget(w0, width) leaves a bracket of at most width 2^(kmax - k - 1). */
+inline int fs_root_budget(double w0, double width)
+{
+    return max((int)ceil(log2(w0 / width)), 0) + FS_ROOT_SLACK;
+}
+
+inline double fs_root_point(double ta, double tb, double fa, double fb, double width, int k,
+                            int kmax)
+{
+    double w = tb - ta, mid = ta + 0.5 * w;
+    double xf = ta + w * (fa / (fa - fb));
+    double x = xf + copysign(fmin(FS_ROOT_OFFSET * width, fabs(mid - xf)), mid - xf);
+    /* the radius of the projection; 1 - 1e-12: rounding must not leave the last bracket
+     * an ulp above width */
+    double r = fmax(0.5 * width * (1.0 - 1e-12) * ldexp(1.0, kmax - k) - 0.5 * w, 0.0);
+    return fabs(x - mid) <= r ? x : mid + copysign(r, x - mid);
 }
 
 /* Free flight along [ray.t0, ray.t1] inside one GPIS object: the first crossing, or none.
@@ -350,8 +427,10 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
             h = dt;
         } else {
             /* the rule on its small system R (see "Step rule"): one Radau node per try */
+            /* after the first step the start is row n - 1 (its mean is known) */
             h = fmin(fmin(grow * h, FS_H_MAX * ell),
-                     fs_mean_step(p, mean, mc, S, n, ray.o + ta * ray.d, dn, lip));
+                     n > fixed ? fs_mean_step_row(p, mean, S, n - 1, dn, lip)
+                               : fs_mean_step(p, mean, mc, S, n, ray.o + ta * ray.d, dn, lip));
             if (r_new > FS_RULE_SAMPLES) {
                 nr = fs_rule_build(p, mean, mc, S, R, fixed, n, ray, ta,
                                    FS_H_MAX * ell, ell, &st);
@@ -388,8 +467,8 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
         ++n;
         if (outside && fb < 0.0) break;
         if (dt <= 0.0 && r_new < FS_RULE_SAMPLES) {   /* else rebuilt at the next step */
-            fs_append(p, mean, mc, R, nr++, S.rows[n - 1], 1, 0.0, &res.status);
-            if (res.status) return res;
+            st = fs_rule_append(p, mean, S, n - 1, R, nr++);
+            if (st) { res.status = st; return res; }
         }
         r_new++;
         outside = fb >= 0.0;
@@ -397,15 +476,19 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
         fa = fb;
     }
 
-    /* a crossing in (ta, tb]: bisection conditioned on everything, `refine` steps and
-     * then on while the bracket is wider than FS_ROOT_WIDTH l_d */
-    for (int k = 0; (k < prm.refine || tb - ta > FS_ROOT_WIDTH * ell)
+    /* a crossing in (ta, tb]: the root search (see "Hit"), every point drawn conditioned
+     * on everything, until the bracket is below FS_ROOT_WIDTH l_d (and at least `refine`
+     * points) */
+    double width = FS_ROOT_WIDTH * ell;
+    int kmax = fs_root_budget(tb - ta, width);
+    for (int k = 0; (k < prm.refine || tb - ta > width)
                     && n + FS_HIT_ROWS + 2 <= FS_MAX_ROWS; ++k, ++n) {
-        double tm = 0.5 * (ta + tb);
+        double tm = fs_root_point(ta, tb, fa, fb, width, k, kmax);
         double f = fs_append(p, mean, mc, S, n, fs_obs(ray.o + tm * ray.d, dn, FS_OBS_VALUE, 0.0),
                              0, fs_normal(rng, step, FS_SLOT_REFINE + k), &res.status);
         if (res.status) return res;
         res.samples++;
+        res.roots++;
         if (f >= 0.0) { ta = tm; fa = f; } else { tb = tm; fb = f; }
     }
     res.hit = 1;

@@ -128,6 +128,7 @@ typedef struct {
      * scatter stage needs no frame: |law_a x law_b| = 1 / sqrt(det S_q). */
     double law_s;
     double3 law_m, law_a, law_b;
+    int roots;              /* of `samples`: drawn by the root search at the hit */
 } FsResult;
 
 inline FsScratch fs_scratch(__global double* base, int item)
@@ -371,19 +372,42 @@ inline double fs_mean_var(GpKernel p, __global const MeanNode* mean, int mc, FsS
     return m;
 }
 
-/* Means, covariance rows and factor of rows [from, n) (posterior if S.post.n). */
-inline int fs_factor(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
-                     int from, int n)
+/* Row i's own numbers: its prior mean (posterior-corrected), the posterior solve v and
+ * the kernel's field multipliers at it. They belong to the observation, not to its place
+ * in a system, so a row moved or copied into another system (same prior and posterior)
+ * takes them along (fs_row_copy) instead of evaluating the mean program, the fields and
+ * an O(observations^2) solve again. */
+inline void fs_row_prep(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S, int i)
+{
+    __global const FsObs* ri = S.rows + i;
+    double3 xi = fs_pos(ri), ui = fs_dir(ri);
+    GpFieldsAt fi = fs_fields(p, mean, xi);
+    if (gp_kernel_nonstationary(p)) fs_store_fields(S, i, fi);
+    S.mu[i] = fs_prior_mean(mean, mc, xi, ui, ri->kind);
+    if (S.post.n) S.mu[i] += fs_post_solve(p, mean, S.post, xi, ui, ri->kind, fi,
+                                           fs_post_v(S, i));
+}
+
+/* Row k of S, with its own numbers (fs_row_prep), becomes row i of D (D may be S: a
+ * move to a lower index); D's factor row i is left to fs_factor_known. */
+inline void fs_row_copy(GpKernel p, FsScratch S, int k, FsScratch D, int i)
+{
+    D.rows[i] = S.rows[k];
+    D.mu[i] = S.mu[k];
+    if (gp_kernel_nonstationary(p)) fs_store_fields(D, i, fs_row_fields(S, k));
+    for (int j = 0; j < S.post.n; ++j) fs_post_v(D, i)[j] = fs_post_v(S, k)[j];
+}
+
+/* Covariance rows and factor of rows [from, n), whose own numbers are in place. */
+inline int fs_factor_known(GpKernel p, __global const MeanNode* mean, FsScratch S, int from,
+                           int n)
 {
     int np = S.post.n, ns = gp_kernel_nonstationary(p);
     for (int i = from; i < n; ++i) {
         __global const FsObs* ri = S.rows + i;
         double3 xi = fs_pos(ri), ui = fs_dir(ri);
-        GpFieldsAt fi = fs_fields(p, mean, xi);   /* stationary: unit, unused */
-        if (ns) fs_store_fields(S, i, fi);
-        S.mu[i] = fs_prior_mean(mean, mc, xi, ui, ri->kind);
-        if (np) S.mu[i] += fs_post_solve(p, mean, S.post, xi, ui, ri->kind, fi,
-                                         fs_post_v(S, i));
+        /* stationary: unit multipliers, unused */
+        GpFieldsAt fi = ns ? fs_row_fields(S, i) : fs_fields(p, mean, xi);
         __global double* Li = S.L + fs_tri(i);
         for (int j = 0; j <= i; ++j) {
             __global const FsObs* rj = S.rows + j;
@@ -393,6 +417,14 @@ inline int fs_factor(GpKernel p, __global const MeanNode* mean, int mc, FsScratc
         }
     }
     return fs_cholesky(S.L, from, n, 0);
+}
+
+/* Means, covariance rows and factor of rows [from, n) (posterior if S.post.n). */
+inline int fs_factor(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
+                     int from, int n)
+{
+    for (int i = from; i < n; ++i) fs_row_prep(p, mean, mc, S, i);
+    return fs_factor_known(p, mean, S, from, n);
 }
 
 /* Append one row at index i, conditioned on rows [0, i): sampled (returns the draw) or,
