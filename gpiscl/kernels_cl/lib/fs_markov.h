@@ -20,10 +20,11 @@
  *   Q(h) = q int_0^h g(s) g(s)' ds,  g(s) = e^(F s) e_p = e^(-lambda s) G(s),
  * G_0 = s^p / p!, G_{i+1} = G_i' - lambda G_i (the impulse response and its derivatives),
  * so Q_ij = q sum_k c_ijk k! / (2 lambda)^(k+1) P(k + 1, 2 lambda h) with P the
- * regularised incomplete gamma. P(k + 1, x) is summed as e^-x sum_{j > k} x^j / j! below
- * x = 1 (fs_mk_gammas): the textbook Q = P_inf - A P_inf A' cancels to O(h^(2p+1)) (5/2 at
- * 1e-3 l_d: Q_00 ~ 1e-14 sigma^2, ~14 of 16 digits lost), the series has no cancellation
- * (Q's leading terms in h all have positive coefficients). Double throughout: Q(h)'s entries span
+ * regularised incomplete gamma. P(2p + 1, x) is summed as e^-x sum_{j > 2p} x^j / j! below
+ * x = 1 and the other P(k + 1, x) differ from it by closed-form terms (fs_mk_transition):
+ * the textbook Q = P_inf - A P_inf A' cancels to O(h^(2p+1)) (5/2 at 1e-3 l_d: Q_00 ~
+ * 1e-14 sigma^2, ~14 of 16 digits lost), the series has no cancellation (Q's leading
+ * terms in h all have positive coefficients). Double throughout: Q(h)'s entries span
  * h^(2p+1)..h, and bridges at 1e-2 l_d invert them (condition ~h^-2p); the Cholesky
  * factors of these diagonally graded matrices keep their relative accuracy.
  * tests/test_fs_markov.py checks A and Q against the kernel's derivative covariances.
@@ -90,79 +91,60 @@ inline FsMarkov fs_markov_of(GpKernel p, double3 dn)
     return m;
 }
 
-/* 1 / j (a multiplication instead of a division in the series) */
-__constant double fs_mk_recip[22] = {0.0, 1.0, 1.0 / 2, 1.0 / 3, 1.0 / 4, 1.0 / 5, 1.0 / 6,
+/* P(k, x) = e^-x sum_{j >= k} x^j / j! (regularised lower incomplete gamma) for k = 2p + 1
+ * = 3 or 5, ex = e^-x: below x = 1 the series' tail by Horner (positive terms, no
+ * cancellation as x -> 0; 17 terms: x^17 k! / (k + 17)! < 2e-18), above it 1 - the head
+ * (P(5, 1) = 0.0037: <= 2.5 digits lost, ~1e-13 relative). */
+/* 1 / j: multiplications instead of divisions in the series */
+__constant double fs_mk_recip[23] = {0.0, 1.0, 1.0 / 2, 1.0 / 3, 1.0 / 4, 1.0 / 5, 1.0 / 6,
     1.0 / 7, 1.0 / 8, 1.0 / 9, 1.0 / 10, 1.0 / 11, 1.0 / 12, 1.0 / 13, 1.0 / 14, 1.0 / 15,
-    1.0 / 16, 1.0 / 17, 1.0 / 18, 1.0 / 19, 1.0 / 20, 1.0 / 21};
+    1.0 / 16, 1.0 / 17, 1.0 / 18, 1.0 / 19, 1.0 / 20, 1.0 / 21, 1.0 / 22};
 
-/* P[k] = P(k + 1, x) = e^-x sum_{j > k} x^j / j!, k = 0..kmax (regularised lower
- * incomplete gamma), in one pass: below x = 1 the series' upper tails (no cancellation
- * as x -> 0; 20 terms: x^21 / 21! < 2e-20), above it 1 - the head (P(5, 1) = 0.0037:
- * <= 2.5 digits lost, ~1e-13 relative). */
-inline void fs_mk_gammas(int kmax, double x, double ex, double* P)   /* ex = e^-x */
+inline double fs_mk_gamma_tail(int k, double x, double ex)
 {
-    double t = ex;   /* e^-x x^j / j! */
     if (x >= 1.0) {
-        double head = 0.0;
-        for (int j = 0; j <= kmax; ++j) {
-            head += t;
-            P[j] = 1.0 - head;
-            t *= x * fs_mk_recip[j + 1];
-        }
-        return;
+        double head = 1.0, t = 1.0;
+        for (int j = 1; j < k; ++j) { t *= x * fs_mk_recip[j]; head += t; }
+        return 1.0 - ex * head;
     }
-    double term[21];
-    for (int j = 0; j < 21; ++j) { term[j] = t; t *= x * fs_mk_recip[j + 1]; }
-    double tail = 0.0;
-    for (int j = 20; j > 0; --j) {
-        tail += term[j];             /* sum_{i >= j} */
-        if (j - 1 <= kmax) P[j - 1] = tail;
-    }
+    double s = 1.0;
+    for (int j = k + 17; j > k; --j) s = 1.0 + s * x * fs_mk_recip[j];
+    double t = ex;
+    for (int j = 1; j <= k; ++j) t *= x * fs_mk_recip[j];
+    return t * s;
 }
 
-/* A(h) and Q(h) of a step of h world lengths (header comment) */
+/* A(h) and Q(h) of a step of h world lengths (header comment): closed forms in u = lambda
+ * h with e = e^-u, E = e^-2u and one incomplete gamma P = P(2p + 1, 2u); every other
+ * P(k + 1, 2u) in Q_ij = q sum_k c_ijk k! / (2 lambda)^(k+1) P(k + 1, 2u) differs from P by
+ * closed-form terms E (2u)^j / j!, which collect into the polynomials below (derived
+ * symbolically from the header's G_i; tests/test_fs_markov.py checks them to 1e-10 against
+ * the kernel's joint law). Their leading orders in u keep Q's graded entries exact to
+ * rounding: no difference of O(1) terms. */
 inline void fs_mk_transition(FsMarkov m, double h, double A[3][3], double Q[3][3])
 {
-    int n = m.n, p = n - 1;
-    double l = m.lam, e = exp(-l * h);
-    double N[3][3] = {{0.0}}, N2[3][3];
-    for (int i = 0; i < p; ++i) N[i][i + 1] = 1.0;
-    /* last row of F: -(lambda^3, 3 lambda^2, 3 lambda) or -(lambda^2, 2 lambda) */
-    if (p == 1) { N[1][0] = -l * l; N[1][1] = -2.0 * l; }
-    else { N[2][0] = -l * l * l; N[2][1] = -3.0 * l * l; N[2][2] = -3.0 * l; }
-    for (int i = 0; i < n; ++i) N[i][i] += l;
-    for (int i = 0; i < n; ++i)
-        for (int j = 0; j < n; ++j) {
-            double s = 0.0;
-            for (int k = 0; k < n; ++k) s += N[i][k] * N[k][j];
-            N2[i][j] = s;
-        }
-    for (int i = 0; i < n; ++i)
-        for (int j = 0; j < n; ++j)
-            A[i][j] = e * ((i == j ? 1.0 : 0.0) + h * N[i][j] + (p == 2 ? 0.5 * h * h * N2[i][j] : 0.0));
-    /* G_i(s) coefficients (ascending powers), G_0 = s^p / p! */
-    double G[3][3] = {{0.0}};
-    G[0][p] = p == 2 ? 0.5 : 1.0;
-    for (int i = 0; i < p; ++i)
-        for (int k = 0; k <= p; ++k)
-            G[i + 1][k] = (k + 1 <= p ? (double)(k + 1) * G[i][k + 1] : 0.0) - l * G[i][k];
-    /* I_k = int_0^h s^k e^{-2 lambda s} ds = k! / (2 lambda)^(k+1) P(k + 1, 2 lambda h) */
-    double I[5], Pg[5], fact = 1.0, pw = 2.0 * l;
-    fs_mk_gammas(2 * p, 2.0 * l * h, e * e, Pg);   /* e^-2 lambda h */
-    for (int k = 0; k <= 2 * p; ++k) {
-        I[k] = fact / pw * Pg[k];
-        fact *= (double)(k + 1);
-        pw *= 2.0 * l;
+    double l = m.lam, u = l * h, e = exp(-u), E = e * e, s2 = m.s2;
+    if (m.n == 2) {
+        A[0][0] = e * (1.0 + u);  A[0][1] = e * h;
+        A[1][0] = -e * l * u;     A[1][1] = e * (1.0 - u);
+        double P = fs_mk_gamma_tail(3, 2.0 * u, E);
+        Q[0][0] = s2 * P;
+        Q[1][0] = Q[0][1] = s2 * 2.0 * l * u * u * E;
+        Q[1][1] = s2 * l * l * (P + 4.0 * u * E);
+        return;
     }
-    /* q = sigma^2 (2 lambda)^(2p+1) (p!)^2 / (2p)!: 4 s2 l^3, 16/3 s2 l^5 */
-    double q = p == 1 ? 4.0 * m.s2 * l * l * l : 16.0 / 3.0 * m.s2 * l * l * l * l * l;
-    for (int i = 0; i < n; ++i)
-        for (int j = 0; j <= i; ++j) {
-            double s = 0.0;
-            for (int a = 0; a <= p; ++a)
-                for (int b = 0; b <= p; ++b) s += G[i][a] * G[j][b] * I[a + b];
-            Q[i][j] = Q[j][i] = q * s;
-        }
+    double u2 = u * u, l2 = l * l;
+    A[0][0] = e * (1.0 + u + 0.5 * u2);  A[0][1] = e * h * (1.0 + u);  A[0][2] = e * 0.5 * h * h;
+    A[1][0] = -e * 0.5 * l * u2;         A[1][1] = e * (1.0 + u - u2);  A[1][2] = e * 0.5 * h * (2.0 - u);
+    A[2][0] = e * 0.5 * l2 * u * (u - 2.0);  A[2][1] = e * l * u * (u - 3.0);
+    A[2][2] = e * 0.5 * (u2 - 4.0 * u + 2.0);
+    double P = fs_mk_gamma_tail(5, 2.0 * u, E), su3E = s2 * u2 * u * E;
+    Q[0][0] = s2 * P;
+    Q[1][0] = Q[0][1] = s2 * (2.0 / 3.0) * l * u2 * u2 * E;
+    Q[1][1] = s2 * l2 / 3.0 * P + (4.0 / 9.0) * l2 * su3E * (4.0 - u);
+    Q[2][0] = Q[0][2] = -s2 * l2 / 3.0 * P + (8.0 / 9.0) * l2 * su3E * (1.0 - u);
+    Q[2][1] = Q[1][2] = s2 * (2.0 / 3.0) * l2 * l * u2 * (u - 2.0) * (u - 2.0) * E;
+    Q[2][2] = s2 * l2 * l2 * (P + 16.0 / 3.0 * u * (u2 - u + 1.0) * E);
 }
 
 /* Lower Cholesky factor of the n x n matrix a (n <= 3) in L; a non-positive pivot
