@@ -15,7 +15,7 @@ from scipy import stats as sst
 from gpiscl.host.gp import Constant, Matern32, Matern52
 from gpiscl.host.gp import function_space as FS
 from gpiscl.host.gp.kernels import covariance_matrix
-from markov_wrappers import bridge, flights, paths, transition
+from markov_wrappers import bridge, flights, paths, rule_ratios, transition
 from stats import assert_agree, z_threshold
 from test_fs_adaptive import M32, M52, expected_crossings
 from test_fs_sampling import ks_two_sample
@@ -230,6 +230,28 @@ def test03_bridge_draws_follow_the_exact_conditional(device, name, widths):
     assert D < crit
     assert np.abs(W.mean(0)).max() * math.sqrt(n) < z
     assert abs(dev_m - sm) < 1e-7 * (abs(sm) + ssd) and abs(dev_sd - ssd) < 1e-7 * ssd
+
+
+def test03b_rule_ratio_makes_the_exact_rates_decisions(device):
+    """fs_mk_rule_ratio (the rate bracketed by normal-tail bounds, erfc only where a
+    threshold falls inside the bracket) puts every ratio on the same side of the step
+    rule's thresholds (accept <= 1; growth below 0.05, 0.3) as scale * fs_return_rate, over
+    random moments spanning deep tails, a < -8, both sides and degenerate ones; and it
+    settles most of them without the exact rate (the bracket is used)."""
+    rng = np.random.default_rng(11)
+    n = 200000
+    s = 10.0 ** rng.uniform(-4, 1, n)
+    g = 10.0 ** rng.uniform(-3, 2, n)
+    mom = np.column_stack([s * rng.uniform(-1, 9, n), g * rng.normal(0, 6, n), s,
+                           s * rng.uniform(-1, 1, n) * 0.99, g])
+    mom[:100, 2] = 0.0          # degenerate: rate 0
+    out = rule_ratios(device, mom, rng.integers(0, 2, n), 10.0 ** rng.uniform(-2, 8))
+    for th in (0.05, 0.3):
+        assert np.array_equal(out[:, 0] < th, out[:, 1] < th), th
+    assert np.array_equal(out[:, 0] <= 1.0, out[:, 1] <= 1.0)
+    settled = np.mean(out[:, 0] != out[:, 1])
+    print(f"settled by the bracket: {settled:.1%}")
+    assert settled > 0.5
 
 
 @pytest.mark.parametrize("name", ["m32", "m52"])
