@@ -166,55 +166,66 @@ inline void fs_mk_transition(FsMarkov m, double h, double A[3][3], double Q[3][3
     Q[2][2] = s2 * l2 * l2 * (P + 16.0 / 3.0 * u * (u2 - u + 1.0) * E);
 }
 
-/* Lower Cholesky factor of the n x n matrix a (n <= 3) in L; a non-positive pivot
- * (rounding of a degenerate Q) gives a zero column. */
-inline void fs_mk_chol(int n, double a[3][3], double L[3][3])
+/* Lower Cholesky factor of the n x n matrix a (n <= 3) in L and the reciprocals of its
+ * diagonal in d (the solves below multiply by them: double divisions were a good part
+ * of a bridge draw); a non-positive pivot (rounding of a degenerate Q) gives a zero
+ * column and d = 0. */
+inline void fs_mk_chol(int n, double a[3][3], double L[3][3], double* d)
 {
     for (int j = 0; j < 3; ++j)
         for (int i = 0; i < 3; ++i) L[j][i] = 0.0;
     for (int j = 0; j < n; ++j) {
-        double d = a[j][j];
-        for (int k = 0; k < j; ++k) d -= L[j][k] * L[j][k];
-        L[j][j] = d > 0.0 ? sqrt(d) : 0.0;
+        double p = a[j][j];
+        for (int k = 0; k < j; ++k) p -= L[j][k] * L[j][k];
+        L[j][j] = p > 0.0 ? sqrt(p) : 0.0;
+        d[j] = p > 0.0 ? 1.0 / L[j][j] : 0.0;
         for (int i = j + 1; i < n; ++i) {
             double s = a[i][j];
             for (int k = 0; k < j; ++k) s -= L[i][k] * L[j][k];
-            L[i][j] = L[j][j] > 0.0 ? s / L[j][j] : 0.0;
+            L[i][j] = s * d[j];
         }
     }
 }
 
-/* x := L^-1 x (forward) or L^-T x (backward) on the first n entries */
-inline void fs_mk_forward(int n, double L[3][3], double* x)
+/* x := L^-1 x (forward) or L^-T x (backward) on the first n entries (d: fs_mk_chol's) */
+inline void fs_mk_forward(int n, double L[3][3], const double* d, double* x)
 {
     for (int i = 0; i < n; ++i) {
         double s = x[i];
         for (int k = 0; k < i; ++k) s -= L[i][k] * x[k];
-        x[i] = s / L[i][i];
+        x[i] = s * d[i];
     }
 }
 
-inline void fs_mk_backward(int n, double L[3][3], double* x)
+inline void fs_mk_backward(int n, double L[3][3], const double* d, double* x)
 {
     for (int i = n - 1; i >= 0; --i) {
         double s = x[i];
         for (int k = i + 1; k < n; ++k) s -= L[k][i] * x[k];
-        x[i] = s / L[i][i];
+        x[i] = s * d[i];
     }
 }
 
-/* The inverse of a positive definite n x n matrix through its Cholesky factor. */
+/* The inverse of a positive definite n x n matrix through its Cholesky factor: W = L^-1
+ * (lower triangular), a^-1 = W'W. */
 inline void fs_mk_inverse(int n, double a[3][3], double out[3][3])
 {
-    double L[3][3];
-    fs_mk_chol(n, a, L);
+    double L[3][3], W[3][3], d[3];
+    fs_mk_chol(n, a, L, d);
     for (int j = 0; j < n; ++j) {
-        double c[3] = {0.0, 0.0, 0.0};
-        c[j] = 1.0;
-        fs_mk_forward(n, L, c);
-        fs_mk_backward(n, L, c);
-        for (int i = 0; i < n; ++i) out[i][j] = c[i];
+        W[j][j] = d[j];
+        for (int i = j + 1; i < n; ++i) {
+            double s = 0.0;
+            for (int k = j; k < i; ++k) s += L[i][k] * W[k][j];
+            W[i][j] = -d[i] * s;
+        }
     }
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j <= i; ++j) {
+            double s = 0.0;
+            for (int k = i; k < n; ++k) s += W[k][i] * W[k][j];
+            out[i][j] = out[j][i] = s;
+        }
 }
 
 /* fs_normal at slots slot .. slot + n - 1 (n <= 3, slot even), one Philox block and one
@@ -239,8 +250,8 @@ inline void fs_mk_copy(int n, double src[3][3], double dst[3][3])
 inline void fs_mk_advance(FsMarkov m, double A[3][3], double Q[3][3], double* x,
                           FsRng rng, uint seg, uint slot)
 {
-    double L[3][3], z[3], y[3];
-    fs_mk_chol(m.n, Q, L);
+    double L[3][3], d[3], z[3], y[3];
+    fs_mk_chol(m.n, Q, L, d);
     fs_mk_normals(rng, seg, slot, m.n, z);
     for (int i = 0; i < m.n; ++i) {
         double s = 0.0;
@@ -278,15 +289,21 @@ inline void fs_mk_bridge(FsMarkov m, double h1, double h2, const double* xa,
         for (int k = 0; k < n; ++k) s += P2[i][k] * xb[k];
         w[i] = s;
     }
+    double PA[3][3];                  /* P2 A2, then Lam = P1 + A2' (P2 A2) */
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j) {
+            double s = 0.0;
+            for (int k = 0; k < n; ++k) s += P2[i][k] * A2[k][j];
+            PA[i][j] = s;
+        }
     for (int i = 0; i < n; ++i) {
         double s = 0.0;
         for (int k = 0; k < n; ++k) s += P1[i][k] * a[k] + A2[k][i] * w[k];
         eta[i] = s;
-        for (int j = 0; j < n; ++j) {
+        for (int j = 0; j <= i; ++j) {
             double t = P1[i][j];
-            for (int k = 0; k < n; ++k)
-                for (int r = 0; r < n; ++r) t += A2[k][i] * P2[k][r] * A2[r][j];
-            Lam[i][j] = t;
+            for (int k = 0; k < n; ++k) t += A2[k][i] * PA[k][j];
+            Lam[i][j] = Lam[j][i] = t;
         }
     }
 }
@@ -295,14 +312,14 @@ inline void fs_mk_bridge(FsMarkov m, double h1, double h2, const double* xa,
 inline void fs_mk_bridge_sample(FsMarkov m, double h1, double h2, const double* xa,
                                 const double* xb, FsRng rng, uint seg, uint slot, double* x)
 {
-    double Lam[3][3], L[3][3], eta[3];
+    double Lam[3][3], L[3][3], d[3], eta[3];
     fs_mk_bridge(m, h1, h2, xa, xb, Lam, eta);
-    fs_mk_chol(m.n, Lam, L);
-    fs_mk_forward(m.n, L, eta);
+    fs_mk_chol(m.n, Lam, L, d);
+    fs_mk_forward(m.n, L, d, eta);
     double z[3];
     fs_mk_normals(rng, seg, slot, m.n, z);
     for (int j = 0; j < m.n; ++j) eta[j] += z[j];
-    fs_mk_backward(m.n, L, eta);
+    fs_mk_backward(m.n, L, d, eta);
     for (int j = 0; j < m.n; ++j) x[j] = eta[j];
 }
 
