@@ -64,14 +64,17 @@ __kernel void mk_bridge(__global const GpKernel* kp, __global const double* dir,
 }
 
 /* The step rule's ratio (fs_mk_rule_ratio) and scale * fs_return_rate for moments rows
- * (m, m1, s, r, g) with the side `outside` (0, 1): out[2 i], out[2 i + 1] */
+ * (m, m1, s, r, g) (fs_march.h's FsMoments, as Q's block: v = s^2, c = r s, w = g^2 + r^2)
+ * with the side `outside` (0, 1): out[2 i], out[2 i + 1] */
 __kernel void mk_rule(__global const double* mom, __global const int* outside, double scale,
                       __global double* out)
 {
     int i = get_global_id(0);
-    FsMoments M = {mom[5 * i], mom[5 * i + 1], mom[5 * i + 2], mom[5 * i + 3], mom[5 * i + 4]};
-    out[2 * i] = fs_mk_rule_ratio(M, outside[i], scale);
-    out[2 * i + 1] = scale * fs_return_rate(M, outside[i]);
+    double s = mom[5 * i + 2], r = mom[5 * i + 3], g = mom[5 * i + 4];
+    double Q[3][3] = {{s * s, r * s, 0.0}, {r * s, g * g + r * r, 0.0}, {0.0, 0.0, 0.0}};
+    out[2 * i] = fs_mk_rule_ratio(mom[5 * i], mom[5 * i + 1], Q, outside[i], scale);
+    out[2 * i + 1] = scale * fs_return_rate(fs_mk_moments(mom[5 * i], mom[5 * i + 1], Q),
+                                            outside[i]);
 }
 
 /* Rays along one line, continued straight through every hit from the vertex record up

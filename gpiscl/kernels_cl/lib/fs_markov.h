@@ -40,7 +40,7 @@
  *
  * Step rule: fs_march.h's, with the conditional moments of (f, f') at ta + h in closed
  * form, m = mu + (A x)_0, m1 = mu' + (A x)_1, (v, c, w) = Q_00, Q_01, Q_11: O(1) per
- * evaluation. Same growth factors, FS_H_MAX, FS_H_MIN, fs_mean_step's cap (sd = sigma),
+ * evaluation (fs_mk_rule_ratio). Same growth factors, FS_H_MAX, FS_H_MIN, fs_mean_step's cap (sd = sigma),
  * l_d = the lag of correlation e^-1/2 (FS_MK_ELL: lambda l_d, closed form).
  *
  * Hit: between a state with f >= 0 and one with f < 0, bisection by exact bridge
@@ -344,37 +344,42 @@ inline double fs_mk_bridge_slope(FsMarkov m, double h1, double h2, const double*
     return mean;
 }
 
-/* Conditional moments of (f, f') h on from state x (transition A, Q given), prior mean
- * mu and its slope mu1 there. */
-inline FsMoments fs_mk_moments(FsMarkov m, double A[3][3], double Q[3][3], const double* x,
-                               double mu, double mu1)
+/* Conditional moments of (f, f') with means (m, m1) and covariance Q's leading 2 x 2
+ * block (Q(h) of the state h on: v = Q_00, c = Q_01, w = Q_11) as fs_march.h's rule
+ * takes them. */
+inline FsMoments fs_mk_moments(double m, double m1, double Q[3][3])
 {
     FsMoments M;
-    double y0 = 0.0, y1 = 0.0;
-    for (int k = 0; k < m.n; ++k) { y0 += A[0][k] * x[k]; y1 += A[1][k] * x[k]; }
-    M.m = mu + y0;
-    M.m1 = mu1 + y1;
+    M.m = m;
+    M.m1 = m1;
     M.s = sqrt(fmax(Q[0][0], 0.0));
     M.r = M.s > 0.0 ? Q[0][1] / M.s : 0.0;
     M.g = sqrt(fmax(Q[1][1] - M.r * M.r, 0.0));
     return M;
 }
 
-/* The step rule's ratio r = scale * fs_return_rate(M, outside), or any value on the same
- * side of each of the rule's thresholds (accept r <= 1; grow by 2, 1.5, 1.1 below 0.05,
- * 0.3, 1): the same decisions, without erfc where the bracket below settles them (erfcf
- * was ~18% of a flight, measured). rate = phi(z) e(a) g / s with e(a) = phi(a) + a Phi(a);
- * Birnbaum's and Sampford's bounds on the normal tail, 2 / (t + sqrt(t^2 + 4)) < Q(t) /
- * phi(t) < 4 / (3t + sqrt(t^2 + 8)) (t >= 0), bracket e(a) within a few percent (both
- * exact at a = 0, both ~phi(a) / a^2 as a -> -inf), written without cancellation; the
- * bracket is widened by 1e-5 for float rounding. Deep tails (a < -8) and degenerate
- * moments take fs_return_rate itself (no erfc there). */
-inline double fs_mk_rule_ratio(FsMoments M, int outside, double scale)
+/* The step rule's ratio r = scale * fs_return_rate(fs_mk_moments(m, m1, Q), outside), or
+ * any value on the same side of each of the rule's thresholds (accept r <= 1; grow by 2,
+ * 1.5, 1.1 below 0.05, 0.3, 1): the same decisions, without erfc where the bracket below
+ * settles them (erfcf was ~18% of a flight, measured). rate = phi(z) e(a) g / s with
+ * e(a) = phi(a) + a Phi(a); Birnbaum's and Sampford's bounds on the normal tail,
+ * 2 / (t + sqrt(t^2 + 4)) < Q(t) / phi(t) < 4 / (3t + sqrt(t^2 + 8)) (t >= 0), bracket
+ * e(a) within 15% (both exact at a = 0, both ~phi(a) / a^2 as a -> -inf), written without
+ * cancellation. z^2 = m^2 / v, a = (m1 - c m / v) / g and g / s from one division (the
+ * chain sqrt, divide, sqrt, divide of the moments was most of an evaluation's latency);
+ * phi needs z^2 only. The bracket is widened by 1e-4 for the float rounding of z^2
+ * (<= 2e-5 relative in r at z^2 ~ 170, where phi(z) underflows in float) and of a.
+ * Deep tails (a < -8) and degenerate moments take fs_return_rate itself (no erfc there). */
+inline double fs_mk_rule_ratio(double m, double m1, double Q[3][3], int outside,
+                               double scale)
 {
-    if (!(M.s > 0.0) || !(M.g > 0.0)) return 0.0;
-    double m = outside ? M.m : -M.m, m1 = outside ? M.m1 : -M.m1;
-    float z = (float)(m / M.s), a = (float)((m1 - M.r / M.s * m) / M.g);
-    if (a < -8.0f) return scale * fs_return_rate(M, outside);
+    double v = Q[0][0], c = Q[0][1];
+    if (!(v > 0.0)) return 0.0;
+    double iv = 1.0 / v, g2 = Q[1][1] - c * c * iv;
+    double ms = outside ? m : -m, m1s = outside ? m1 : -m1;
+    float a = (float)(m1s - c * iv * ms) * rsqrt((float)g2);
+    if (!(g2 > 0.0) || !(a >= -8.0f))
+        return scale * fs_return_rate(fs_mk_moments(m, m1, Q), outside);
     float pa = fs_phif(a), lo, hi, t = fabs(a);
     float s4 = sqrt(t * t + 4.0f), s8 = sqrt(t * t + 8.0f);
     if (a >= 0.0f) {   /* e = phi(a) + a (1 - Q(a)) */
@@ -384,11 +389,12 @@ inline double fs_mk_rule_ratio(FsMoments M, int outside, double scale)
         lo = pa * 8.0f / ((s8 + t) * (3.0f * t + s8));
         hi = pa * 4.0f / ((t + s4) * (t + s4));
     }
-    double k = (double)fs_phif(z) * (M.g / M.s) * scale;
-    double rlo = k * lo * (1.0 - 1e-5), rhi = k * hi * (1.0 + 1e-5);
+    float pz = 0.39894228f * exp(-0.5f * (float)(ms * ms * iv));
+    double k = (double)pz * sqrt(g2 * iv) * scale;
+    double rlo = k * lo * (1.0 - 1e-4), rhi = k * hi * (1.0 + 1e-4);
     /* a threshold strictly inside (rlo, rhi] could go either way: decide it exactly */
     if ((rlo < 0.05 && rhi >= 0.05) || (rlo < 0.3 && rhi >= 0.3) || (rlo <= 1.0 && rhi > 1.0))
-        return scale * fs_return_rate(M, outside);
+        return scale * fs_return_rate(fs_mk_moments(m, m1, Q), outside);
     return rhi;
 }
 
@@ -466,7 +472,9 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
             double mum = fs_mk_mean_on(flat, mu, mean, mc, ray, dn, ta + FS_RADAU_NODE * hs,
                                       &mu1m);
             fs_mk_transition(m, FS_RADAU_NODE * hs * dlen, Am, Qm);
-            double r = fs_mk_rule_ratio(fs_mk_moments(m, Am, Qm, x, mum, mu1m), outside,
+            double y0 = 0.0, y1 = 0.0;   /* the node's conditional means: A x */
+            for (int k = 0; k < m.n; ++k) { y0 += Am[0][k] * x[k]; y1 += Am[1][k] * x[k]; }
+            double r = fs_mk_rule_ratio(mum + y0, mu1m + y1, Qm, outside,
                                         FS_RADAU_WEIGHT * dlen * ell / tol);
             res.evals++;
             if (r <= 1.0 || h <= FS_H_MIN * ell) {
