@@ -3,7 +3,7 @@ sampler of fs_march.h, same run, medians of --repeats (the two alternate, so loa
 other users of the machine hits both alike).
 
     python tools/bench_markov.py [--rays 4096] [--length 40] [--resolution 32] [--spp 4]
-        [--repeats 3]
+        [--repeats 3] [--refine 6]
 
 1. Free flight (tests/markov_wrappers.py's mk_flights): rays of --length l along a line
    through constant-mean Matern 3/2 and 5/2 (l = 1, sigma = 1, mean 0 and 2 sigma),
@@ -60,7 +60,7 @@ from markov_wrappers import flights  # noqa: E402
 SCENE = "scenes/fs_volume_room_global.json"
 
 
-def flight_rates(dev, kernel, mu, rays, length, repeats):
+def flight_rates(dev, kernel, mu, rays, length, repeats, refine):
     """Median samples/s and length/s, and per-ray samples, for Markov and general."""
     rates = {True: [], False: []}
     per_ray = {}
@@ -68,7 +68,8 @@ def flight_rates(dev, kernel, mu, rays, length, repeats):
         for markov in (True, False):
             t = time.process_time()
             out = flights(dev, kernel, Constant(mu), rays, markov=markov,
-                          memory="renewal_plus", t1=length, seed=5, restarts=1 << 20)
+                          memory="renewal_plus", refine=refine, t1=length, seed=5,
+                          restarts=1 << 20)
             sec = time.process_time() - t
             bad = int(np.count_nonzero(out[:, 5]))
             rates[markov].append((out[:, 6].sum() / sec, rays * length / sec))
@@ -100,17 +101,21 @@ def main():
     ap.add_argument("--resolution", type=int, default=32)
     ap.add_argument("--spp", type=int, default=4)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--refine", type=int, default=6,
+                    help="free flight: root-search points forced per hit (the scenes' default)")
     ap.add_argument("--device", default=None)
     args = ap.parse_args()
     dev = Device(args.device)
     print(f"device: {dev.name}; median of {args.repeats}")
-    print(f"\nfree flight: {args.rays} rays x {args.length:g} l, renewal_plus, default tolerance")
+    print(f"\nfree flight: {args.rays} rays x {args.length:g} l, renewal_plus, default tolerance, "
+          f"refine {args.refine}")
     print(f"  {'kernel':8s}{'mu':>4s}{'sampler':>9s}{'samples/s':>12s}{'l/s':>11s}"
           f"{'samples/ray':>13s}{'hits/ray':>10s}{'failed':>8s}")
     flights(dev, Matern32(), Constant(0.0), 64, markov=True)    # builds the program
     for name, kern in (("m32", Matern32(1.0, 1.0)), ("m52", Matern52(1.0, 1.0))):
         for mu in (0.0, 2.0):
-            med, per = flight_rates(dev, kern, mu, args.rays, args.length, args.repeats)
+            med, per = flight_rates(dev, kern, mu, args.rays, args.length, args.repeats,
+                                    args.refine)
             for markov in (True, False):
                 s, ln = med[markov]
                 spr, hits, bad = per[markov]
