@@ -40,8 +40,20 @@
  *
  * Step rule: fs_march.h's, with the conditional moments of (f, f') at ta + h in closed
  * form, m = mu + (A x)_0, m1 = mu' + (A x)_1, (v, c, w) = Q_00, Q_01, Q_11: O(1) per
- * evaluation (fs_mk_rule_ratio). Same growth factors, FS_H_MAX, FS_H_MIN, fs_mean_step's cap (sd = sigma),
- * l_d = the lag of correlation e^-1/2 (FS_MK_ELL: lambda l_d, closed form).
+ * evaluation (fs_mk_rule_ratio: fs_return_rate's decisions, erfc only near a threshold).
+ * Same growth factors, FS_H_MAX, FS_H_MIN, fs_mean_step's cap (sd = sigma), l_d = the lag
+ * of correlation e^-1/2 (FS_MK_ELL: lambda l_d, closed form).
+ *
+ * Cost (tools/bench_markov.py; Matern 3/2, mean 0, 40 l rays continued through every hit,
+ * per ray: 12 flights, 11 hits, 263 steps, 542 rule evaluations, 67 bridge draws at
+ * refine 6; perf): rule evaluations ~40% (the node's transition and the rate bracket,
+ * latency-bound scalar code), the steps' transitions and state draws ~25% (Box-Muller
+ * about half), bridge draws ~8%, the hits' slope laws and draws ~7%. The rule is tried
+ * 2.06 times a step: near a crossing the ratio grows like h^12 (median of a rejected try
+ * 8e3), so one halving overshoots to ~1e-2 and the next doubling is rejected again;
+ * gentler growth (1.5 / 1.25 / 1, 1.4 / 1.1 / 0.9) or ratio-based shrinking cut the tries
+ * to 1.6-1.9 a step but took as many more steps, at equal or more time (same-run A/B),
+ * so fs_march.h's factors stay.
  *
  * Hit: between a state with f >= 0 and one with f < 0, bisection by exact bridge
  * sampling (the midpoint's state given both end states, fs_mk_bridge: precision
