@@ -103,10 +103,6 @@ inline FsMarkov fs_markov_of(GpKernel p, double3 dn)
     return m;
 }
 
-/* P(k, x) = e^-x sum_{j >= k} x^j / j! (regularised lower incomplete gamma) for k = 2p + 1
- * = 3 or 5, ex = e^-x: below x = 1 the series' tail by Horner (positive terms, no
- * cancellation as x -> 0; 17 terms: x^17 k! / (k + 17)! < 2e-18), above it 1 - the head
- * (P(5, 1) = 0.0037: <= 2.5 digits lost, ~1e-13 relative). */
 /* the series' coefficients k! / (k + i)!, i = 0..19, for k = 3 and 5 */
 __constant double fs_mk_tail3[20] = {
     1.0, 0.25, 0.05, 0.008333333333333333, 0.0011904761904761906, 0.00014880952380952382,
