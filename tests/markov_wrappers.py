@@ -1,5 +1,5 @@
 """Device wrappers of fs_markov.h for tests/test_fs_markov.py and tools/bench_markov.py:
-the transition, state paths, bridge draws, and flights continued through their hits with
+the transition, state paths, bridge draws, the step rule's ratio, and flights continued through their hits with
 either sampler (Markov or the general one of fs_march.h) on the same random streams."""
 import functools
 
@@ -61,6 +61,21 @@ __kernel void mk_bridge(__global const GpKernel* kp, __global const double* dir,
         slope[0] = fs_mk_bridge_slope(m, h1, h2, xa, xb, y0, &sd);
         slope[1] = sd;
     }
+}
+
+/* The step rule's ratio (fs_mk_rule_ratio) and scale * fs_return_rate for moments rows
+ * (m, m1, s, r, g) (fs_march.h's FsMoments, as Q's block: v = s^2, c = r s, w = g^2 + r^2)
+ * with the side `outside` (0, 1) and a scale per row: out[2 i], out[2 i + 1] */
+__kernel void mk_rule(__global const double* mom, __global const int* outside,
+                      __global const double* scales, __global double* out)
+{
+    int i = get_global_id(0);
+    double scale = scales[i];
+    double s = mom[5 * i + 2], r = mom[5 * i + 3], g = mom[5 * i + 4];
+    double Q[3][3] = {{s * s, r * s, 0.0}, {r * s, g * g + r * r, 0.0}, {0.0, 0.0, 0.0}};
+    out[2 * i] = fs_mk_rule_ratio(mom[5 * i], mom[5 * i + 1], Q, outside[i], scale);
+    out[2 * i + 1] = scale * fs_return_rate(fs_mk_moments(mom[5 * i], mom[5 * i + 1], Q),
+                                            outside[i]);
 }
 
 /* Rays along one line, continued straight through every hit from the vertex record up
@@ -157,6 +172,20 @@ def bridge(device, kernel, h1, h2, xa, xb, y0, n, seed, direction=(1.0, 0.0, 0.0
     cl.enqueue_copy(device.queue, out, ob)
     cl.enqueue_copy(device.queue, slope, sb)
     return out, slope
+
+
+def rule_ratios(device, moments, outside, scale):
+    """(fs_mk_rule_ratio, scale * fs_return_rate) per row of moments (n, 5); scale: one
+    or one per row."""
+    moments = np.asarray(moments, np.float64)
+    out = np.zeros((len(moments), 2))
+    ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
+    scales = np.broadcast_to(np.asarray(scale, np.float64), (len(moments),))
+    program(device.ctx)["mk_rule"](
+        device.queue, (len(moments),), None, buf(device.ctx, moments),
+        buf(device.ctx, np.asarray(outside, np.int32)), buf(device.ctx, scales), ob)
+    cl.enqueue_copy(device.queue, out, ob)
+    return out
 
 
 def flights(device, kernel, mean, n, markov, memory="none", refine=6,

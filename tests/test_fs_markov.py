@@ -15,7 +15,7 @@ from scipy import stats as sst
 from gpiscl.host.gp import Constant, Matern32, Matern52
 from gpiscl.host.gp import function_space as FS
 from gpiscl.host.gp.kernels import covariance_matrix
-from markov_wrappers import bridge, flights, paths, transition
+from markov_wrappers import bridge, flights, paths, rule_ratios, transition
 from stats import assert_agree, z_threshold
 from test_fs_adaptive import M32, M52, expected_crossings
 from test_fs_sampling import ks_two_sample
@@ -230,6 +230,40 @@ def test03_bridge_draws_follow_the_exact_conditional(device, name, widths):
     assert D < crit
     assert np.abs(W.mean(0)).max() * math.sqrt(n) < z
     assert abs(dev_m - sm) < 1e-7 * (abs(sm) + ssd) and abs(dev_sd - ssd) < 1e-7 * ssd
+
+
+def test03b_rule_ratio_makes_the_exact_rates_decisions(device):
+    """fs_mk_rule_ratio (the rate bracketed by normal-tail bounds, erfc only where a
+    threshold falls inside the bracket) puts every ratio on the same side of the step
+    rule's thresholds (accept <= 1; growth below 0.05, 0.3) as scale * fs_return_rate, over
+    random moments spanning deep tails, a < -8 (fs_return_rate's asymptotic), both sides
+    and degenerate ones, at random scales and at scales (up to 1e8) that put the exact
+    ratio within 1e-6..3e-2 relative of a threshold; and it settles most of them without
+    the exact rate (the bracket is used)."""
+    rng = np.random.default_rng(11)
+    n = 200000
+    s = 10.0 ** rng.uniform(-4, 1, n)
+    g = 10.0 ** rng.uniform(-3, 2, n)
+    mom = np.column_stack([s * rng.uniform(-1, 9, n), g * rng.normal(0, 12, n), s,
+                           s * rng.uniform(-1, 1, n) * 0.99, g])
+    mom[:100, 2] = 0.0          # degenerate: rate 0
+    side = rng.integers(0, 2, n)
+    out = rule_ratios(device, mom, side, 10.0 ** rng.uniform(-2, 8))
+    # scales the rule can meet (0.75 l_d / tol, tol >= 1e-8: rates below ~1e-8 are
+    # float denormals in both, decided by neither's rounding)
+    rate = rule_ratios(device, mom, side, 1.0)[:, 1]
+    ok = (rate > 1e-8) & (rate < 1e2)
+    th = rng.choice([0.05, 0.3, 1.0], n)
+    rel = rng.choice([-1.0, 1.0], n) * 10.0 ** rng.uniform(-6, -1.5, n)
+    near = rule_ratios(device, mom[ok], side[ok], (th * (1.0 + rel) / np.where(ok, rate, 1.0))[ok])
+    for o in (out, near):
+        for t in (0.05, 0.3):
+            assert np.array_equal(o[:, 0] < t, o[:, 1] < t), t
+        assert np.array_equal(o[:, 0] <= 1.0, o[:, 1] <= 1.0)
+    settled = np.mean(out[:, 0] != out[:, 1])
+    print(f"settled by the bracket: {settled:.1%} (near a threshold: "
+          f"{np.mean(near[:, 0] != near[:, 1]):.1%})")
+    assert settled > 0.5
 
 
 @pytest.mark.parametrize("name", ["m32", "m52"])

@@ -3,7 +3,7 @@ sampler of fs_march.h, same run, medians of --repeats (the two alternate, so loa
 other users of the machine hits both alike).
 
     python tools/bench_markov.py [--rays 4096] [--length 40] [--resolution 32] [--spp 4]
-        [--repeats 3]
+        [--repeats 3] [--refine 6]
 
 1. Free flight (tests/markov_wrappers.py's mk_flights): rays of --length l along a line
    through constant-mean Matern 3/2 and 5/2 (l = 1, sigma = 1, mean 0 and 2 sigma),
@@ -17,22 +17,40 @@ other users of the machine hits both alike).
    shipped (global memory) always takes the general sampler: global memory conditions
    on rows off the ray, which breaks the ray's Markov property.
 
-Measured (PoCL CPU, 2 cores shared with other jobs; defaults, same run, medians of 3;
-after both samplers took the Radau rule and the Newton slope inversion):
-    free flight      samples/s Markov / general     l/s ratio
-    m32 mu 0         1.97e6 / 8.01e5   2.5x          2.8x
-    m32 mu 2         2.34e6 / 6.86e5   3.4x          3.9x
-    m52 mu 0         1.35e6 / 6.41e5   2.1x          2.6x
-    m52 mu 2         1.60e6 / 6.49e5   2.5x          3.2x
-    render (32^2, 4 spp)  4.37e4 / 2.08e4 paths/s   2.1x
-(before them: Markov 6.7e5 / general 1.7e5 samples/s for m32 at mu 0, 4.0x; the general
-sampler gained most, its step rule having moved to a small system.) The issue's goal
-(30x) assumed a Cholesky over whole rays; the general sampler keeps a window of 16 rows
-and evaluates its step rule on <= 14, so its per-sample cost is already small, and both
-pay the same per-step overhead: a Rice-rate evaluation per try, a Philox normal per
-sample and, per hit, the slope inversion. Per call (wrapper loops, same machine, before
-the changes above): Markov transition A, Q 0.17 us, fs_return_rate 0.11 us (double;
-float now), fs_normal 0.10 us, a bridge draw 1.3 us.
+Measured (PoCL CPU, 2 cores shared with other jobs at load ~5; CPU time of this process
+(time.process_time: PoCL's threads included); defaults (refine 6), medians of 3; two
+runs of this branch and two of its base 2ecaf8b, alternating; ranges over the two):
+    free flight   samples/s Markov / general   ratio     l/s ratio   (base: ratio, l/s)
+    m32 mu 0      3.73-3.84e6 / 5.8-6.2e5      6.2-6.4x  7.0-7.3x    (2.9-3.0x, 3.3-3.4x)
+    m32 mu 2      3.78-3.98e6 / 6.1-6.4e5      6.2x      7.2x        (3.1-3.3x, 3.6-3.8x)
+    m52 mu 0      2.35-2.71e6 / 6.2-6.9e5      3.8-3.9x  4.6-4.8x    (1.9-2.1x, 2.3-2.6x)
+    m52 mu 2      2.69-2.90e6 / 5.9-6.4e5      4.6x      5.9x        (2.5-2.6x, 3.3x)
+    render 32^2, 4 spp   5.6-6.7e4 / 2.0-2.4e4 paths/s   2.75-2.85x  (2.0-2.1x)
+    render 64^2, 16 spp  8.06e4 / 2.02e4 paths/s         3.98x       (4.92e4 / 2.03e4, 2.43x)
+The Markov sampler itself is 1.75-2.1x faster per sample than at the base (same runs):
+closed-form A(h), Q(h) with one incomplete gamma by Estrin's scheme (a transition 53 ->
+18 ns), the rule's rate bracketed by normal-tail bounds with erfc only near a threshold
+(fs_mk_rule_ratio, the same decisions), the moments without the sqrt/divide chain, one
+sincos per Box-Muller pair, O(n^3) bridges with reciprocal pivots, no mean program on a
+ray where the mean's Lipschitz bound is 0, and the down-crossing slope search that crept
+up on its root by halvings (shared: ~18 evaluations of S a hit -> ~5; the general
+sampler gains from it too). Per call now (wrapper loops, min of 7, m32 / m52): transition
+18 / 24 ns, a rule evaluation with its transition ~72 ns (the exact rate alone 125), a
+step's state draw with its transition 78 / 141 ns, a bridge draw 145 / 230 ns (base 206 /
+363), the slope law at a hit 135 / 213 ns (base 263 / 418), the down-crossing slope ~0.45
+us (base 1.4). The rate at 32^2 is mostly the host's: at 64^2 and 16 spp the kernels'
+share shows. Where a flight's time goes and why the rule is tried 2.06 times a step:
+fs_markov.h's header ("Cost").
+What stands between this and the issue's 30x: the goal assumed a Cholesky over whole
+rays; the general sampler keeps a window of 16 rows and evaluates its step rule on <= 14,
+~1.6 us of CPU per sample. 30x would be ~55 ns a sample; a Markov step already costs
+2.06 rule evaluations (~72 ns each with the node's transition: an exp, the rate's two
+float exps and a latency chain of divisions) and its own transition and state draw
+(~78 ns, a Box-Muller log and sincos inside): ~0.23 us before bisections and hits, so
+~0.26 us a sample (measured) is near this structure's floor in scalar double code on this
+CPU (~7x). Beyond that: fewer rule evaluations (a step predictor that keeps the bound;
+the simple ones tried traded tries for steps), or work-items that step in lockstep so
+PoCL can vectorise (not with per-ray branching).
 """
 from __future__ import annotations
 
@@ -60,16 +78,17 @@ from markov_wrappers import flights  # noqa: E402
 SCENE = "scenes/fs_volume_room_global.json"
 
 
-def flight_rates(dev, kernel, mu, rays, length, repeats):
+def flight_rates(dev, kernel, mu, rays, length, repeats, refine):
     """Median samples/s and length/s, and per-ray samples, for Markov and general."""
     rates = {True: [], False: []}
     per_ray = {}
     for _ in range(repeats):
         for markov in (True, False):
-            t = time.perf_counter()
+            t = time.process_time()
             out = flights(dev, kernel, Constant(mu), rays, markov=markov,
-                          memory="renewal_plus", t1=length, seed=5, restarts=1 << 20)
-            sec = time.perf_counter() - t
+                          memory="renewal_plus", refine=refine, t1=length, seed=5,
+                          restarts=1 << 20)
+            sec = time.process_time() - t
             bad = int(np.count_nonzero(out[:, 5]))
             rates[markov].append((out[:, 6].sum() / sec, rays * length / sec))
             per_ray[markov] = (out[:, 6].mean(), out[:, 4].mean(), bad)
@@ -100,17 +119,21 @@ def main():
     ap.add_argument("--resolution", type=int, default=32)
     ap.add_argument("--spp", type=int, default=4)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--refine", type=int, default=6,
+                    help="free flight: root-search points forced per hit (the scenes' default)")
     ap.add_argument("--device", default=None)
     args = ap.parse_args()
     dev = Device(args.device)
     print(f"device: {dev.name}; median of {args.repeats}")
-    print(f"\nfree flight: {args.rays} rays x {args.length:g} l, renewal_plus, default tolerance")
+    print(f"\nfree flight: {args.rays} rays x {args.length:g} l, renewal_plus, default tolerance, "
+          f"refine {args.refine}")
     print(f"  {'kernel':8s}{'mu':>4s}{'sampler':>9s}{'samples/s':>12s}{'l/s':>11s}"
           f"{'samples/ray':>13s}{'hits/ray':>10s}{'failed':>8s}")
     flights(dev, Matern32(), Constant(0.0), 64, markov=True)    # builds the program
     for name, kern in (("m32", Matern32(1.0, 1.0)), ("m52", Matern52(1.0, 1.0))):
         for mu in (0.0, 2.0):
-            med, per = flight_rates(dev, kern, mu, args.rays, args.length, args.repeats)
+            med, per = flight_rates(dev, kern, mu, args.rays, args.length, args.repeats,
+                                    args.refine)
             for markov in (True, False):
                 s, ln = med[markov]
                 spr, hits, bad = per[markov]
@@ -128,9 +151,9 @@ def main():
     for _ in range(args.repeats):
         for g, (scene, settings) in variants.items():
             integ = WavefrontIntegrator(dev, scene, settings, None)
-            t = time.perf_counter()
+            t = time.process_time()
             res = integ.render(args.spp)
-            rates[g].append(res.stats.paths / (time.perf_counter() - t))
+            rates[g].append(res.stats.paths / (time.process_time() - t))
             stats[g] = res.stats
     for g, name in ((0, "Markov"), (1, "general")):
         st = stats[g]

@@ -20,10 +20,11 @@
  *   Q(h) = q int_0^h g(s) g(s)' ds,  g(s) = e^(F s) e_p = e^(-lambda s) G(s),
  * G_0 = s^p / p!, G_{i+1} = G_i' - lambda G_i (the impulse response and its derivatives),
  * so Q_ij = q sum_k c_ijk k! / (2 lambda)^(k+1) P(k + 1, 2 lambda h) with P the
- * regularised incomplete gamma. P(k + 1, x) is summed as e^-x sum_{j > k} x^j / j! below
- * x = 1 (fs_mk_gammas): the textbook Q = P_inf - A P_inf A' cancels to O(h^(2p+1)) (5/2 at
- * 1e-3 l_d: Q_00 ~ 1e-14 sigma^2, ~14 of 16 digits lost), the series has no cancellation
- * (Q's leading terms in h all have positive coefficients). Double throughout: Q(h)'s entries span
+ * regularised incomplete gamma. P(2p + 1, x) is summed as e^-x sum_{j > 2p} x^j / j! below
+ * x = 1 and the other P(k + 1, x) differ from it by closed-form terms (fs_mk_transition):
+ * the textbook Q = P_inf - A P_inf A' cancels to O(h^(2p+1)) (5/2 at 1e-3 l_d: Q_00 ~
+ * 1e-14 sigma^2, ~14 of 16 digits lost), the series has no cancellation (Q's leading
+ * terms in h all have positive coefficients). Double throughout: Q(h)'s entries span
  * h^(2p+1)..h, and bridges at 1e-2 l_d invert them (condition ~h^-2p); the Cholesky
  * factors of these diagonally graded matrices keep their relative accuracy.
  * tests/test_fs_markov.py checks A and Q against the kernel's derivative covariances.
@@ -39,8 +40,20 @@
  *
  * Step rule: fs_march.h's, with the conditional moments of (f, f') at ta + h in closed
  * form, m = mu + (A x)_0, m1 = mu' + (A x)_1, (v, c, w) = Q_00, Q_01, Q_11: O(1) per
- * evaluation. Same growth factors, FS_H_MAX, FS_H_MIN, fs_mean_step's cap (sd = sigma),
- * l_d = the lag of correlation e^-1/2 (FS_MK_ELL: lambda l_d, closed form).
+ * evaluation (fs_mk_rule_ratio: fs_return_rate's decisions, erfc only near a threshold).
+ * Same growth factors, FS_H_MAX, FS_H_MIN, fs_mean_step's cap (sd = sigma), l_d = the lag
+ * of correlation e^-1/2 (FS_MK_ELL: lambda l_d, closed form).
+ *
+ * Cost (tools/bench_markov.py; Matern 3/2, mean 0, 40 l rays continued through every hit,
+ * per ray: 12 flights, 11 hits, 263 steps, 542 rule evaluations, 67 bridge draws at
+ * refine 6; perf): rule evaluations ~40% (the node's transition and the rate bracket,
+ * latency-bound scalar code), the steps' transitions and state draws ~25% (Box-Muller
+ * about half), bridge draws ~8%, the hits' slope laws and draws ~7%. The rule is tried
+ * 2.06 times a step: near a crossing the ratio grows like h^12 (median of a rejected try
+ * 8e3), so one halving overshoots to ~1e-2 and the next doubling is rejected again;
+ * gentler growth (1.5 / 1.25 / 1, 1.4 / 1.1 / 0.9) or ratio-based shrinking cut the tries
+ * to 1.6-1.9 a step but took as many more steps, at equal or more time (same-run A/B),
+ * so fs_march.h's factors stay.
  *
  * Hit: between a state with f >= 0 and one with f < 0, bisection by exact bridge
  * sampling (the midpoint's state given both end states, fs_mk_bridge: precision
@@ -90,130 +103,137 @@ inline FsMarkov fs_markov_of(GpKernel p, double3 dn)
     return m;
 }
 
-/* 1 / j (a multiplication instead of a division in the series) */
-__constant double fs_mk_recip[22] = {0.0, 1.0, 1.0 / 2, 1.0 / 3, 1.0 / 4, 1.0 / 5, 1.0 / 6,
-    1.0 / 7, 1.0 / 8, 1.0 / 9, 1.0 / 10, 1.0 / 11, 1.0 / 12, 1.0 / 13, 1.0 / 14, 1.0 / 15,
-    1.0 / 16, 1.0 / 17, 1.0 / 18, 1.0 / 19, 1.0 / 20, 1.0 / 21};
+/* the series' coefficients k! / (k + i)!, i = 0..19, for k = 3 and 5 */
+__constant double fs_mk_tail3[20] = {
+    1.0, 0.25, 0.05, 0.008333333333333333, 0.0011904761904761906, 0.00014880952380952382,
+    1.6534391534391536e-05, 1.6534391534391535e-06, 1.5031265031265032e-07,
+    1.252605419272086e-08, 9.635426302092969e-10, 6.882447358637835e-11,
+    4.58829823909189e-12, 2.867686399432431e-13, 1.6868743526073125e-14,
+    9.371524181151737e-16, 4.932381147974598e-17, 2.466190573987299e-18,
+    1.1743764638034756e-19, 5.338074835470344e-21};
+__constant double fs_mk_tail5[20] = {
+    1.0, 0.16666666666666666, 0.023809523809523808, 0.002976190476190476,
+    0.00033068783068783067, 3.306878306878307e-05, 3.006253006253006e-06,
+    2.505210838544172e-07, 1.9270852604185938e-08, 1.376489471727567e-09,
+    9.17659647818378e-11, 5.735372798864862e-12, 3.373748705214625e-13,
+    1.8743048362303472e-14, 9.864762295949196e-16, 4.932381147974598e-17,
+    2.348752927606951e-18, 1.0676149670940688e-19, 4.641804204756821e-21,
+    1.934085085315342e-22};
 
-/* P[k] = P(k + 1, x) = e^-x sum_{j > k} x^j / j!, k = 0..kmax (regularised lower
- * incomplete gamma), in one pass: below x = 1 the series' upper tails (no cancellation
- * as x -> 0; 20 terms: x^21 / 21! < 2e-20), above it 1 - the head (P(5, 1) = 0.0037:
- * <= 2.5 digits lost, ~1e-13 relative). */
-inline void fs_mk_gammas(int kmax, double x, double ex, double* P)   /* ex = e^-x */
+/* P(k, x) = e^-x sum_{j >= k} x^j / j! (regularised lower incomplete gamma) for k = 2p + 1
+ * = 3 or 5, ex = e^-x: below x = 1 the series' tail e^-x x^k / k! sum_i c_i x^i (positive
+ * terms, no cancellation as x -> 0; 20 terms: the next < 1e-20), by Estrin's scheme
+ * (quads in x^4: a chain of 6 multiply-adds instead of Horner's 20, which was most of a
+ * transition); above it 1 - the head (P(5, 1) = 0.0037: <= 2.5 digits lost, ~1e-13
+ * relative). */
+inline double fs_mk_gamma_tail(int k, double x, double ex)
 {
-    double t = ex;   /* e^-x x^j / j! */
-    if (x >= 1.0) {
-        double head = 0.0;
-        for (int j = 0; j <= kmax; ++j) {
-            head += t;
-            P[j] = 1.0 - head;
-            t *= x * fs_mk_recip[j + 1];
-        }
-        return;
+    if (x >= 1.0) {   /* the head sum_{j < k} x^j / j! */
+        double head = 1.0 + x * (1.0 + x * 0.5);
+        if (k == 5) head += x * x * x * (1.0 / 6.0 + x * (1.0 / 24.0));
+        return 1.0 - ex * head;
     }
-    double term[21];
-    for (int j = 0; j < 21; ++j) { term[j] = t; t *= x * fs_mk_recip[j + 1]; }
-    double tail = 0.0;
-    for (int j = 20; j > 0; --j) {
-        tail += term[j];             /* sum_{i >= j} */
-        if (j - 1 <= kmax) P[j - 1] = tail;
-    }
+    __constant const double* c = k == 3 ? fs_mk_tail3 : fs_mk_tail5;
+    double x2 = x * x, x4 = x2 * x2, s = 0.0;
+    for (int j = 16; j >= 0; j -= 4)
+        s = s * x4 + ((c[j] + c[j + 1] * x) + (c[j + 2] + c[j + 3] * x) * x2);
+    double xk = k == 3 ? x2 * x * (1.0 / 6.0) : x4 * x * (1.0 / 120.0);
+    return ex * xk * s;
 }
 
-/* A(h) and Q(h) of a step of h world lengths (header comment) */
+/* A(h) and Q(h) of a step of h world lengths (header comment): closed forms in u = lambda
+ * h with e = e^-u, E = e^-2u and one incomplete gamma P = P(2p + 1, 2u); every other
+ * P(k + 1, 2u) in Q_ij = q sum_k c_ijk k! / (2 lambda)^(k+1) P(k + 1, 2u) differs from P by
+ * closed-form terms E (2u)^j / j!, which collect into the polynomials below (derived
+ * symbolically from the header's G_i; tests/test_fs_markov.py checks them to 1e-10 against
+ * the kernel's joint law). Their leading orders in u keep Q's graded entries exact to
+ * rounding: no difference of O(1) terms. */
 inline void fs_mk_transition(FsMarkov m, double h, double A[3][3], double Q[3][3])
 {
-    int n = m.n, p = n - 1;
-    double l = m.lam, e = exp(-l * h);
-    double N[3][3] = {{0.0}}, N2[3][3];
-    for (int i = 0; i < p; ++i) N[i][i + 1] = 1.0;
-    /* last row of F: -(lambda^3, 3 lambda^2, 3 lambda) or -(lambda^2, 2 lambda) */
-    if (p == 1) { N[1][0] = -l * l; N[1][1] = -2.0 * l; }
-    else { N[2][0] = -l * l * l; N[2][1] = -3.0 * l * l; N[2][2] = -3.0 * l; }
-    for (int i = 0; i < n; ++i) N[i][i] += l;
-    for (int i = 0; i < n; ++i)
-        for (int j = 0; j < n; ++j) {
-            double s = 0.0;
-            for (int k = 0; k < n; ++k) s += N[i][k] * N[k][j];
-            N2[i][j] = s;
-        }
-    for (int i = 0; i < n; ++i)
-        for (int j = 0; j < n; ++j)
-            A[i][j] = e * ((i == j ? 1.0 : 0.0) + h * N[i][j] + (p == 2 ? 0.5 * h * h * N2[i][j] : 0.0));
-    /* G_i(s) coefficients (ascending powers), G_0 = s^p / p! */
-    double G[3][3] = {{0.0}};
-    G[0][p] = p == 2 ? 0.5 : 1.0;
-    for (int i = 0; i < p; ++i)
-        for (int k = 0; k <= p; ++k)
-            G[i + 1][k] = (k + 1 <= p ? (double)(k + 1) * G[i][k + 1] : 0.0) - l * G[i][k];
-    /* I_k = int_0^h s^k e^{-2 lambda s} ds = k! / (2 lambda)^(k+1) P(k + 1, 2 lambda h) */
-    double I[5], Pg[5], fact = 1.0, pw = 2.0 * l;
-    fs_mk_gammas(2 * p, 2.0 * l * h, e * e, Pg);   /* e^-2 lambda h */
-    for (int k = 0; k <= 2 * p; ++k) {
-        I[k] = fact / pw * Pg[k];
-        fact *= (double)(k + 1);
-        pw *= 2.0 * l;
+    double l = m.lam, u = l * h, e = exp(-u), E = e * e, s2 = m.s2;
+    if (m.n == 2) {
+        A[0][0] = e * (1.0 + u);  A[0][1] = e * h;
+        A[1][0] = -e * l * u;     A[1][1] = e * (1.0 - u);
+        double P = fs_mk_gamma_tail(3, 2.0 * u, E);
+        Q[0][0] = s2 * P;
+        Q[1][0] = Q[0][1] = s2 * 2.0 * l * u * u * E;
+        Q[1][1] = s2 * l * l * (P + 4.0 * u * E);
+        return;
     }
-    /* q = sigma^2 (2 lambda)^(2p+1) (p!)^2 / (2p)!: 4 s2 l^3, 16/3 s2 l^5 */
-    double q = p == 1 ? 4.0 * m.s2 * l * l * l : 16.0 / 3.0 * m.s2 * l * l * l * l * l;
-    for (int i = 0; i < n; ++i)
-        for (int j = 0; j <= i; ++j) {
-            double s = 0.0;
-            for (int a = 0; a <= p; ++a)
-                for (int b = 0; b <= p; ++b) s += G[i][a] * G[j][b] * I[a + b];
-            Q[i][j] = Q[j][i] = q * s;
-        }
+    double u2 = u * u, l2 = l * l;
+    A[0][0] = e * (1.0 + u + 0.5 * u2);  A[0][1] = e * h * (1.0 + u);  A[0][2] = e * 0.5 * h * h;
+    A[1][0] = -e * 0.5 * l * u2;         A[1][1] = e * (1.0 + u - u2);  A[1][2] = e * 0.5 * h * (2.0 - u);
+    A[2][0] = e * 0.5 * l2 * u * (u - 2.0);  A[2][1] = e * l * u * (u - 3.0);
+    A[2][2] = e * 0.5 * (u2 - 4.0 * u + 2.0);
+    double P = fs_mk_gamma_tail(5, 2.0 * u, E), su3E = s2 * u2 * u * E;
+    Q[0][0] = s2 * P;
+    Q[1][0] = Q[0][1] = s2 * (2.0 / 3.0) * l * u2 * u2 * E;
+    Q[1][1] = s2 * l2 / 3.0 * P + (4.0 / 9.0) * l2 * su3E * (4.0 - u);
+    Q[2][0] = Q[0][2] = -s2 * l2 / 3.0 * P + (8.0 / 9.0) * l2 * su3E * (1.0 - u);
+    Q[2][1] = Q[1][2] = s2 * (2.0 / 3.0) * l2 * l * u2 * (u - 2.0) * (u - 2.0) * E;
+    Q[2][2] = s2 * l2 * l2 * (P + 16.0 / 3.0 * u * (u2 - u + 1.0) * E);
 }
 
-/* Lower Cholesky factor of the n x n matrix a (n <= 3) in L; a non-positive pivot
- * (rounding of a degenerate Q) gives a zero column. */
-inline void fs_mk_chol(int n, double a[3][3], double L[3][3])
+/* Lower Cholesky factor of the n x n matrix a (n <= 3) in L and the reciprocals of its
+ * diagonal in d (the solves below multiply by them: double divisions were a good part
+ * of a bridge draw); a non-positive pivot (rounding of a degenerate Q) gives a zero
+ * column and d = 0. */
+inline void fs_mk_chol(int n, double a[3][3], double L[3][3], double* d)
 {
     for (int j = 0; j < 3; ++j)
         for (int i = 0; i < 3; ++i) L[j][i] = 0.0;
     for (int j = 0; j < n; ++j) {
-        double d = a[j][j];
-        for (int k = 0; k < j; ++k) d -= L[j][k] * L[j][k];
-        L[j][j] = d > 0.0 ? sqrt(d) : 0.0;
+        double p = a[j][j];
+        for (int k = 0; k < j; ++k) p -= L[j][k] * L[j][k];
+        L[j][j] = p > 0.0 ? sqrt(p) : 0.0;
+        d[j] = p > 0.0 ? 1.0 / L[j][j] : 0.0;
         for (int i = j + 1; i < n; ++i) {
             double s = a[i][j];
             for (int k = 0; k < j; ++k) s -= L[i][k] * L[j][k];
-            L[i][j] = L[j][j] > 0.0 ? s / L[j][j] : 0.0;
+            L[i][j] = s * d[j];
         }
     }
 }
 
-/* x := L^-1 x (forward) or L^-T x (backward) on the first n entries */
-inline void fs_mk_forward(int n, double L[3][3], double* x)
+/* x := L^-1 x (forward) or L^-T x (backward) on the first n entries (d: fs_mk_chol's) */
+inline void fs_mk_forward(int n, double L[3][3], const double* d, double* x)
 {
     for (int i = 0; i < n; ++i) {
         double s = x[i];
         for (int k = 0; k < i; ++k) s -= L[i][k] * x[k];
-        x[i] = s / L[i][i];
+        x[i] = s * d[i];
     }
 }
 
-inline void fs_mk_backward(int n, double L[3][3], double* x)
+inline void fs_mk_backward(int n, double L[3][3], const double* d, double* x)
 {
     for (int i = n - 1; i >= 0; --i) {
         double s = x[i];
         for (int k = i + 1; k < n; ++k) s -= L[k][i] * x[k];
-        x[i] = s / L[i][i];
+        x[i] = s * d[i];
     }
 }
 
-/* The inverse of a positive definite n x n matrix through its Cholesky factor. */
+/* The inverse of a positive definite n x n matrix through its Cholesky factor: W = L^-1
+ * (lower triangular), a^-1 = W'W. */
 inline void fs_mk_inverse(int n, double a[3][3], double out[3][3])
 {
-    double L[3][3];
-    fs_mk_chol(n, a, L);
+    double L[3][3], W[3][3], d[3];
+    fs_mk_chol(n, a, L, d);
     for (int j = 0; j < n; ++j) {
-        double c[3] = {0.0, 0.0, 0.0};
-        c[j] = 1.0;
-        fs_mk_forward(n, L, c);
-        fs_mk_backward(n, L, c);
-        for (int i = 0; i < n; ++i) out[i][j] = c[i];
+        W[j][j] = d[j];
+        for (int i = j + 1; i < n; ++i) {
+            double s = 0.0;
+            for (int k = j; k < i; ++k) s += L[i][k] * W[k][j];
+            W[i][j] = -d[i] * s;
+        }
     }
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j <= i; ++j) {
+            double s = 0.0;
+            for (int k = i; k < n; ++k) s += W[k][i] * W[k][j];
+            out[i][j] = out[j][i] = s;
+        }
 }
 
 /* fs_normal at slots slot .. slot + n - 1 (n <= 3, slot even), one Philox block and one
@@ -222,9 +242,9 @@ inline void fs_mk_normals(FsRng rng, uint seg, uint slot, int n, double* z)
 {
     for (int j = 0; j < n; j += 2) {
         double2 u = fs_uniform2(rng, seg, (slot + (uint)j) >> 1);
-        double rad = sqrt(-2.0 * log(1.0 - u.x)), ang = 2.0 * M_PI * u.y;
-        z[j] = rad * cos(ang);
-        if (j + 1 < n) z[j + 1] = rad * sin(ang);
+        double rad = sqrt(-2.0 * log(1.0 - u.x)), c, sn = sincos(2.0 * M_PI * u.y, &c);
+        z[j] = rad * c;
+        if (j + 1 < n) z[j + 1] = rad * sn;
     }
 }
 
@@ -238,8 +258,8 @@ inline void fs_mk_copy(int n, double src[3][3], double dst[3][3])
 inline void fs_mk_advance(FsMarkov m, double A[3][3], double Q[3][3], double* x,
                           FsRng rng, uint seg, uint slot)
 {
-    double L[3][3], z[3], y[3];
-    fs_mk_chol(m.n, Q, L);
+    double L[3][3], d[3], z[3], y[3];
+    fs_mk_chol(m.n, Q, L, d);
     fs_mk_normals(rng, seg, slot, m.n, z);
     for (int i = 0; i < m.n; ++i) {
         double s = 0.0;
@@ -277,15 +297,21 @@ inline void fs_mk_bridge(FsMarkov m, double h1, double h2, const double* xa,
         for (int k = 0; k < n; ++k) s += P2[i][k] * xb[k];
         w[i] = s;
     }
+    double PA[3][3];                  /* P2 A2, then Lam = P1 + A2' (P2 A2) */
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j) {
+            double s = 0.0;
+            for (int k = 0; k < n; ++k) s += P2[i][k] * A2[k][j];
+            PA[i][j] = s;
+        }
     for (int i = 0; i < n; ++i) {
         double s = 0.0;
         for (int k = 0; k < n; ++k) s += P1[i][k] * a[k] + A2[k][i] * w[k];
         eta[i] = s;
-        for (int j = 0; j < n; ++j) {
+        for (int j = 0; j <= i; ++j) {
             double t = P1[i][j];
-            for (int k = 0; k < n; ++k)
-                for (int r = 0; r < n; ++r) t += A2[k][i] * P2[k][r] * A2[r][j];
-            Lam[i][j] = t;
+            for (int k = 0; k < n; ++k) t += A2[k][i] * PA[k][j];
+            Lam[i][j] = Lam[j][i] = t;
         }
     }
 }
@@ -294,14 +320,14 @@ inline void fs_mk_bridge(FsMarkov m, double h1, double h2, const double* xa,
 inline void fs_mk_bridge_sample(FsMarkov m, double h1, double h2, const double* xa,
                                 const double* xb, FsRng rng, uint seg, uint slot, double* x)
 {
-    double Lam[3][3], L[3][3], eta[3];
+    double Lam[3][3], L[3][3], d[3], eta[3];
     fs_mk_bridge(m, h1, h2, xa, xb, Lam, eta);
-    fs_mk_chol(m.n, Lam, L);
-    fs_mk_forward(m.n, L, eta);
+    fs_mk_chol(m.n, Lam, L, d);
+    fs_mk_forward(m.n, L, d, eta);
     double z[3];
     fs_mk_normals(rng, seg, slot, m.n, z);
     for (int j = 0; j < m.n; ++j) eta[j] += z[j];
-    fs_mk_backward(m.n, L, eta);
+    fs_mk_backward(m.n, L, d, eta);
     for (int j = 0; j < m.n; ++j) x[j] = eta[j];
 }
 
@@ -326,20 +352,61 @@ inline double fs_mk_bridge_slope(FsMarkov m, double h1, double h2, const double*
     return mean;
 }
 
-/* Conditional moments of (f, f') h on from state x (transition A, Q given), prior mean
- * mu and its slope mu1 there. */
-inline FsMoments fs_mk_moments(FsMarkov m, double A[3][3], double Q[3][3], const double* x,
-                               double mu, double mu1)
+/* Conditional moments of (f, f') with means (m, m1) and covariance Q's leading 2 x 2
+ * block (Q(h) of the state h on: v = Q_00, c = Q_01, w = Q_11) as fs_march.h's rule
+ * takes them. */
+inline FsMoments fs_mk_moments(double m, double m1, double Q[3][3])
 {
     FsMoments M;
-    double y0 = 0.0, y1 = 0.0;
-    for (int k = 0; k < m.n; ++k) { y0 += A[0][k] * x[k]; y1 += A[1][k] * x[k]; }
-    M.m = mu + y0;
-    M.m1 = mu1 + y1;
+    M.m = m;
+    M.m1 = m1;
     M.s = sqrt(fmax(Q[0][0], 0.0));
     M.r = M.s > 0.0 ? Q[0][1] / M.s : 0.0;
     M.g = sqrt(fmax(Q[1][1] - M.r * M.r, 0.0));
     return M;
+}
+
+/* The step rule's ratio r = scale * fs_return_rate(fs_mk_moments(m, m1, Q), outside), or
+ * any value on the same side of each of the rule's thresholds (accept r <= 1; grow by 2,
+ * 1.5, 1.1 below 0.05, 0.3, 1): the same decisions, without erfc where the bracket below
+ * settles them (erfcf was ~18% of a flight, measured). rate = phi(z) e(a) g / s with
+ * e(a) = phi(a) + a Phi(a); Birnbaum's and Sampford's bounds on the normal tail,
+ * 2 / (t + sqrt(t^2 + 4)) < Q(t) / phi(t) < 4 / (3t + sqrt(t^2 + 8)) (t >= 0), bracket
+ * e(a) within 15% (both exact at a = 0, both ~phi(a) / a^2 as a -> -inf), written without
+ * cancellation. z^2 = m^2 / v, a = (m1 - c m / v) / g and g / s from one division (the
+ * chain sqrt, divide, sqrt, divide of the moments was most of an evaluation's latency);
+ * phi needs z^2 only. The bracket is widened by 1e-4 for the float rounding of z^2
+ * (<= 2e-5 relative in r at z^2 ~ 170, where phi(z) underflows in float) and of a.
+ * Degenerate moments take fs_return_rate itself. */
+inline double fs_mk_rule_ratio(double m, double m1, double Q[3][3], int outside,
+                               double scale)
+{
+    double v = Q[0][0], c = Q[0][1];
+    if (!(v > 0.0)) return 0.0;
+    double iv = 1.0 / v, g2 = Q[1][1] - c * c * iv;
+    double ms = outside ? m : -m, m1s = outside ? m1 : -m1;
+    float a = (float)(m1s - c * iv * ms) * rsqrt((float)g2);
+    if (!(g2 > 0.0) || !(a == a))
+        return scale * fs_return_rate(fs_mk_moments(m, m1, Q), outside);
+    float pa = fs_phif(a), lo, hi, t = fabs(a);
+    float s4 = sqrt(t * t + 4.0f), s8 = sqrt(t * t + 8.0f);
+    if (a >= 0.0f) {   /* e = phi(a) + a (1 - Q(a)) */
+        lo = pa + a * (1.0f - pa * 4.0f / (3.0f * a + s8));
+        hi = pa + a * (1.0f - pa * 2.0f / (a + s4));
+    } else {           /* e = phi(t) - t Q(t), t = -a */
+        lo = pa * 8.0f / ((s8 + t) * (3.0f * t + s8));
+        hi = pa * 4.0f / ((t + s4) * (t + s4));
+        /* below a = -8 fs_return_rate takes the asymptotic phi(a) / a^2 (1 - 3 / a^2),
+         * up to 0.35% under e(a) (0.04% under lo there): the bracket must hold it */
+        if (a < -8.0f) lo *= 0.995f;
+    }
+    float pz = 0.39894228f * exp(-0.5f * (float)(ms * ms * iv));
+    double k = (double)pz * sqrt(g2 * iv) * scale;
+    double rlo = k * lo * (1.0 - 1e-4), rhi = k * hi * (1.0 + 1e-4);
+    /* a threshold strictly inside (rlo, rhi] could go either way: decide it exactly */
+    if ((rlo < 0.05 && rhi >= 0.05) || (rlo < 0.3 && rhi >= 0.3) || (rlo <= 1.0 && rhi > 1.0))
+        return scale * fs_return_rate(fs_mk_moments(m, m1, Q), outside);
+    return rhi;
 }
 
 /* The prior mean at ray parameter t and its slope along dn (per world length) */
@@ -350,6 +417,17 @@ inline double fs_mk_mean(__global const MeanNode* mean, int mc, FsRay ray, doubl
     float v = gp_mean_eval(mean, mc, convert_float3(ray.o + t * ray.d), &g);
     *slope = dot(convert_double3(g), dn);
     return (double)v;
+}
+
+/* fs_mk_mean, or (flat: the mean's Lipschitz bound on the ray is 0, so it is constant
+ * there) its value mu0 at the start and slope 0 without evaluating the mean program: the
+ * same numbers (a constant mean's gradient is exactly 0), ~5% of a flight through a
+ * constant mean (measured). */
+inline double fs_mk_mean_on(int flat, double mu0, __global const MeanNode* mean, int mc,
+                            FsRay ray, double3 dn, double t, double* slope)
+{
+    if (flat) { *slope = 0.0; return mu0; }
+    return fs_mk_mean(mean, mc, ray, dn, t, slope);
 }
 
 /* The start state's free components given those set (Y, and Y' if `slope_set`):
@@ -388,6 +466,7 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
     double h = 0.5 * ell, tol = (double)prm.miss_tol, grow = 1.0, sd = sqrt(m.s2);
     double lip = (double)gp_mean_lipschitz_on(mean, mc, convert_float3(ray.o + ray.t0 * ray.d),
                                               convert_float3(ray.o + ray.t1 * ray.d)) * dlen;
+    int flat = !(lip > 0.0);
     double Ae[3][3], Qe[3][3], Am[3][3], Qm[3][3], mue = 0.0, mu1e = 0.0;
     int step = 0;
     for (;; ++step) {
@@ -401,16 +480,18 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
             /* fs_march.h's Radau rule: one node at 2h/3 per try (nu(ta) = 0) */
             int clipped = ta + h >= ray.t1;
             double hs = clipped ? ray.t1 - ta : h, mu1m;
-            double mum = fs_mk_mean(mean, mc, ray, dn, ta + FS_RADAU_NODE * hs, &mu1m);
+            double mum = fs_mk_mean_on(flat, mu, mean, mc, ray, dn, ta + FS_RADAU_NODE * hs,
+                                      &mu1m);
             fs_mk_transition(m, FS_RADAU_NODE * hs * dlen, Am, Qm);
-            double r = FS_RADAU_WEIGHT
-                * fs_return_rate(fs_mk_moments(m, Am, Qm, x, mum, mu1m), outside)
-                * dlen * ell / tol;
+            double y0 = 0.0, y1 = 0.0;   /* the node's conditional means: A x */
+            for (int k = 0; k < m.n; ++k) { y0 += Am[0][k] * x[k]; y1 += Am[1][k] * x[k]; }
+            double r = fs_mk_rule_ratio(mum + y0, mu1m + y1, Qm, outside,
+                                        FS_RADAU_WEIGHT * dlen * ell / tol);
             res.evals++;
             if (r <= 1.0 || h <= FS_H_MIN * ell) {
                 tb = clipped ? ray.t1 : ta + hs;
                 grow = r < 0.05 ? 2.0 : (r < 0.3 ? 1.5 : 1.1);
-                mue = fs_mk_mean(mean, mc, ray, dn, ta + hs, &mu1e);
+                mue = fs_mk_mean_on(flat, mu, mean, mc, ray, dn, ta + hs, &mu1e);
                 fs_mk_transition(m, hs * dlen, Ae, Qe);
                 break;
             }
@@ -437,7 +518,7 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
         double hh = 0.5 * (tb - ta) * dlen;     /* both halves, exactly equal */
         fs_mk_bridge_sample(m, hh, hh, x, xb, rng, (uint)step,
                             FS_SLOT_REFINE + (uint)(stride * k), xm);
-        double f = fs_mk_mean(mean, mc, ray, dn, tm, &mu1m) + xm[0];
+        double f = fs_mk_mean_on(flat, mu, mean, mc, ray, dn, tm, &mu1m) + xm[0];
         res.samples++;
         if (isnan(f)) { res.status = FS_STATUS_NAN; return res; }
         if (f >= 0.0) { ta = tm; fa = f; for (int j = 0; j < m.n; ++j) x[j] = xm[j]; }
@@ -449,7 +530,7 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
     res.hit = 1;
     res.t = ta + (tb - ta) * w;
     double3 xh = ray.o + res.t * ray.d;
-    double muh1, muh = fs_mk_mean(mean, mc, ray, dn, res.t, &muh1), gsd;
+    double muh1, muh = fs_mk_mean_on(flat, mu, mean, mc, ray, dn, res.t, &muh1), gsd;
     double b = muh1 + fs_mk_bridge_slope(m, (res.t - ta) * dlen, (tb - res.t) * dlen, x, xb,
                                          -muh, &gsd);
     double s = fs_downcrossing_slope(b, gsd, fs_uniform2(rng, step, FS_U_SLOPE));
