@@ -3,7 +3,7 @@ sampler of fs_march.h, same run, medians of --repeats (the two alternate, so loa
 other users of the machine hits both alike).
 
     python tools/bench_markov.py [--rays 4096] [--length 40] [--resolution 32] [--spp 4]
-        [--repeats 3] [--refine 6]
+        [--repeats 3] [--refine N]
 
 1. Free flight (tests/markov_wrappers.py's mk_flights): rays of --length l along a line
    through constant-mean Matern 3/2 and 5/2 (l = 1, sigma = 1, mean 0 and 2 sigma),
@@ -70,6 +70,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 from gpiscl.host.compile.scene import compile_scene  # noqa: E402
 from gpiscl.host.gp import Constant, Matern32, Matern52  # noqa: E402
 from gpiscl.host.layout import records as layouts  # noqa: E402
+from gpiscl.host.layout import function_space_records as FL  # noqa: E402
 from gpiscl.host.render.device import Device  # noqa: E402
 from gpiscl.host.render.integrator import WavefrontIntegrator  # noqa: E402
 from gpiscl.host.scene.loading import load_scene  # noqa: E402
@@ -119,8 +120,9 @@ def main():
     ap.add_argument("--resolution", type=int, default=32)
     ap.add_argument("--spp", type=int, default=4)
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--refine", type=int, default=6,
-                    help="free flight: root-search points forced per hit (the scenes' default)")
+    ap.add_argument("--refine", type=int, default=FL.DEFAULT_REFINE,
+                    help="free flight: root-search points forced per hit (default: the "
+                         "scenes' default)")
     ap.add_argument("--device", default=None)
     args = ap.parse_args()
     dev = Device(args.device)

@@ -510,16 +510,19 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
         for (int j = 0; j < m.n; ++j) x[j] = xb[j];
     }
 
-    /* bisection by bridge draws in (ta, tb]: x is the state at ta, xb at tb */
-    /* an even number of slots per bisection (fs_mk_normals pairs them): 2 or 4 */
+    /* the root search (fs_march.h's fs_root_point: points chosen from values already
+     * drawn) by bridge draws in (ta, tb]: x is the state at ta, xb at tb */
+    /* an even number of slots per point (fs_mk_normals pairs them): 2 or 4 */
     int stride = (m.n + 1) & ~1, kmax = (FS_SLOT_NORMAL - FS_SLOT_REFINE) / stride;
-    for (int k = 0; (k < prm.refine || tb - ta > FS_ROOT_WIDTH * ell) && k < kmax; ++k) {
-        double tm = 0.5 * (ta + tb), xm[3], mu1m;
-        double hh = 0.5 * (tb - ta) * dlen;     /* both halves, exactly equal */
-        fs_mk_bridge_sample(m, hh, hh, x, xb, rng, (uint)step,
+    double width = FS_ROOT_WIDTH * ell;
+    int budget = fs_root_budget(tb - ta, width);
+    for (int k = 0; (k < prm.refine || tb - ta > width) && k < kmax; ++k) {
+        double tm = fs_root_point(ta, tb, fa, fb, width, k, budget), xm[3], mu1m;
+        fs_mk_bridge_sample(m, (tm - ta) * dlen, (tb - tm) * dlen, x, xb, rng, (uint)step,
                             FS_SLOT_REFINE + (uint)(stride * k), xm);
         double f = fs_mk_mean_on(flat, mu, mean, mc, ray, dn, tm, &mu1m) + xm[0];
         res.samples++;
+        res.roots++;
         if (isnan(f)) { res.status = FS_STATUS_NAN; return res; }
         if (f >= 0.0) { ta = tm; fa = f; for (int j = 0; j < m.n; ++j) x[j] = xm[j]; }
         else { tb = tm; fb = f; for (int j = 0; j < m.n; ++j) xb[j] = xm[j]; }
