@@ -13,9 +13,11 @@
  * against 40 (numpy, tools/bench_adaptive_marching.py's docstring has the table): SE at
  * spacing 0.8 l (typical steps) +0.7%, at 1.2 l +3e-6; at 0.5 l +63% but of a variance
  * that is 0.7% of sigma^2 (given 16: +7%); RQ alpha = 1: +2% at 0.3 l, +4e-4 at 0.5 l.
- * Rice's crossing rate with it (tests/test_fs_adaptive.py --long, 2e6 length scales):
- * SE within 0.4% at mu/sigma = 0, 1; RQ alpha = 1 at mu = sigma +0.6 +- 0.2% there,
- * -0.3 +- 0.26% with another seed (window 32: -0.5 +- 0.26%). All memory models condition
+ * Rice's crossing rate with it (tests/test_fs_adaptive.py --long): SE within 0.4% at
+ * mu/sigma = 0, 1. The rational quadratic (correlation ~ 1/t^2) counted +0.45 +- 0.15%
+ * at mu = sigma with 16, where the adaptive step packs samples near the level and 16
+ * span too little ray; it takes 32 (compile/gpis.py sampler_window has the numbers):
+ * FsParams.window per object, FS_WINDOW the default. All memory models condition
  * on the window inside a ray; they differ only at a vertex (fs_begin). Segments, their N
  * and the 256 cap are gone.
  *
