@@ -17,16 +17,19 @@ other users of the machine hits both alike).
    shipped (global memory) always takes the general sampler: global memory conditions
    on rows off the ray, which breaks the ray's Markov property.
 
-Measured (PoCL CPU, 2 cores shared with other jobs at load ~5; CPU time of this process
-(time.process_time: PoCL's threads included); defaults (refine 6), medians of 3; two
-runs of this branch and two of its base 2ecaf8b, alternating; ranges over the two):
-    free flight   samples/s Markov / general   ratio     l/s ratio   (base: ratio, l/s)
-    m32 mu 0      3.73-3.84e6 / 5.8-6.2e5      6.2-6.4x  7.0-7.3x    (2.9-3.0x, 3.3-3.4x)
-    m32 mu 2      3.78-3.98e6 / 6.1-6.4e5      6.2x      7.2x        (3.1-3.3x, 3.6-3.8x)
-    m52 mu 0      2.35-2.71e6 / 6.2-6.9e5      3.8-3.9x  4.6-4.8x    (1.9-2.1x, 2.3-2.6x)
-    m52 mu 2      2.69-2.90e6 / 5.9-6.4e5      4.6x      5.9x        (2.5-2.6x, 3.3x)
-    render 32^2, 4 spp   5.6-6.7e4 / 2.0-2.4e4 paths/s   2.75-2.85x  (2.0-2.1x)
-    render 64^2, 16 spp  8.06e4 / 2.02e4 paths/s         3.98x       (4.92e4 / 2.03e4, 2.43x)
+Measured (PoCL CPU, 2 cores, quiet machine; CPU time of this process (time.process_time:
+PoCL's threads included); defaults (refine 0, the ITP root search), medians of 3, main
+at c8b3f6c):
+    free flight   samples/s Markov / general   ratio     l/s ratio
+    m32 mu 0      2.94e6 / 5.03e5              5.85x     6.73x
+    m32 mu 2      3.66e6 / 5.90e5              6.22x     7.23x
+    m52 mu 0      2.33e6 / 5.61e5              4.15x     5.25x
+    m52 mu 2      2.67e6 / 5.63e5              4.74x     6.21x
+    render 32^2, 4 spp   5.98e4 / 2.22e4 paths/s   2.69x
+    render 64^2, 16 spp  7.61e4 / 1.93e4 paths/s   3.94x
+Against its base 2ecaf8b at refine 6 (helper's runs, load ~5, alternating): samples/s
+ratios 6.2-6.4x / 6.2x / 3.8-3.9x / 4.6x, then 2.9-3.0x / 3.1-3.3x / 1.9-2.1x / 2.5-2.6x
+at the base; renders 2.75-2.85x at 32^2 (base 2.0-2.1x), 3.98x at 64^2 (base 2.43x).
 The Markov sampler itself is 1.75-2.1x faster per sample than at the base (same runs):
 closed-form A(h), Q(h) with one incomplete gamma by Estrin's scheme (a transition 53 ->
 18 ns), the rule's rate bracketed by normal-tail bounds with erfc only near a threshold

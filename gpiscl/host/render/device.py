@@ -104,6 +104,11 @@ class Device:
                               "the film needs for batch-independent accumulation")
 
     @property
+    def is_cpu(self) -> bool:
+        """A CPU device: its memory is the process's, and it vectorises within work-items."""
+        return bool(self.device.type & cl.device_type.CPU)
+
+    @property
     def name(self) -> str:
         return f"{self.device.platform.name.strip()} / {self.device.name.strip()}"
 
@@ -213,8 +218,7 @@ def to_device(device: Device, array: np.ndarray, writable=False) -> cl.Buffer:
         array = np.zeros(1, dtype=array.dtype)
     array = np.ascontiguousarray(array)
     align = max(int(device.device.mem_base_addr_align) // 8, 16)
-    if (not writable and device.device.type & cl.device_type.CPU
-            and array.ctypes.data % align == 0):
+    if not writable and device.is_cpu and array.ctypes.data % align == 0:
         return cl.Buffer(device.ctx, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=array)
     flags = (mf.READ_WRITE if writable else mf.READ_ONLY) | mf.COPY_HOST_PTR
     return cl.Buffer(device.ctx, flags, hostbuf=array)

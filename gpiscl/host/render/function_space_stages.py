@@ -20,15 +20,14 @@ from ..layout import function_space_records as FL
 # chunk). On a CPU the device's memory is the process's and every page a batch or a chunk
 # touches stays resident, while 16 MB already keeps two cores busy: the global-memory room
 # (4 KB of ring a path, 58 KB of scratch per item) held 59 MB of scratch and 32 MB of
-# rings at 256 MB budgets, 16 + 16 MB at these, at the same paths/s (see the commit).
-RING_BUDGET = {"cpu": 16 << 20, "other": 256 << 20}
-SCRATCH_BUDGET = {"cpu": 16 << 20, "other": 256 << 20}
+# rings at 256 MB budgets, 16 + 16 MB at these, at the same paths/s (tools/bench_scenes.py, same run).
+BUDGET, CPU_BUDGET = 256 << 20, 16 << 20
 # Work-groups per compute unit in one chunk: enough that the units finish together (the
 # work per ray varies by several times), few enough that the scratch stays small. A CPU
 # touches every scratch page a chunk uses: chunks of the whole batch (up to ~15,000 items
 # of 17.7 KB each for the knob) held ~250 MB resident where 16 groups a unit hold ~9 MB
 # on two cores, at the same paths/s (tools/bench_scenes.py). A GPU's many units still
-# reach SCRATCH_BUDGET first.
+# reach BUDGET first.
 GROUPS_PER_UNIT = 16
 
 
@@ -43,14 +42,14 @@ def ring_stride(objects: np.ndarray) -> int:
     return int(glob["memory_cap"].max()) if len(glob) else 1
 
 
-def budget(table: dict, device: Device) -> int:
-    """A byte budget of RING_BUDGET or SCRATCH_BUDGET for the device's kind."""
-    return table["cpu" if device.device.type & cl.device_type.CPU else "other"]
+def budget(device: Device) -> int:
+    """Bytes of rings per batch, and of scratch per launch, on this device."""
+    return CPU_BUDGET if device.is_cpu else BUDGET
 
 
 def max_batch(objects: np.ndarray, device: Device) -> int:
-    """The largest batch whose rings fit the device's RING_BUDGET."""
-    return max(1, budget(RING_BUDGET, device)
+    """The largest batch whose rings fit the device's budget."""
+    return max(1, budget(device)
                // (ring_stride(objects) * FL.FS_OBS.dtype.itemsize))
 
 
@@ -81,7 +80,7 @@ class FunctionSpaceStages:
                  timings: KernelTimings | None = None, mean_nodes: np.ndarray | None = None):
         self.device, self.objects, self.batch, self.timings = device, objects, batch, timings
         self.stride = ring_stride(objects)
-        self.local = 16 if device.device.type & cl.device_type.CPU else 64
+        self.local = 16 if device.is_cpu else 64
         self.checked = mean_nodes is not None
         rows = 0
         if mean_nodes is not None:
@@ -115,7 +114,7 @@ class FunctionSpaceStages:
             self.program.timings = self.timings
         slice_bytes = 8 * defines["FS_SCRATCH_DOUBLES"]
         parallel = int(self.device.device.max_compute_units) * self.local * GROUPS_PER_UNIT
-        chunk = max(1, min(self.batch, budget(SCRATCH_BUDGET, self.device) // (2 * slice_bytes), parallel))
+        chunk = max(1, min(self.batch, budget(self.device) // (2 * slice_bytes), parallel))
         self.chunk = int(-(-chunk // self.local) * self.local)
         self.scratch = cl.Buffer(self.device.ctx, cl.mem_flags.READ_WRITE,
                                  2 * slice_bytes * self.chunk)

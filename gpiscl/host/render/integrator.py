@@ -26,19 +26,19 @@ from ..compile.scene import CompiledScene
 # CPU the queues are the process's own memory and every page a batch touches stays
 # resident, while 2^15 paths already keep its cores as busy as 2^18 (wedge_volume, 4 spp,
 # same run: paths per CPU second x1.00, per wall second x0.98) and touch 14 MB, not 110.
-DEFAULT_BATCH = {"cpu": 1 << 15, "other": 1 << 18}
+DEFAULT_BATCH, CPU_DEFAULT_BATCH = 1 << 18, 1 << 15
 
 
 def default_batch(device: Device) -> int:
-    return DEFAULT_BATCH["cpu" if device.device.type & cl.device_type.CPU else "other"]
+    return CPU_DEFAULT_BATCH if device.is_cpu else DEFAULT_BATCH
 
 
 def ws_defines(device: Device) -> dict:
     """Weight-space features run WS_LANES per work-item in vector types: what makes the
     feature loop SIMD on CPU runtimes; GPUs vectorise across work-items instead."""
-    is_cpu = bool(device.device.type & cl.device_type.CPU)
     # the native float width measured 1.3-1.6x faster than 8 lanes on a 16-wide CPU
-    return {"WS_LANES": min(16, max(1, device.device.native_vector_width_float)) if is_cpu else 1}
+    lanes = min(16, max(1, device.device.native_vector_width_float))
+    return {"WS_LANES": lanes if device.is_cpu else 1}
 
 
 def stage_program(device: Device) -> Program:

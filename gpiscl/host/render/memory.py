@@ -75,7 +75,7 @@ def plan(device, num_pixels: int, batch: int, max_memory: int | None = None,
     (the device's global memory, and the host's available memory, whichever is smaller;
     on a CPU device both are the same RAM, so their needs add up)."""
     dev = device.device
-    is_cpu = bool(dev.type & 2)           # cl.device_type.CPU, without importing pyopencl
+    is_cpu = device.is_cpu
     film_device = num_pixels * (FILM_BYTES_PER_PIXEL + (AOV_BYTES_PER_PIXEL if aov else 0))
     film_host = num_pixels * (HOST_BYTES_PER_PIXEL + (2 * AOV_BYTES_PER_PIXEL if aov else 0))
     if max_memory is not None:
