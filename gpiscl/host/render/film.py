@@ -48,11 +48,22 @@ class Film:
         cl.enqueue_copy(self.queue, s, self.sum)
         cl.enqueue_copy(self.queue, q, self.sum_sq)
         cl.enqueue_copy(self.queue, c, self.count)
+        # in place: an image's worth of float64 per step, not one per temporary (the end
+        # of a render is its peak of memory); the same operations in the same order
         n = c[..., None]
+        empty, single = ~(n > 0), ~(n > 1)
         with np.errstate(invalid="ignore", divide="ignore"):
-            mean = np.where(n > 0, s / n, 0.0)
-            var = np.where(n > 1, np.maximum(q - n * mean * mean, 0.0) / (n - 1), 0.0)
-            stderr = np.sqrt(np.where(n > 0, var / n, 0.0))
+            mean = s / n
+            mean[np.broadcast_to(empty, mean.shape)] = 0.0
+            var = n * mean                     # unbiased variance of one sample
+            var *= mean
+            np.subtract(q, var, out=var)
+            np.maximum(var, 0.0, out=var)
+            var /= n - 1
+            var[np.broadcast_to(single, var.shape)] = 0.0
+            var /= n                           # ... of the mean: its standard error
+            var[np.broadcast_to(empty, var.shape)] = 0.0
+            stderr = np.sqrt(var, out=var)
         aov = None
         if self.has_aov:
             aov = np.empty((h, w, 12), np.float64)

@@ -86,12 +86,8 @@ class FunctionSpaceStages:
         if mean_nodes is not None:
             from ..compile.posterior import posterior_rows
             rows = int(posterior_rows(mean_nodes, objects).max(initial=0))
+        self.work = None      # the per-batch buffers, allocated when a launch needs them
         self._build(rows)
-        mf, ctx = cl.mem_flags, device.ctx
-        self.vertex = cl.Buffer(ctx, mf.READ_WRITE, FL.FS_VERTEX.dtype.itemsize * batch)
-        self.vertex_object = cl.Buffer(ctx, mf.READ_WRITE, 4 * batch)
-        self.rings = cl.Buffer(ctx, mf.READ_WRITE,
-                               FL.FS_OBS.dtype.itemsize * self.stride * batch)
 
     def _check_posterior(self, means):
         if not self.checked:
@@ -116,8 +112,31 @@ class FunctionSpaceStages:
         parallel = int(self.device.device.max_compute_units) * self.local * GROUPS_PER_UNIT
         chunk = max(1, min(self.batch, budget(self.device) // (2 * slice_bytes), parallel))
         self.chunk = int(-(-chunk // self.local) * self.local)
-        self.scratch = cl.Buffer(self.device.ctx, cl.mem_flags.READ_WRITE,
-                                 2 * slice_bytes * self.chunk)
+        self.scratch_bytes = 2 * slice_bytes * self.chunk
+        self.release()        # a rebuilt program may need a larger scratch
+
+    def _work(self) -> tuple:
+        """(vertex, vertex_object, rings, scratch): the path-indexed vertex records and
+        rings of one batch and the chunk's scratch, allocated on first use after release."""
+        if self.work is None:
+            mf, ctx, batch = cl.mem_flags, self.device.ctx, self.batch
+            self.work = (cl.Buffer(ctx, mf.READ_WRITE, FL.FS_VERTEX.dtype.itemsize * batch),
+                         cl.Buffer(ctx, mf.READ_WRITE, 4 * batch),
+                         cl.Buffer(ctx, mf.READ_WRITE,
+                                   FL.FS_OBS.dtype.itemsize * self.stride * batch),
+                         cl.Buffer(ctx, mf.READ_WRITE, self.scratch_bytes))
+        return self.work
+
+    def release(self) -> None:
+        """Free the per-batch buffers (between renders: the vertex records and rings only
+        live within a batch); the next launch allocates them again."""
+        for buf in self.work or ():
+            buf.release()
+        self.work = None
+
+    def _args(self) -> tuple:
+        vertex, vertex_object, rings, scratch = self._work()
+        return vertex, vertex_object, rings, np.int32(self.stride), scratch
 
     def _chunks(self, name, n, head, tail):
         """Launch over [0, n) in chunks with a fixed local size: PoCL compiles a kernel
@@ -134,14 +153,12 @@ class FunctionSpaceStages:
         """Rays [0, n) of `rays`: hits moved to function-space crossings, vertices recorded."""
         self._check_posterior(means)
         self._chunks("gpis_function_space", n, (params,),
-                     (*paths.args, *rays.args, gpis_objects, kernels, means, self.vertex,
-                      self.vertex_object, self.rings, np.int32(self.stride), self.scratch,
+                     (*paths.args, *rays.args, gpis_objects, kernels, means, *self._args(),
                       counters))
 
     def shadow(self, params, paths, shadow, n, gpis_objects, kernels, means, counters):
         """Shadow rays (at most n: one per hit) blocked by function-space crossings."""
         self._check_posterior(means)
         self._chunks("gpis_shadow_function_space", n, (params,),
-                     (*paths.args, *shadow.args, gpis_objects, kernels, means, self.vertex,
-                      self.vertex_object, self.rings, np.int32(self.stride), self.scratch,
+                     (*paths.args, *shadow.args, gpis_objects, kernels, means, *self._args(),
                       counters))

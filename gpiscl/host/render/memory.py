@@ -12,6 +12,7 @@ naming the resolution, with --max-memory to override the estimate of what is ava
 """
 from __future__ import annotations
 
+import ctypes
 import os
 import re
 
@@ -100,3 +101,17 @@ def plan(device, num_pixels: int, batch: int, max_memory: int | None = None,
         raise SceneError(source, key, f"no memory left for even one path after the film "
                          f"({gib(film)} of {gib(available)})")
     return max(1, min(batch, fits))
+
+
+def return_freed_pages() -> None:
+    """Hand the heap's free pages back to the system after large buffers are released.
+
+    PoCL's CPU device allocates buffers with malloc. A queue's per-field buffers (128 KB
+    each at 2^15 paths) fall below glibc's dynamic mmap threshold, so their pages stay in
+    the heap after release and the process keeps them resident; malloc_trim returns every
+    free page (measured: 11 MB of queues at 2^15 paths). A no-op without glibc."""
+    try:
+        trim = ctypes.CDLL(None).malloc_trim
+    except (OSError, AttributeError):
+        return
+    trim(0)

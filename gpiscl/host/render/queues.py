@@ -20,3 +20,8 @@ class DeviceQueue:
     @property
     def args(self) -> list:
         return [self.buffers[f] for _, f in self.layout.fields]
+
+    def release(self) -> None:
+        for buf in self.buffers.values():
+            buf.release()
+        self.buffers = {}
