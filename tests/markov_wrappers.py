@@ -73,7 +73,9 @@ __kernel void mk_rule(__global const double* mom, __global const int* outside,
     double scale = scales[i];
     double s = mom[5 * i + 2], r = mom[5 * i + 3], g = mom[5 * i + 4];
     double Q[3][3] = {{s * s, r * s, 0.0}, {r * s, g * g + r * r, 0.0}, {0.0, 0.0, 0.0}};
-    out[2 * i] = fs_mk_rule_ratio(mom[5 * i], mom[5 * i + 1], Q, outside[i], scale);
+    float X, gam;
+    out[2 * i] = fs_mk_rule_ratio(mom[5 * i], mom[5 * i + 1], Q, outside[i], scale, 1.0f, &X,
+                                  &gam);
     out[2 * i + 1] = scale * fs_return_rate(fs_mk_moments(mom[5 * i], mom[5 * i + 1], Q),
                                             outside[i]);
 }

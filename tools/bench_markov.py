@@ -17,9 +17,26 @@ other users of the machine hits both alike).
    shipped (global memory) always takes the general sampler: global memory conditions
    on rows off the ray, which breaks the ray's Markov property.
 
-Measured (PoCL CPU, 2 cores, quiet machine; CPU time of this process (time.process_time:
-PoCL's threads included); defaults (refine 0, the ITP root search), medians of 3, main
-at c8b3f6c):
+Measured 2026-12-02 (helper markov3: fs_mk_predict, the step predictor; PoCL CPU, 2
+cores, load average 7-9 from other sessions, so single timings scatter by 10-20%; CPU time
+of this process; defaults (refine 0), each line the median of 4 bench runs of 3 (two
+sessions of two), base and predictor alternating):
+    free flight   samples/s Markov / general   ratio   l/s ratio   base 40b0be2: ratio, l/s
+    m32 mu 0      2.10e6 / 3.58e5              5.75x   7.35x       6.58x, 7.57x
+    m32 mu 2      2.15e6 / 3.79e5              5.73x   7.46x       6.37x, 7.41x
+    m52 mu 0      1.50e6 / 3.55e5              4.19x   5.58x       3.75x, 4.73x
+    m52 mu 2      1.64e6 / 3.56e5              4.65x   6.75x       4.15x, 5.44x
+    render 32^2, 4 spp   3.69e4 / 1.36e4 paths/s   2.73x                2.61x
+The general sampler is the same code in both trees, yet its rate moved by up to 16%
+between their runs (m52: 4.0e5 in the base's, 3.55e5 in the predictor's): the load. The
+Markov sampler's own l/s, base -> predictor in the same session: m32 3.16e5 -> 3.33e5
+(+5%), 9.09e5 -> 9.72e5 (+7%); m52 5.69e5 -> 5.84e5 (+3%), 1.27e6 -> 1.41e6 (+11%).
+Per ray (CPU us, 40 l, medians of 5 alternating runs of tests/markov_wrappers.flights,
+base / predictor): m32 mu 0 130.0 / 122.3 (1.06x), mu 2 43.7 / 42.8 (1.02x), m52 mu 0
+74.8 / 70.4 (1.06x), mu 2 29.5 / 29.7 (0.99x). The predictor takes fewer samples per l
+(m32 mu 0: 279 -> 252, m52: 108 -> 103) and 35% fewer rule evaluations (544 -> 350, 161 ->
+110), so the samples/s ratio understates it: the l/s ratio is the equal-accuracy one.
+Before it (main at c8b3f6c, quiet machine, medians of 3):
     free flight   samples/s Markov / general   ratio     l/s ratio
     m32 mu 0      2.94e6 / 5.03e5              5.85x     6.73x
     m32 mu 2      3.66e6 / 5.90e5              6.22x     7.23x
@@ -42,18 +59,20 @@ sampler gains from it too). Per call now (wrapper loops, min of 7, m32 / m52): t
 step's state draw with its transition 78 / 141 ns, a bridge draw 145 / 230 ns (base 206 /
 363), the slope law at a hit 135 / 213 ns (base 263 / 418), the down-crossing slope ~0.45
 us (base 1.4). The rate at 32^2 is mostly the host's: at 64^2 and 16 spp the kernels'
-share shows. Where a flight's time goes and why the rule is tried 2.06 times a step:
-fs_markov.h's header ("Cost").
+share shows. Where a flight's time goes, the predictor and what was tried besides it:
+fs_markov.h's header ("Step rule", "Cost").
 What stands between this and the issue's 30x: the goal assumed a Cholesky over whole
 rays; the general sampler keeps a window of 16 rows and evaluates its step rule on <= 14,
-~1.6 us of CPU per sample. 30x would be ~55 ns a sample; a Markov step already costs
-2.06 rule evaluations (~72 ns each with the node's transition: an exp, the rate's two
-float exps and a latency chain of divisions) and its own transition and state draw
-(~78 ns, a Box-Muller log and sincos inside): ~0.23 us before bisections and hits, so
-~0.26 us a sample (measured) is near this structure's floor in scalar double code on this
-CPU (~7x). Beyond that: fewer rule evaluations (a step predictor that keeps the bound;
-the simple ones tried traded tries for steps), or work-items that step in lockstep so
-PoCL can vectorise (not with per-ray branching).
+~1.6-2 us of CPU per sample. 30x would be ~55-65 ns a sample. A Markov step costs its
+own transition and state draw (~78 ns quiet, a Box-Muller log and sincos inside) plus
+1.4 rule evaluations with the predictor (~72 ns each) and the predictor: ~0.2 us before
+bisections and hits. Even the rule's floor (an oracle taking the largest accepted step
+at every step, its search not counted: 175 instead of ~235 steps a ray for m32, 58
+instead of ~80 for m52) at one evaluation a step would do 374 / 146 evaluations plus
+samples a ray against 602 / 213 now (820 / 269 with the fixed growth factors): at most
+~1.6x more from the step sequence, not 5x. Beyond that: a different rule (fewer, longer steps at the same miss
+bound), or work-items that step in lockstep so PoCL can vectorise across rays (not with
+per-ray branching as now).
 """
 from __future__ import annotations
 

@@ -40,20 +40,39 @@
  *
  * Step rule: fs_march.h's, with the conditional moments of (f, f') at ta + h in closed
  * form, m = mu + (A x)_0, m1 = mu' + (A x)_1, (v, c, w) = Q_00, Q_01, Q_11: O(1) per
- * evaluation (fs_mk_rule_ratio: fs_return_rate's decisions, erfc only near a threshold).
- * Same growth factors, FS_H_MAX, FS_H_MIN, fs_mean_step's cap (sd = sigma), l_d = the lag
- * of correlation e^-1/2 (FS_MK_ELL: lambda l_d, closed form).
+ * evaluation (fs_mk_rule_ratio: fs_return_rate's decision at ratio 1, erfc only near it).
+ * Same acceptance (ratio <= 1, or h at FS_H_MIN), FS_H_MAX, FS_H_MIN, fs_mean_step's cap
+ * (sd = sigma), l_d = the lag of correlation e^-1/2 (FS_MK_ELL: lambda l_d, closed form).
+ * The proposals differ: fs_march.h grows the last step by 2, 1.5 or 1.1 and halves a
+ * rejected try, which near a crossing (ratio ~ h^12 there) overshot after every halving
+ * and was rejected again (2.06 tries a step). Here fs_mk_predict aims each try at ratio
+ * 2^FS_MK_TARGET from the last try's X = z^2 + a^2 [a < 0] (log r ~ -X / 2) and the
+ * state's value and slope (a rejected try: the same state; the next step: the new one),
+ * in float with bit-read log2 / exp2 (its latency is on every step's chain). Laws are
+ * unchanged (each accepted step has ratio <= 1, the same miss bound); the step sequence,
+ * hence the random numbers' use, is not bit-identical to the fixed factors'. Counts per
+ * 40 l ray (mean 0, renewal_plus, refine 0; tests/test_fs_markov.py test03c), fixed
+ * factors -> predictor: Matern 3/2 279 samples and 544 evaluations -> 251 and 350 (1.39
+ * evaluations a sample, 43% of first tries rejected), 5/2 108 and 161 -> 103 and 110.
+ * The floor of this rule: the largest accepted step found by bisection at every step (an
+ * oracle, its evaluations not counted) takes 199 / 87 samples, so 175 / 58 steps.
+ * Tried and dropped (counts of evaluations + samples per ray, 3/2 / 5/2; fixed factors
+ * 820 / 269, this 602 / 213): log-linear extrapolation with the secant's exponent (817 /
+ * 286) or with the exact d log r / d log h (the derivative of every term, 790 / 289:
+ * log r is far from linear in log h); z^2 alone instead of X (667 / 233); a leading-
+ * order model of z and a separately (584 / 214, the same time); the next step from the
+ * new state's conditional mean before its draw, to overlap the draw's latency (663 / 227,
+ * no faster); growth up to 4 (608 / 228), targets 2^0..2^-4 (598-613 / 213-214); two
+ * tries at once (h and 0.6 h, independent chains for the core to overlap: 791 / 267,
+ * 13-18% slower a ray, so the evaluations are not latency alone).
  *
  * Cost (tools/bench_markov.py; Matern 3/2, mean 0, 40 l rays continued through every hit,
- * per ray: 12 flights, 11 hits, 263 steps, 542 rule evaluations, 67 bridge draws at
- * refine 6; perf): rule evaluations ~40% (the node's transition and the rate bracket,
- * latency-bound scalar code), the steps' transitions and state draws ~25% (Box-Muller
- * about half), bridge draws ~8%, the hits' slope laws and draws ~7%. The rule is tried
- * 2.06 times a step: near a crossing the ratio grows like h^12 (median of a rejected try
- * 8e3), so one halving overshoots to ~1e-2 and the next doubling is rejected again;
- * gentler growth (1.5 / 1.25 / 1, 1.4 / 1.1 / 0.9) or ratio-based shrinking cut the tries
- * to 1.6-1.9 a step but took as many more steps, at equal or more time (same-run A/B),
- * so fs_march.h's factors stay.
+ * per ray: 12 flights, 11 hits, ~235 steps, 350 rule evaluations, ~17 root points at
+ * refine 0; perf): the rule evaluations (the node's transition and the rate bracket) and
+ * the steps' transitions ~30%, the predictor and the loop ~16%, state draws ~20%
+ * (Box-Muller's log ~6%), the hits' bridges, slope laws and draws ~8%: latency-bound
+ * scalar code, so the predictor's 35% fewer evaluations gave only -1..+11% (median ~5%)
+ * more length a second (same-run medians under load; tools/bench_markov.py's docstring).
  *
  * Hit: between a state with f >= 0 and one with f < 0, bisection by exact bridge
  * sampling (the midpoint's state given both end states, fs_mk_bridge: precision
@@ -77,6 +96,14 @@
 #define FS_MK_ELL32 1.3576766739458992   /* (1 + x) e^-x = e^-1/2 */
 #define FS_MK_ELL52 1.9262524514893138   /* (1 + x + x^2 / 3) e^-x = e^-1/2 */
 #define FS_MK_ROOT_CLAMP 1e-9            /* the root's fraction of the bracket, see fs_mk_hit */
+/* The step predictor (fs_mk_predict): the ratio 2^FS_MK_TARGET it aims the next try at,
+ * and the factors it may change h by, growing after an accepted step and shrinking
+ * after a rejected try */
+#define FS_MK_TARGET -3.0f
+#define FS_MK_GROW_MIN 0.5f
+#define FS_MK_GROW_MAX 2.0f
+#define FS_MK_SHRINK_MIN 0.0625f
+#define FS_MK_SHRINK_MAX 0.75f
 
 typedef struct {
     int n;          /* state size p + 1 */
@@ -379,13 +406,17 @@ inline FsMoments fs_mk_moments(double m, double m1, double Q[3][3])
  * (<= 2e-5 relative in r at z^2 ~ 170, where phi(z) underflows in float) and of a.
  * Degenerate moments take fs_return_rate itself. */
 inline double fs_mk_rule_ratio(double m, double m1, double Q[3][3], int outside,
-                               double scale)
+                               double scale, float hn, float* X, float* gam)
 {
     double v = Q[0][0], c = Q[0][1];
+    *X = 0.0f;
+    *gam = 0.0f;
     if (!(v > 0.0)) return 0.0;
     double iv = 1.0 / v, g2 = Q[1][1] - c * c * iv;
     double ms = outside ? m : -m, m1s = outside ? m1 : -m1;
     float a = (float)(m1s - c * iv * ms) * rsqrt((float)g2);
+    *X = (float)(ms * ms * iv) + (a < 0.0f ? a * a : 0.0f);
+    *gam = 2.0f * (float)(c * iv) * hn;
     if (!(g2 > 0.0) || !(a == a))
         return scale * fs_return_rate(fs_mk_moments(m, m1, Q), outside);
     float pa = fs_phif(a), lo, hi, t = fabs(a);
@@ -404,9 +435,51 @@ inline double fs_mk_rule_ratio(double m, double m1, double Q[3][3], int outside,
     double k = (double)pz * sqrt(g2 * iv) * scale;
     double rlo = k * lo * (1.0 - 1e-4), rhi = k * hi * (1.0 + 1e-4);
     /* a threshold strictly inside (rlo, rhi] could go either way: decide it exactly */
-    if ((rlo < 0.05 && rhi >= 0.05) || (rlo < 0.3 && rhi >= 0.3) || (rlo <= 1.0 && rhi > 1.0))
+    if (rlo <= 1.0 && rhi > 1.0)
         return scale * fs_return_rate(fs_mk_moments(m, m1, Q), outside);
     return rhi;
+}
+
+/* log2 x and 2^y within 0.09 in log2 (Mitchell: the float's bits read as a piecewise
+ * linear log2): the predictor's accuracy, at a few operations instead of a log and an exp
+ * on its latency chain */
+inline float fs_mk_log2(float x)
+{
+    return (float)as_int(fmax(x, 1e-30f)) * (1.0f / 8388608.0f) - 127.0f;
+}
+
+inline float fs_mk_exp2(float y)
+{
+    return as_float((int)((clamp(y, -126.0f, 126.0f) + 127.0f) * 8388608.0f));
+}
+
+/* log2 of X_t, the X at which the ratio would be 2^FS_MK_TARGET, from a try that saw X and
+ * ratio 2^lr: the ratio is mostly e^(-X / 2) (X below), so X_t = X + 2 ln 2 (lr - target);
+ * an underflowed ratio (r = 0 reads as lr ~ -100) says only that X is large. */
+inline float fs_mk_target_x(float X, float lr)
+{
+    return fs_mk_log2(fmax(lr > -99.0f ? X + 1.3862944f * (lr - FS_MK_TARGET) : 0.25f * X,
+                           1.0f));
+}
+
+/* The step predictor: the factor rho on h at which the rule's ratio would be about
+ * 2^FS_MK_TARGET. The ratio is phi(z) e(a) g / s (fs_mk_rule_ratio) with e(a) ~ phi(a) /
+ * a^2 for a < 0, so log r ~ -X / 2 + slowly varying terms, X = z^2 + a^2 [a < 0]. At small
+ * h, z and a both scale like the node's mean m over s ~ rho^(gam / 2) (v ~ h^gam, gam = 2
+ * c hn / v from dv/dh = 2c; a = (m1 - c m / v) / g with c / v ~ gam / 2h, g^2 ~ h^(gam -
+ * 2)), so X(rho) = X (m(rho) / mn)^2 rho^-gam, mn the node mean X was seen at and m(rho) =
+ * a0 + b0 rho linear (a0 the value at the step's start, b0 its slope times the node's
+ * distance; a rejected try: the chord to the node's mean). One Newton step in log2 rho
+ * from 0 on log2 X(rho) = log2 X_t (lx = log2 X - log2 X_t); clamped to [lo, hi].
+ * Only the step sequence depends on it: a step is still accepted only at ratio <= 1. */
+inline float fs_mk_predict(float lx, float a0, float b0, float mn, float gam, float lo,
+                           float hi)
+{
+    float m = a0 + b0;
+    if (!(m > 0.0f) || !(mn > 0.0f)) return clamp(0.5f, lo, hi);   /* the level within reach */
+    float G = lx + 2.0f * (fs_mk_log2(m) - fs_mk_log2(mn)), dG = 2.0f * b0 / m - gam;
+    float L = dG < -0.1f ? -G / dG : (G > 0.0f ? 1.0f : -1.0f);
+    return clamp(fs_mk_exp2(clamp(L, -4.0f, 2.0f)), lo, hi);
 }
 
 /* The prior mean at ray parameter t and its slope along dn (per world length) */
@@ -468,7 +541,9 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
                                               convert_float3(ray.o + ray.t1 * ray.d)) * dlen;
     int flat = !(lip > 0.0);
     double Ae[3][3], Qe[3][3], Am[3][3], Qm[3][3], mue = 0.0, mu1e = 0.0;
-    int step = 0;
+    /* the accepted try's numbers for the next step's prediction (fs_mk_predict) */
+    float p_lx = 0.0f, p_mn = 0.0f, p_gam = 0.0f, p_hn = 0.0f;
+    int p_ok = 0, step = 0;
     for (;; ++step) {
         if (ta >= ray.t1) return res;
         if (step >= FS_MAX_STEPS) { res.status = FS_STATUS_STEPS; return res; }
@@ -485,17 +560,30 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
             fs_mk_transition(m, FS_RADAU_NODE * hs * dlen, Am, Qm);
             double y0 = 0.0, y1 = 0.0;   /* the node's conditional means: A x */
             for (int k = 0; k < m.n; ++k) { y0 += Am[0][k] * x[k]; y1 += Am[1][k] * x[k]; }
+            float X, gam, hn = (float)(FS_RADAU_NODE * hs * dlen);
             double r = fs_mk_rule_ratio(mum + y0, mu1m + y1, Qm, outside,
-                                        FS_RADAU_WEIGHT * dlen * ell / tol);
+                                        FS_RADAU_WEIGHT * dlen * ell / tol, hn, &X, &gam);
             res.evals++;
+            /* the predictor's numbers: the node's mean on the safe side (> 0), gam */
+            float sg = outside ? 1.0f : -1.0f, mn = sg * (float)(mum + y0);
+            float lx = fs_mk_log2(X) - fs_mk_target_x(X, fs_mk_log2((float)fmin(r, 1e30)));
+            gam = gam > 0.5f && gam < 5.0f ? gam : 3.0f;
             if (r <= 1.0 || h <= FS_H_MIN * ell) {
                 tb = clipped ? ray.t1 : ta + hs;
-                grow = r < 0.05 ? 2.0 : (r < 0.3 ? 1.5 : 1.1);
+                p_ok = r <= 1.0 && X > 0.0f && mn > 0.0f;   /* else (the floor's forced step) 2 */
+                p_lx = lx;
+                p_mn = mn;
+                p_gam = gam;
+                p_hn = hn;
                 mue = fs_mk_mean_on(flat, mu, mean, mc, ray, dn, ta + hs, &mu1e);
                 fs_mk_transition(m, hs * dlen, Ae, Qe);
                 break;
             }
-            h = 0.5 * hs;
+            /* the same state: from the step's start value along the chord to the node */
+            float a0 = sg * (float)fa;
+            h = fmax(hs * (X > 0.0f ? fs_mk_predict(lx, a0, mn - a0, mn, gam, FS_MK_SHRINK_MIN,
+                                                    FS_MK_SHRINK_MAX) : 0.5f),
+                     FS_H_MIN * ell);
         }
         for (int j = 0; j < m.n; ++j) xb[j] = x[j];
         fs_mk_advance(m, Ae, Qe, xb, rng, (uint)step, 0u);
@@ -504,6 +592,11 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
         if (isnan(fb)) { res.status = FS_STATUS_NAN; return res; }
         if (outside && fb < 0.0) break;
         outside = fb >= 0.0;
+        /* the next step's first try: the new value and slope, the accepted node's X */
+        float sg = outside ? 1.0f : -1.0f;
+        grow = p_ok ? fs_mk_predict(p_lx, sg * (float)fb, sg * (float)(mu1e + xb[1]) * p_hn,
+                                    p_mn, p_gam, FS_MK_GROW_MIN, FS_MK_GROW_MAX)
+                    : 2.0;
         ta = tb;
         fa = fb;
         mua = mue;
