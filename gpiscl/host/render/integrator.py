@@ -143,7 +143,7 @@ class WavefrontIntegrator:
         self.escaped = DeviceQueue(ctx, layouts.INDEX_QUEUE, cap)
         self.shadow = DeviceQueue(ctx, layouts.SHADOW_QUEUE, cap)
         # not a scene key: off, every ray solves for its posterior weights (the baseline
-        # of tests/test_ws_posterior.py's cache test)
+        # of tests/test_kriging_cache.py)
         self.kriging = kriging_cache.KrigingCache(device, gpis.objects, gpis.mean_nodes, cap,
                                                   settings.get("kriging_cache", True))
         self.counters_host = np.zeros(layouts.NUM_COUNTERS, np.int32)
