@@ -22,6 +22,18 @@ Scenes default to the issue-16 set: ws_sphere_se, ws_sphere_rq, the posterior sp
 and the knob. Trees default to this checkout; pass a second worktree at an older commit to
 get before/after ratios from the same run (the machines are shared and noisy: rounds
 interleave the trees, numbers are medians, ratios are medians of per-round ratios).
+
+Measured (2026-12-02, PoCL CPU, 2 cores shared with other jobs at load 7-10; --modes
+render --repeats 3; before = 40b0be2, after = the per-path kriging cache of
+render/kriging_cache.py; same run):
+  scene              paths/s before -> after     paths/CPU-s before -> after   peak RSS
+  posterior sphere   1783 -> 2197 (x1.29)        2918 -> 3360 (x1.16)          144 -> 147 MB
+  ws_sphere_se       16450 -> 19590 (x1.06)      27900 -> 27930 (x1.01)        144 -> 145 MB
+An earlier run of the same at load ~8 gave x1.09 (posterior sphere) and x0.92
+(ws_sphere_se, whose code did not change: the wall-time noise). Solves of the posterior's
+weights per path: 2.21 -> 0.88 (64x64, 4 spp; every ray that searched the object solved);
+their share of the posterior sphere's render CPU before: ~31% (a build solving twice per
+search took 3.3 s more CPU on 10.5 s, 128x128, 2 spp, medians of 3).
 """
 from __future__ import annotations
 
