@@ -7,7 +7,9 @@ render paths/s, peak resident memory, and time to first pixel cold and warm.
 Every measurement is a fresh `python -m gpiscl render` process (PYTHONPATH = the tree),
 so imports, scene preparation, OpenCL compiles and caches count as a user sees them:
   render  the scene at its own resolution, --spp samples: paths/s as the CLI prints it
-          (its own timer), and peak RSS (the process's ru_maxrss); PoCL's and the bake
+          (its own timer), paths per CPU second of the whole process (ru_utime + ru_stime:
+          steadier than wall time on a shared, oversubscribed machine; startup included,
+          ~0.7 s of it), and peak RSS (the process's ru_maxrss); PoCL's and the bake
           cache warm (a small render of each scene fills them first);
   first   time to first pixel with nothing cached: an empty PoCL kernel cache, pyopencl's
           cache off, an empty bake cache ($GPISCL_CACHE): process start to the end of a
@@ -20,6 +22,18 @@ Scenes default to the issue-16 set: ws_sphere_se, ws_sphere_rq, the posterior sp
 and the knob. Trees default to this checkout; pass a second worktree at an older commit to
 get before/after ratios from the same run (the machines are shared and noisy: rounds
 interleave the trees, numbers are medians, ratios are medians of per-round ratios).
+
+Measured (2026-12-02, PoCL CPU, 2 cores shared with other jobs at load 7-10; --modes
+render --repeats 3; before = 40b0be2, after = the per-path kriging cache of
+render/kriging_cache.py; same run):
+  scene              paths/s before -> after     paths/CPU-s before -> after   peak RSS
+  posterior sphere   1783 -> 2197 (x1.29)        2918 -> 3360 (x1.16)          144 -> 147 MB
+  ws_sphere_se       16450 -> 19590 (x1.06)      27900 -> 27930 (x1.01)        144 -> 145 MB
+An earlier run of the same at load ~8 gave x1.09 (posterior sphere) and x0.92
+(ws_sphere_se, whose code did not change: the wall-time noise). Solves of the posterior's
+weights per path: 2.21 -> 0.88 (64x64, 4 spp; every ray that searched the object solved);
+their share of the posterior sphere's render CPU before: ~31% (a build solving twice per
+search took 3.3 s more CPU on 10.5 s, 128x128, 2 spp, medians of 3).
 """
 from __future__ import annotations
 
@@ -64,7 +78,7 @@ def posterior_sphere(folder: Path) -> Path:
 
 
 def run(tree: Path, scene: Path, args: list, env: dict, out: Path):
-    """(wall seconds, peak RSS MB, CLI output) of one render process."""
+    """(wall seconds, peak RSS MB, CLI output, CPU seconds) of one render process."""
     env = dict(os.environ, **env, PYTHONPATH=str(tree))
     t = time.perf_counter()
     p = subprocess.Popen([sys.executable, "-m", "gpiscl", "render", str(scene), *args,
@@ -76,7 +90,7 @@ def run(tree: Path, scene: Path, args: list, env: dict, out: Path):
     p.returncode = os.waitstatus_to_exitcode(status)
     if p.returncode:
         raise RuntimeError(f"{scene} in {tree} failed:\n{text}")
-    return wall, usage.ru_maxrss / 1024.0, text
+    return wall, usage.ru_maxrss / 1024.0, text, usage.ru_utime + usage.ru_stime
 
 
 def main(argv=None):
@@ -96,6 +110,7 @@ def main(argv=None):
         # per tree: a PoCL cache kept warm across rounds, and a bake cache for 'warm'
         caches = {t: (tmp / f"pocl{i}", tmp / f"bake{i}") for i, t in enumerate(trees)}
         results = {}   # (scene, mode, tree) -> list of (value, rss)
+        cpu_rates = {}   # (scene, tree) -> paths per CPU second of each 'render' round
         small = ["--resolution", "16x16", "--spp", "1"]
         if "render" in modes:
             # 'render' is the steady state: the first-ever PoCL compile (~150 MB of LLVM
@@ -112,12 +127,16 @@ def main(argv=None):
                     for tree in trees:
                         pocl, bake = caches[tree]
                         out = tmp / "out.png"
+                        extra = ""
                         if mode == "render":
                             env = {"POCL_CACHE_DIR": str(pocl), "GPISCL_CACHE": str(bake)}
-                            wall, rss, text = run(tree, scene, ["--spp", str(args.spp)], env,
-                                                  out)
+                            wall, rss, text, cpu = run(tree, scene, ["--spp", str(args.spp)],
+                                                       env, out)
                             m = re.search(r"paths/s: ([0-9.e+]+)", text)
                             value = float(m.group(1))
+                            paths = int(re.search(r"paths: ([0-9]+)", text).group(1))
+                            cpu_rates.setdefault((scene, tree), []).append(paths / cpu)
+                            extra = f", {paths / cpu:.4g} paths/CPU-s"
                         else:
                             fresh = tmp / f"fresh{rnd}"
                             shutil.rmtree(fresh, ignore_errors=True)
@@ -130,10 +149,10 @@ def main(argv=None):
                             if mode != "first":   # PoCL's cache (and, warm, the bakes')
                                 run(tree, scene, small, env, out)   # holds this scene
                                 shutil.rmtree(fresh / "bake", ignore_errors=True)
-                            value, rss, _ = run(tree, scene, small, env, out)
+                            value, rss, _, _ = run(tree, scene, small, env, out)
                         results.setdefault((scene, mode, tree), []).append((value, rss))
                         print(f"  round {rnd} {scene.name} {mode} {tree.name}: {value:.4g} "
-                              f"{'paths/s' if mode == 'render' else 's'}, {rss:.0f} MB",
+                              f"{'paths/s' if mode == 'render' else 's'}, {rss:.0f} MB{extra}",
                               file=sys.stderr)
         print(f"medians of {args.repeats} rounds; trees: "
               + ", ".join(f"[{i}] {t}" for i, t in enumerate(trees)))
@@ -152,6 +171,17 @@ def main(argv=None):
                         cell += f" (x{ratio:.2f} of [0])"
                     cells.append(cell)
                 print(f"{scene.name:24s} {mode:6s} " + "   ".join(cells))
+            if "render" in modes:
+                cells = []
+                for i, tree in enumerate(trees):
+                    vals = cpu_rates[(scene, tree)]
+                    cell = f"[{i}] {statistics.median(vals):9.4g} paths/CPU-s"
+                    if i > 0:
+                        ratio = statistics.median(
+                            x / b for x, b in zip(vals, cpu_rates[(scene, trees[0])]))
+                        cell += f" (x{ratio:.2f} of [0])"
+                    cells.append(cell)
+                print(f"{scene.name:24s} {'cpu':6s} " + "   ".join(cells))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 

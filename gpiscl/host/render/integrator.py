@@ -13,7 +13,7 @@ import numpy as np
 import pyopencl as cl
 
 from . import function_space_stages as gpis_function_space
-from . import memory
+from . import kriging_cache, memory
 from ..layout import records as layouts
 from .batching import BatchSizer
 from .device import Device, Program, to_device
@@ -126,6 +126,9 @@ class WavefrontIntegrator:
         self.gpis_model = [to_device(device, gpis.kernels), to_device(device, gpis.mean_nodes),
                            to_device(device, gpis.order_table)]
         self.weight_space = gpis.uses("weight_space")
+        if self.weight_space:   # a posterior's kept weights fit their budget
+            self.batch = min(self.batch, kriging_cache.max_batch(gpis.objects,
+                                                                 gpis.mean_nodes, device))
         self.function_space = None
         if gpis.uses("function_space"):
             self.batch = min(self.batch, gpis_function_space.max_batch(gpis.objects, device))
@@ -133,6 +136,12 @@ class WavefrontIntegrator:
                 device, gpis.objects, self.batch, self.program.timings,
                 mean_nodes=gpis.mean_nodes)   # sizes a posterior's program up front
         self.paths = None     # the work queues: _allocate_work, release_work
+        # not a scene key: off, every ray solves for its posterior weights (the baseline
+        # of tests/test_kriging_cache.py). Kept across release_work: its tags are zeroed
+        # once, its slots stay valid (keyed by realization) and a batch touches ~1 MB.
+        self.kriging = kriging_cache.KrigingCache(device, gpis.objects, gpis.mean_nodes,
+                                                  self.batch,
+                                                  settings.get("kriging_cache", True))
         self.counters_host = np.zeros(layouts.NUM_COUNTERS, np.int32)
         self.counters = to_device(device, self.counters_host, writable=True)
         self.params_host = layouts.RENDER_PARAMS.zeros(1)
@@ -201,7 +210,7 @@ class WavefrontIntegrator:
         if self.weight_space:
             self.program.launch("gpis_weight_space", n, self.params, np.int32(n),
                                 *self.paths.args, *rays.args, self.gpis_objects,
-                                *self.gpis_model, self.counters)
+                                *self.gpis_model, self.counters, *self.kriging.args)
         if self.function_space:
             self.function_space.free_flight(self.params, self.paths, rays, n, self.gpis_objects,
                                             *self.gpis_model[:2], self.counters)
@@ -211,7 +220,7 @@ class WavefrontIntegrator:
         if self.weight_space:
             self.program.launch("gpis_shadow_weight_space", n, self.params, *self.paths.args,
                                 *self.shadow.args, self.gpis_objects, *self.gpis_model,
-                                self.counters)
+                                self.counters, *self.kriging.args)
         if self.function_space:
             self.function_space.shadow(self.params, self.paths, self.shadow, n, self.gpis_objects,
                                        *self.gpis_model[:2], self.counters)

@@ -162,12 +162,14 @@ inline float ws_first_negative(float a, float pa, float k, float pk, float b, fl
  * WS_STATUS_ITER_CAP / WS_STATUS_NAN with T_INFINITY returned (the caller must count or
  * kill such rays: "no hit" is then not proven). d need not be unit length; t is in units
  * of d. tol is raised to the float resolution of t where needed. *evaluations counts the
- * M-feature passes (bounds and point evaluations), the search's cost. */
-inline float ws_first_root_post(WsPostBlock B, GpKernel k, __global const MeanNode* mean,
-                                int mean_count, __global const float* order_cdf,
-                                int order_count, int M, uint2 key, int object, float3 o,
-                                float3 d, float t0, float t1, float tol, float3* normal,
-                                int* status, int* evaluations)
+ * M-feature passes (bounds and point evaluations, and the n of a posterior's solve when
+ * it runs), the search's cost. B: the object's posterior block (n = 0: the prior); S: the
+ * path's slot for its weights (ws_post_weights), or none. */
+inline float ws_first_root_slot(WsPostBlock B, WsPostSlot S, GpKernel k,
+                                __global const MeanNode* mean, int mean_count,
+                                __global const float* order_cdf, int order_count, int M,
+                                uint2 key, int object, float3 o, float3 d, float t0, float t1,
+                                float tol, float3* normal, int* status, int* evaluations)
 {
     *status = WS_STATUS_OK;
     *evaluations = 0;
@@ -193,8 +195,9 @@ inline float ws_first_root_post(WsPostBlock B, GpKernel k, __global const MeanNo
 #else
     const float* cache = 0;
 #endif
-    /* a posterior conditions this ray's realization once, here; with the constant empty
-     * block of the prior's callers all posterior code compiles away */
+    /* a posterior conditions this ray's realization once, here (or reads the weights the
+     * path's first search kept in S); with the constant empty block of the prior's
+     * callers all posterior code compiles away */
     double post_v[WS_POST_MAX];
     WsPost post;
     const WsPost* P = 0;
@@ -204,13 +207,14 @@ inline float ws_first_root_post(WsPostBlock B, GpKernel k, __global const MeanNo
             *status = WS_STATUS_ROWS;
             return T_INFINITY;
         }
-        post.rho = ws_post_prepare(cache, k, mean, mean_count, order_cdf, order_count, M, key,
-                                   object, B, post_v);
+        int computed;
+        post.rho = ws_post_weights(S, cache, k, mean, mean_count, order_cdf, order_count, M,
+                                   key, object, B, post_v, &computed);
         post.rows = B.rows;
         post.v = post_v;
         post.n = B.n;
         P = &post;
-        evals = B.n;
+        evals = computed ? B.n : 0;
     }
     float3 g;
     float f = ws_eval_post(cache, P, k, mean, mean_count, order_cdf, order_count, M, key, object,
@@ -360,6 +364,18 @@ inline float ws_first_root_post(WsPostBlock B, GpKernel k, __global const MeanNo
     }
     *evaluations = evals;
     return hit;
+}
+
+/* The search without a slot: a posterior's weights solved for this ray alone. */
+inline float ws_first_root_post(WsPostBlock B, GpKernel k, __global const MeanNode* mean,
+                                int mean_count, __global const float* order_cdf,
+                                int order_count, int M, uint2 key, int object, float3 o,
+                                float3 d, float t0, float t1, float tol, float3* normal,
+                                int* status, int* evaluations)
+{
+    WsPostSlot none = {0, 0};
+    return ws_first_root_slot(B, none, k, mean, mean_count, order_cdf, order_count, M, key,
+                              object, o, d, t0, t1, tol, normal, status, evaluations);
 }
 
 /* The prior's search (no posterior). */

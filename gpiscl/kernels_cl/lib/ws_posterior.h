@@ -13,9 +13,13 @@
  * the n noise deviations.
  * Noise: e_j = sd_j z_j, z_j from Philox call WS_CALL_NOISE with the features' counter
  * (key, object, j): the realization stays a pure function of the path's key.
- * Cost per ray: n prior evaluations at the rows (n M features) and two triangular solves
- * (n^2) in double, once per search; then every point evaluation and every bound adds n
- * kernel terms. v lives in private memory: WS_POST_MAX rows (scene/observations.WS_MAX_ROWS).
+ * Cost: n prior evaluations at the rows (n M features) and two triangular solves (n^2) in
+ * double, once per path and object: v depends only on the realization (key, object), so
+ * the first search of a path that needs it computes it and keeps it in the path's slot
+ * (WsPostSlot, sized by render/kriging_cache.py); later rays and shadow rays of the path
+ * copy it back (~1/3 of a posterior ray's cost when every ray solved again). Then every
+ * point evaluation and every bound adds n kernel terms. A search works on v in private
+ * memory: WS_POST_MAX rows (scene/observations.WS_MAX_ROWS).
  *
  * Bounds: along the ray x(t) = o + t d the correction is smooth but not affine; over
  * [a, b] (half width h, middle tm) ws_tents_post takes the narrower of two rigorous forms
@@ -245,6 +249,47 @@ inline double ws_post_prepare(const float* cache, GpKernel k, __global const Mea
         nv += B.sd[j] * B.sd[j] * v[j] * v[j];
     }
     return sqrt(fmax(zz - nv, 0.0) * (1.0 + 1e-9) + 1e-6 * B.n * diag * vv);
+}
+
+/* A path's kept weights for one object: its tag says whose they are, (key.x, key.y,
+ * object + 1, 0), all zero while empty (the host zeroes the tags; values are never read
+ * without a matching tag, so they need no clearing). A slot is reused by the next batch's
+ * path of the same index, whose key differs (or, for one fixed realization, whose weights
+ * are the same), so a tag match means exactly these weights. No tag: no slot. */
+typedef struct {
+    __global uint4* tag;
+    __global double* values;   /* rho, then v_0 .. v_{n-1} */
+} WsPostSlot;
+
+inline uint4 ws_post_tag(uint2 key, int object)
+{
+    return (uint4)(key.x, key.y, (uint)object + 1u, 0u);
+}
+
+/* ws_post_prepare through the path's slot: the kept v and rho when the slot holds this
+ * realization's (bit for bit what ws_post_prepare returned then), else computed and kept.
+ * *computed: whether the solve ran. One work-item per path and slot in a launch (one ray
+ * per path in the ray queue, one shadow ray per path in the shadow queue), so no races. */
+inline double ws_post_weights(WsPostSlot S, const float* cache, GpKernel k,
+                              __global const MeanNode* mean, int mean_count,
+                              __global const float* order_cdf, int order_count, int M,
+                              uint2 key, int object, WsPostBlock B, double* v, int* computed)
+{
+    uint4 want = ws_post_tag(key, object);
+    if (S.tag && all(*S.tag == want)) {
+        for (int j = 0; j < B.n; ++j) v[j] = S.values[1 + j];
+        *computed = 0;
+        return S.values[0];
+    }
+    double rho = ws_post_prepare(cache, k, mean, mean_count, order_cdf, order_count, M, key,
+                                 object, B, v);
+    if (S.tag) {
+        S.values[0] = rho;
+        for (int j = 0; j < B.n; ++j) S.values[1 + j] = v[j];
+        *S.tag = want;
+    }
+    *computed = 1;
+    return rho;
 }
 
 /* The correction along o + t d over [a, b], for ws_tents_post: values at a, b and the

@@ -1,12 +1,13 @@
 /* From: ray queue `in` with surface hits.  To: hits moved to the first zero crossing of
- * the path's weight-space realization of any GPIS object, with its analytic normal. */
+ * the path's weight-space realization of any GPIS object, with its analytic normal. A
+ * posterior's weights come from, or go to, the path's kriging cache slot. */
 __kernel void gpis_weight_space(__constant RenderParams* params, int num_rays,
                                 PATH_PARAMS(path), RAY_PARAMS(in),
                                 __global const GpisObject* gpis,
                                 __global const GpKernel* kernels,
                                 __global const MeanNode* means,
                                 __global const float* order_table,
-                                __global int* counters)
+                                __global int* counters, WS_POST_CACHE_PARAMS)
 {
     int i = get_global_id(0);
     if (i >= num_rays) return;
@@ -16,10 +17,12 @@ __kernel void gpis_weight_space(__constant RenderParams* params, int num_rays,
     float t_hit = in_hit_t[i];
     int hit = -1;
     float3 n_hit = (float3)(0.0f);
+    WsPostCache C = WS_POST_CACHE;
     for (int k = 0; k < params->num_gpis; ++k) {
         float3 n;
-        float t = ws_object_first_root(gpis, k, kernels, means, order_table, key, o.xyz, d.xyz,
-                                       o.w, t_hit, &n, counters);
+        float t = ws_object_first_root(gpis, k, kernels, means, order_table, key,
+                                       ws_post_slot(C, k, p), o.xyz, d.xyz, o.w, t_hit, &n,
+                                       counters);
         if (t < t_hit) {
             t_hit = t;
             hit = k;
