@@ -34,6 +34,18 @@ An earlier run of the same at load ~8 gave x1.09 (posterior sphere) and x0.92
 weights per path: 2.21 -> 0.88 (64x64, 4 spp; every ray that searched the object solved);
 their share of the posterior sphere's render CPU before: ~31% (a build solving twice per
 search took 3.3 s more CPU on 10.5 s, 128x128, 2 spp, medians of 3).
+
+Peak RSS, every example scene, 4 spp at its own resolution (same run, medians of 3, MB):
+before = 40b0be2, after = a5d5692 (render() frees its queues, function-space scratch and
+rings before reading the film, malloc_trim, film.read in place: the peak was at the end):
+  ws_* (7 scenes)           143-148 -> 141-142     fs_mirror_ball_sun     152 -> 147
+  fs_sphere_matern32 / 52   159 / 161 -> 148 / 149  fs_sphere_se           166 -> 155
+  csg_two_spheres / baked   170 / 169 -> 159 / 157  bunny_grid             175 -> 161
+  wedge_volume              173 -> 162             fs_volume_room_global  174 -> 163
+  knob_no_csg / knob        178 / 189 -> 168 / 178
+The peak is now inside the render: ~133 MB before the first batch (fs_sphere_se: 81 MB of
+file pages, libLLVM's text 42 of them, and 52 MB anonymous), then the queues (~12 MB
+touched at 2^15 paths) and function-space scratch (15 MB allocated at 16 groups a unit).
 """
 from __future__ import annotations
 
