@@ -121,6 +121,7 @@
 #define FS_MEAN_KAPPA 6.0          /* fs_mean_step */
 #endif
 #define FS_MEAN_Z 6.0
+#define FS_MEAN_HOPS 8             /* fs_mean_step */
 /* two-point Radau rule on [0, 1] with the fixed node at 0 (weight 1/4, where nu = 0) and
  * the free one at 2/3 (weight 3/4): exact for quadratics, one evaluation per try */
 #define FS_RADAU_NODE (2.0 / 3.0)
@@ -319,18 +320,19 @@ inline double fs_downcrossing_slope(double mean, double sd, double2 u)
  * which the l_d cap covers. Returns the first try's length: hg (the growth ladder's),
  * or less where the mean needs it.
  * On the knob every step was this cap's (24^2 render: 6.6 steps a flight, all capped,
- * none rejected; the flights lie in the occupancy shell |mean| <~ 24 sd). Two ways to a
- * smaller bound, both keeping the argument above word for word and only lengthening
- * steps (a rejected try's half keeps both, being inside the certified stretch):
+ * none rejected; most flights are fresh rays entering the occupancy shell at |mean| ~
+ * 24 sd, gpis_proxy.h). Two ways to a longer step with the argument above unchanged (a
+ * rejected try's half keeps both, being inside the certified stretch):
  *  - the slope bound of a grid mean over the try's stretch [ta, ta + hg] only
- *    (gp_mean_lipschitz_on, the bricks it crosses) instead of over the whole ray
- *    (the knob: 1.34 on average per ray; steps a flight 6.6 -> 5.4);
- *  - far from the zero set a two-ended test: with the mean mb at the try's end, the mean
- *    over the try is at least (|m| + |mb| - lip h) / 2 (the two ends' Lipschitz cones),
- *    so if that is >= FS_MEAN_Z sd, |mean| >= FS_MEAN_Z sd on all of it: the far case
- *    above, which the start alone certified only up to (|m| - FS_MEAN_Z sd) / lip (a ray
- *    leaving the surface at an angle; -> 4.9 with the first). Stationary priors without
- *    a posterior only, where sd is the same at both ends. */
+ *    (gp_mean_lipschitz_on, the bricks it crosses) instead of over the whole ray's
+ *    (the knob's rays: 1.34 on average; steps a flight 6.6 -> 5.4);
+ *  - far from the zero set, sphere tracing continued from ball to ball (up to
+ *    FS_MEAN_HOPS prior-mean evaluations, no GP rows): each ball's edge starts the next,
+ *    so |mean| >= FS_MEAN_Z sd on the whole union, the far case above, which the start's
+ *    ball alone certified only up to (|m| - FS_MEAN_Z sd) / lip (a fresh ray took ~3
+ *    GP steps to close in from 24 sd; steps a flight -> 3.5 with the first). Stationary
+ *    priors without a posterior only, where sd is the same all along and the prior
+ *    mean is the mean. */
 inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
                            FsRay ray, double3 dn, double ta, double hg, double m, double sd,
                            double lip, int grid)
@@ -349,8 +351,20 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
         if (cap >= he) return hg;
     }
     if (fabs(m) > FS_MEAN_Z * sd && !S.post.n && !gp_kernel_nonstationary(p)) {
-        double mb = fs_prior_mean(mean, mc, ray.o + (ta + he) * ray.d, dn, FS_OBS_VALUE);
-        if (m * mb > 0.0 && fabs(m) + fabs(mb) - lip * he >= 2.0 * FS_MEAN_Z * sd) return hg;
+        /* sphere tracing on, from ball to ball: each ends where the next starts, so
+         * |mean| >= FS_MEAN_Z sd (one sign) on all of [ta, ta + s] */
+        double s = 0.0, mz = fabs(m);
+        for (int k = 0; k < FS_MEAN_HOPS; ++k) {
+            double hop = (mz - FS_MEAN_Z * sd) / lip;
+            s += hop;
+            if (s >= he) return hg;
+            /* converging onto the near zone, or out of hops */
+            if (hop < 0.25 * FS_MEAN_KAPPA * sd / lip || k + 1 == FS_MEAN_HOPS) break;
+            double mk = fs_prior_mean(mean, mc, ray.o + (ta + s) * ray.d, dn, FS_OBS_VALUE);
+            if (!(mk * m > 0.0) || !(fabs(mk) > FS_MEAN_Z * sd)) break;
+            mz = fabs(mk);
+        }
+        cap = fmax(cap, s);
     }
     return cap;
 }
