@@ -42,7 +42,8 @@
  * smallest l on the ray). The first try grows the last step by 2, 1.5 or 1.1 as its
  * bound was below 5%, 30% or 100% of the tolerance (capped at FS_H_MAX l_d and at the
  * ray's end, and at fs_mean_step: the prior mean must not change faster than the node
- * can see); a rejected try halves (floor FS_H_MIN l_d). So a ray's expected misses are
+ * can see; on the knob every step was that cap's, fs_mean_step has the numbers); a
+ * rejected try halves (floor FS_H_MIN l_d). So a ray's expected misses are
  * at most tol * (its length / l_d), and the crossing rate's relative bias at most
  * tol / (l_d * Rice's rate) = 2 pi tol e^(mu^2 / 2 sigma^2) for SE: the default 2e-6
  * gives <= 0.11% for mu / sigma <= 3 (1e-5, the earlier default, allowed 0.57% there).
@@ -62,7 +63,7 @@
  * against 0.46 l_d (c = 0.9) and 0.14 l_d (c = 0.99) for the uniform grid. A row's
  * prior mean, field multipliers and posterior solve are computed once, when it is
  * drawn (fs_row_prep), and travel with it into R, into the slid window and into the
- * next step's mean cap (fs_row_copy, fs_mean_step_row): before, each sample's mean
+ * next step's mean cap (fs_row_copy, fs_start_mean): before, each sample's mean
  * program and posterior solve ran up to four times (its row, R's append, R's rebuild,
  * the cap at the next step's start) and each slid row's once more.
  * A posteriori bridge check (the issue's second half): not done. A one-node bridge
