@@ -258,3 +258,43 @@ def test08_thin_features_of_the_mean_are_not_stepped_over(device, prg):
     print(f"hit fraction {np.mean(t >= 0):.4f}, hit t in [{t.min():.4f}, {t.max():.4f}]")
     assert np.all(t >= 0)
     assert np.all(np.abs(t - 2.95) < 0.05)
+
+
+def test09_a_grid_means_local_slope_bound_still_sees_thin_features(device, prg):
+    """fs_mean_step's cap with a grid mean's slope bound over each try's stretch (its
+    bricks) instead of the whole ray's: a grid along x with a gentle slope (0.25) far
+    from a thin steep dip (slope 10, -5 sigma deep at x = 3, entry face at 2.95; the
+    knob's kernel). The bound over the try's stretch must reach the dip's bricks before a
+    step may reach the dip: every ray hits it, at its entry face. Fails (rays step over
+    the dip) with the bound taken over the first quarter of the stretch only."""
+    from gpiscl.host.gp.means import GridMean
+    h = 0.025
+    x = -0.5 + h * np.arange(int(round(6.0 / h)) + 1)
+    u = np.abs(x - 3.0)
+    g = np.minimum(0.3 + 0.25 * u, 10.0 * (u - 0.05)).astype(np.float32)
+    values = np.repeat(np.repeat(g[:, None, None], 2, axis=1), 2, axis=2)
+    grid = GridMean(values, (-0.5, -0.5 * h, -0.5 * h), h)
+    kern = SquaredExponential(sigma=0.01, length_scale=1.4)
+    out = flights(device, prg, kern, grid, 2000, memory="renewal_plus", t1=5.5, seed=5)
+    t = out[:, 0]
+    print(f"hit fraction {np.mean(t >= 0):.4f}, hit t in [{t.min():.4f}, {t.max():.4f}]")
+    assert np.all(t >= 0)
+    assert np.all(np.abs(t - 2.95) < 0.05)
+
+
+def test10_sphere_tracing_from_ball_to_ball_stops_at_a_thin_feature(device, prg):
+    """test08's slab met at 60 degrees (the mean falls at half its slope bound along the
+    ray), so fs_mean_step's far-zone balls close in on the slab geometrically instead of
+    landing on its FS_MEAN_Z sd level in one: each ball's radius must be its own centre's
+    mean. Every ray hits the slab at its entry face (t = 2.95 / cos 60 = 5.9). Fails
+    (rays step over the slab) with every ball the start's radius."""
+    from gpiscl.host.gp import Box
+    kern = SquaredExponential(sigma=0.01, length_scale=1.4)
+    slab = Box(half_extents=(0.05, 10.0, 10.0), center=(3.0, 0.0, 0.0))
+    d = (0.5, math.sqrt(0.75), 0.0)
+    out = flights(device, prg, kern, slab, 2000, memory="renewal_plus", d=d, t1=12.0,
+                  seed=6)
+    t = out[:, 0]
+    print(f"hit fraction {np.mean(t >= 0):.4f}, hit t in [{t.min():.4f}, {t.max():.4f}]")
+    assert np.all(t >= 0)
+    assert np.all(np.abs(t - 5.9) < 0.1)

@@ -43,6 +43,30 @@ load), more than the change. Paths per CPU s of the default sampler, before and 
 alternating in 6 rounds (24^2, 32 spp), median ratio after / before (range): fs_sphere_se
 1.16 (0.93-1.60), knob 1.08 (0.90-1.47), wedge_volume 0.87 (0.61-1.57; 1.6-1.8 values a
 flight, nothing to gain), fs_volume_room_global 1.18 (1.09-1.41).
+
+Measured 2026-12-02 (the mean cap of fs_march.h's fs_mean_step: a grid mean's slope bound
+over each try's stretch, sphere tracing from ball to ball far from the zero set), knob
+only: the other three scenes take the same steps as before (their means never reach the
+cap: fs_sphere_se 4.91 samples and 4.97 evaluations a flight at 8 spp on both trees;
+wedge_volume's slope 0.05 and the room's constant mean give caps of metres). Before =
+main at 40b0be2, after = this change, alternating, 2 rounds each (the 2-core machine at
+load ~9, so the absolute rates are low). Paths per CPU s adaptive / uniform 0.9 / uniform
+0.99, then GP values and rule evaluations per flight of the adaptive default:
+    before  1.23e4 / 3.05e4 / 2.47e4;  1.17e4 / 2.85e4 / 2.38e4    7.05, 6.62
+    after   1.84e4 / 3.30e4 / 2.86e4;  1.51e4 / 2.85e4 / 2.62e4    3.93, 3.46
+adaptive / uniform 0.9: 0.40, 0.41 before, 0.56, 0.53 after; after / before 1.50, 1.28
+(and 1.41 in one 2048-spp render each: 57.9 against 81.7 CPU s). The MSE columns of
+these runs were all alike (each reference's few sun glints dominate them), and their
+mean/ref z of the adaptive default (-2.4 to -3.8) was the same before and after. Where
+the knob's time went before: every adaptive step was the mean cap's (none rejected, one
+evaluation each): flights are mostly fresh rays entering the occupancy shell at |mean|
+~24 sd and closing in by single sphere-tracing balls (~3 GP steps) and then 6 sd / lip
+steps (0.045 of a 1.4 length scale) near the surface, against 0.65 for uniform 0.9, which
+is biased there (+4.9%, z 18, at 4 s references). What is left is the near zone: its
+steps are the cap's guarantee. The image under a uniform environment without the floor
+(256 spp, 24^2): after against two before renders +0.055 +- 0.030%, before against
+before -0.108 +- 0.035% (the renders' stderr is ~20% low: median z^2 0.61-0.66, 0.455
+expected, for both pairs).
 """
 from __future__ import annotations
 

@@ -23,6 +23,24 @@ samples per flight 10.36 / 15.77 / 25.41 / 24.82 at mu 0 / 1 / 2 / 3. Same proce
 interleaved (both samplers built in one run, medians of 7 ratios), CPU time per flight
 after / before: adaptive 0.69 / 0.78 / 0.91 / 1.00, uniform 0.9 0.62 / 0.80 / 0.96 / 0.96,
 uniform 0.99 0.71 / 0.90 / 0.98 / 1.00.
+
+Measured 2026-12-02 after fs_march.h's mean-cap change (a constant mean has no cap: the
+same steps, samples and evaluations as main at 40b0be2, bit for bit), 2048 rays, medians
+of 3, before (40b0be2) and after alternating, two runs each (2-core machine at load ~9):
+CPU us per l adaptive 2e-6 / uniform 0.9 / uniform 0.99, and adaptive / uniform 0.9:
+    mu 1: before 3.88 / 3.06 / 9.09, 1.31; 3.89 / 3.24 / 9.44, 1.19
+          after  3.57 / 2.80 / 7.94, 1.10; 3.74 / 3.09 / 9.01, 1.21
+    mu 2: before 2.46 / 2.56 / 8.29, 1.01; 2.53 / 2.26 / 8.52, 1.19
+          after  2.65 / 2.52 / 7.90, 1.05; 2.44 / 2.58 / 6.98, 1.07
+    mu 3: before 2.15 / 2.59 / 8.86, 0.83; 1.72 / 2.23 / 8.15, 0.83
+          after  1.77 / 2.32 / 8.67, 0.81; 1.86 / 2.59 / 7.97, 0.80
+Samples per flight 12.70 / 24.04 / 24.75 (adaptive), 20.97 / 51.03 / 65.10 (0.9),
+58.41 / 155.79 / 206.52 (0.99); rule evaluations per flight 18.05 / 41.04 / 40.48, i.e.
+~1.85 per step (steps = samples - root points): nearly every other try is rejected. That
+is where the adaptive default loses to uniform 0.9 at mu <= 2 here (it draws 40-60% of
+the values but pays an evaluation of the rule's small system per try), and what a step
+predictor from the bound's ratio (instead of the 2 / 1.5 / 1.1 ladder and halving) would
+go after.
 """
 from __future__ import annotations
 

@@ -42,7 +42,8 @@
  * smallest l on the ray). The first try grows the last step by 2, 1.5 or 1.1 as its
  * bound was below 5%, 30% or 100% of the tolerance (capped at FS_H_MAX l_d and at the
  * ray's end, and at fs_mean_step: the prior mean must not change faster than the node
- * can see); a rejected try halves (floor FS_H_MIN l_d). So a ray's expected misses are
+ * can see; on the knob every step was that cap's, fs_mean_step has the numbers); a
+ * rejected try halves (floor FS_H_MIN l_d). So a ray's expected misses are
  * at most tol * (its length / l_d), and the crossing rate's relative bias at most
  * tol / (l_d * Rice's rate) = 2 pi tol e^(mu^2 / 2 sigma^2) for SE: the default 2e-6
  * gives <= 0.11% for mu / sigma <= 3 (1e-5, the earlier default, allowed 0.57% there).
@@ -62,7 +63,7 @@
  * against 0.46 l_d (c = 0.9) and 0.14 l_d (c = 0.99) for the uniform grid. A row's
  * prior mean, field multipliers and posterior solve are computed once, when it is
  * drawn (fs_row_prep), and travel with it into R, into the slid window and into the
- * next step's mean cap (fs_row_copy, fs_mean_step_row): before, each sample's mean
+ * next step's mean cap (fs_row_copy, fs_start_mean): before, each sample's mean
  * program and posterior solve ran up to four times (its row, R's append, R's rebuild,
  * the cap at the next step's start) and each slid row's once more.
  * A posteriori bridge check (the issue's second half): not done. A one-node bridge
@@ -121,6 +122,7 @@
 #define FS_MEAN_KAPPA 6.0          /* fs_mean_step */
 #endif
 #define FS_MEAN_Z 6.0
+#define FS_MEAN_HOPS 8             /* fs_mean_step */
 /* two-point Radau rule on [0, 1] with the fixed node at 0 (weight 1/4, where nu = 0) and
  * the free one at 2/3 (weight 3/4): exact for quadratics, one evaluation per try */
 #define FS_RADAU_NODE (2.0 / 3.0)
@@ -303,42 +305,96 @@ inline double fs_downcrossing_slope(double mean, double sd, double2 u)
 }
 
 /* The longest step the prior mean allows: the rule sees the process only at its node
- * (t + 2h/3) and the samples at the step's ends, so a mean that dips to 0 between them (a feature thinner than the
- * step, with sigma << l: the knob's l = 1.4, sigma = 0.01) hides the rate's peak, and
- * steps of 2 l_d went through such features (the knob 6% too bright). With the mean's
- * Lipschitz bound `lip` (per unit t, gp_mean_lipschitz_on over the ray) the mean moves by
- * at most FS_MEAN_KAPPA = 6 sd over a step near its zero set, so t, the node and t + h
- * are at most 4 sd of mean apart: a mean that dips to 0 between two of them has a node
- * or a sample within 2 sd of its dip, whose rate rejects the step or whose value is
- * likely below 0 (with Simpson's nodes, 3 sd: the knob's brightness was the same at
- * kappa 1, 2, 3 and 6 and with steps capped to 0.035 l, while the cost fell from 21 to 8
- * samples per flight), and far from it the step is
- * the sphere-tracing distance to |mean| = FS_MEAN_Z sd (a crossing there needs a
- * residual of that size: rate ~ e^{-Z^2/2} / l, far below any tolerance). sd is the
- * prior's at x (sigma(x) fields and a posterior included); a posterior's mean correction
- * varies on the kernel's scale, which the l_d cap covers. */
+ * (t + 2h/3) and the samples at the step's ends, so a mean that dips to 0 between them (a
+ * feature thinner than the step, with sigma << l: the knob's l = 1.4, sigma = 0.01) hides
+ * the rate's peak, and steps of 2 l_d went through such features (the knob 6% too
+ * bright). With the mean's Lipschitz bound `lip` (per unit t) the mean moves by at most
+ * FS_MEAN_KAPPA = 6 sd over a step near its zero set, so t, the node and t + h are at
+ * most 4 sd of mean apart: a mean that dips to 0 between two of them has a node or a
+ * sample within 2 sd of its dip, whose rate rejects the step or whose value is likely
+ * below 0 (with Simpson's nodes, 3 sd: the knob's brightness was the same at kappa 1, 2,
+ * 3 and 6 and with steps capped to 0.035 l, while the cost fell from 21 to 8 samples per
+ * flight), and far from it the step is the sphere-tracing distance to |mean| = FS_MEAN_Z
+ * sd (a crossing there needs a residual of that size: rate ~ e^{-Z^2/2} / l, far below
+ * any tolerance). m and sd are the prior's at x(ta) (sigma(x) fields and a posterior
+ * included; fs_start_mean); a posterior's mean correction varies on the kernel's scale,
+ * which the l_d cap covers. Returns the first try's length: hg (the growth ladder's),
+ * or less where the mean needs it.
+ * On the knob every step was this cap's (24^2 render: 6.6 steps a flight, all capped,
+ * none rejected; most flights are fresh rays entering the occupancy shell at |mean| ~
+ * 24 sd, gpis_proxy.h). Two ways to a longer step with the argument above unchanged (a
+ * rejected try's half keeps both, being inside the certified stretch):
+ *  - the slope bound of a grid mean over the try's stretch [ta, ta + hg] only
+ *    (gp_mean_lipschitz_on, the bricks it crosses) instead of over the whole ray's
+ *    (the knob's rays: 1.34 on average; steps a flight 6.6 -> 5.4);
+ *  - far from the zero set, sphere tracing continued from ball to ball (up to
+ *    FS_MEAN_HOPS prior-mean evaluations, no GP rows): each ball's edge starts the next,
+ *    so |mean| >= FS_MEAN_Z sd on the whole union, the far case above, which the start's
+ *    ball alone certified only up to (|m| - FS_MEAN_Z sd) / lip (a fresh ray took ~3
+ *    GP steps to close in from 24 sd; steps a flight -> 3.5 with the first). Stationary
+ *    priors without a posterior only, where sd is the same all along and the prior
+ *    mean is the mean. */
 inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
-                           int n, double3 x, double3 dn, double lip)
+                           FsRay ray, double3 dn, double ta, double hg, double m, double sd,
+                           double lip, int grid)
 {
-    if (!(lip > 0.0)) return INFINITY;
-    double var, m = fs_mean_var(p, mean, mc, S, x, dn, FS_OBS_VALUE, n, &var), sd = sqrt(var);
-    return fmax(FS_MEAN_KAPPA * sd, fabs(m) - FS_MEAN_Z * sd) / lip;
+    if (!(lip > 0.0)) return hg;
+    double reach = fmax(FS_MEAN_KAPPA * sd, fabs(m) - FS_MEAN_Z * sd), cap = reach / lip;
+    /* a try past t1 is clipped to it (then any cap >= he takes the same step as hg) */
+    double he = fmin(hg, ray.t1 - ta);
+    if (cap >= he) return hg;
+    if (grid) {
+        lip = (double)gp_mean_lipschitz_on(mean, mc, convert_float3(ray.o + ta * ray.d),
+                                           convert_float3(ray.o + (ta + he) * ray.d))
+              * length(ray.d);
+        if (!(lip > 0.0)) return hg;
+        cap = reach / lip;
+        if (cap >= he) return hg;
+    }
+    if (fabs(m) > FS_MEAN_Z * sd && !S.post.n && !gp_kernel_nonstationary(p)) {
+        /* sphere tracing on, from ball to ball: each ends where the next starts, so
+         * |mean| >= FS_MEAN_Z sd (one sign) on all of [ta, ta + s] */
+        double s = 0.0, mz = fabs(m);
+        for (int k = 0; k < FS_MEAN_HOPS; ++k) {
+            double hop = (mz - FS_MEAN_Z * sd) / lip;
+            s += hop;
+            if (s >= he) return hg;
+            /* converging onto the near zone, or out of hops */
+            if (hop < 0.25 * FS_MEAN_KAPPA * sd / lip || k + 1 == FS_MEAN_HOPS) break;
+            double mk = fs_prior_mean(mean, mc, ray.o + (ta + s) * ray.d, dn, FS_OBS_VALUE);
+            if (!(mk * m > 0.0) || !(fabs(mk) > FS_MEAN_Z * sd)) break;
+            mz = fabs(mk);
+        }
+        cap = fmax(cap, s);
+    }
+    return cap;
 }
 
-/* fs_mean_step at the value row k of S (the step's start, a sample of this ray): its own
- * numbers (fs_row_prep) are in S, so neither the mean program nor the O(observations^2)
- * solve runs again there; the same numbers as fs_mean_var's, bit for bit (the same
- * operations on the same point). */
-inline double fs_mean_step_row(GpKernel p, __global const MeanNode* mean, FsScratch S, int k,
-                               double3 dn, double lip)
+/* The prior mean and sd at x(ta) for fs_mean_step. A value row of S at exactly that point
+ * (the last sample; at the first step a fresh start's row or a vertex's value row) has
+ * its own numbers (fs_row_prep), so neither the mean program nor the O(observations^2)
+ * solve runs again: the same numbers as fs_mean_var's, bit for bit (the same operations
+ * on the same point); else fs_mean_var (slot n as its work space). */
+inline double fs_start_mean(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
+                            int fixed, int n, double3 x, double3 dn, double* sd)
 {
-    if (!(lip > 0.0)) return INFINITY;
-    double3 x = fs_pos(S.rows + k);
+    int k = n - 1;
+    if (n == fixed) {
+        for (k = fixed - 1; k >= 0; --k) {
+            __global const FsObs* o = S.rows + k;
+            if (o->kind == FS_OBS_VALUE && o->px == x.x && o->py == x.y && o->pz == x.z) break;
+        }
+    }
+    if (k < 0) {
+        double var, m = fs_mean_var(p, mean, mc, S, x, dn, FS_OBS_VALUE, n, &var);
+        *sd = sqrt(var);
+        return m;
+    }
     GpFieldsAt fx = gp_kernel_nonstationary(p) ? fs_row_fields(S, k) : fs_fields(p, mean, x);
     double var = gp_cov_at(p, x, dn, FS_OBS_VALUE, fx, x, dn, FS_OBS_VALUE, fx);
     if (S.post.n) var -= fs_post_dot(fs_post_v(S, k), fs_post_v(S, k), S.post.n);
-    double sd = sqrt(fmax(var, 0.0)), m = S.mu[k];
-    return fmax(FS_MEAN_KAPPA * sd, fabs(m) - FS_MEAN_Z * sd) / lip;
+    *sd = sqrt(fmax(var, 0.0));
+    return S.mu[k];
 }
 
 /* Drop the older half of the window: rows [n - keep, n) move to [fixed, fixed + keep)
@@ -414,6 +470,7 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
     double lip = dt > 0.0 ? 0.0
         : (double)gp_mean_lipschitz_on(mean, mc, convert_float3(ray.o + ray.t0 * ray.d),
                                        convert_float3(ray.o + ray.t1 * ray.d)) * dlen;
+    int grid = lip > 0.0 && gp_mean_has_grid(mean, mc);
     FsScratch R = fs_rule_scratch(S);
     int nr = 0, r_new = FS_RULE_SAMPLES + 1;   /* rows of R; samples since it was built */
     int step = 0;
@@ -429,10 +486,11 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
             h = dt;
         } else {
             /* the rule on its small system R (see "Step rule"): one Radau node per try */
-            /* after the first step the start is row n - 1 (its mean is known) */
-            h = fmin(fmin(grow * h, FS_H_MAX * ell),
-                     n > fixed ? fs_mean_step_row(p, mean, S, n - 1, dn, lip)
-                               : fs_mean_step(p, mean, mc, S, n, ray.o + ta * ray.d, dn, lip));
+            /* the mean's cap; its numbers at ta are a row's (fs_start_mean) */
+            double sd0 = 0.0, m0 = lip > 0.0
+                ? fs_start_mean(p, mean, mc, S, fixed, n, ray.o + ta * ray.d, dn, &sd0) : 0.0;
+            h = fs_mean_step(p, mean, mc, S, ray, dn, ta, fmin(grow * h, FS_H_MAX * ell),
+                             m0, sd0, lip, grid);
             if (r_new > FS_RULE_SAMPLES) {
                 nr = fs_rule_build(p, mean, mc, S, R, fixed, n, ray, ta,
                                    FS_H_MAX * ell, ell, &st);
