@@ -245,6 +245,15 @@ def test07_missed_crossings_of_the_same_realizations_stay_below_the_tolerance(de
     assert missed < allowed + z_threshold(4) * math.sqrt(allowed)
 
 
+def assert_every_ray_hits_at(out, face: float, within: float):
+    """Every flight of `out` (flights(): hit t in column 0, -1 for none) hit, at the
+    feature's entry face t = face (within a few sigma of mean)."""
+    t = out[:, 0]
+    print(f"hit fraction {np.mean(t >= 0):.4f}, hit t in [{t.min():.4f}, {t.max():.4f}]")
+    assert np.all(t >= 0)
+    assert np.all(np.abs(t - face) < within)
+
+
 def test08_thin_features_of_the_mean_are_not_stepped_over(device, prg):
     """A slab 0.1 thick (mean -5 sigma at its middle) under a smooth, small-sigma kernel
     (l = 1.4, sigma = 0.01, the knob's): the rate's quadrature sees the process only at
@@ -254,10 +263,7 @@ def test08_thin_features_of_the_mean_are_not_stepped_over(device, prg):
     kern = SquaredExponential(sigma=0.01, length_scale=1.4)
     slab = Box(half_extents=(0.05, 10.0, 10.0), center=(3.0, 0.0, 0.0))
     out = flights(device, prg, kern, slab, 2000, memory="renewal_plus", t1=6.0, seed=4)
-    t = out[:, 0]
-    print(f"hit fraction {np.mean(t >= 0):.4f}, hit t in [{t.min():.4f}, {t.max():.4f}]")
-    assert np.all(t >= 0)
-    assert np.all(np.abs(t - 2.95) < 0.05)
+    assert_every_ray_hits_at(out, 2.95, 0.05)
 
 
 def test09_a_grid_means_local_slope_bound_still_sees_thin_features(device, prg):
@@ -276,10 +282,7 @@ def test09_a_grid_means_local_slope_bound_still_sees_thin_features(device, prg):
     grid = GridMean(values, (-0.5, -0.5 * h, -0.5 * h), h)
     kern = SquaredExponential(sigma=0.01, length_scale=1.4)
     out = flights(device, prg, kern, grid, 2000, memory="renewal_plus", t1=5.5, seed=5)
-    t = out[:, 0]
-    print(f"hit fraction {np.mean(t >= 0):.4f}, hit t in [{t.min():.4f}, {t.max():.4f}]")
-    assert np.all(t >= 0)
-    assert np.all(np.abs(t - 2.95) < 0.05)
+    assert_every_ray_hits_at(out, 2.95, 0.05)
 
 
 def test10_sphere_tracing_from_ball_to_ball_stops_at_a_thin_feature(device, prg):
@@ -294,7 +297,4 @@ def test10_sphere_tracing_from_ball_to_ball_stops_at_a_thin_feature(device, prg)
     d = (0.5, math.sqrt(0.75), 0.0)
     out = flights(device, prg, kern, slab, 2000, memory="renewal_plus", d=d, t1=12.0,
                   seed=6)
-    t = out[:, 0]
-    print(f"hit fraction {np.mean(t >= 0):.4f}, hit t in [{t.min():.4f}, {t.max():.4f}]")
-    assert np.all(t >= 0)
-    assert np.all(np.abs(t - 5.9) < 0.1)
+    assert_every_ray_hits_at(out, 5.9, 0.1)
