@@ -80,9 +80,10 @@ __kernel void post_roots(__global const GpKernel* kp, __global const MeanNode* m
 {
     int r = get_global_id(0), status, evals;
     float3 n;
-    float t = ws_first_root_post(ws_posterior_block(means, first), kp[0], means + first, mc,
-                                 cdf, nc, M, keys[r], 0, vload3(r, o), vload3(r, d), t0, t1,
-                                 tol, &n, &status, &evals);
+    WsPostSlot solve_here = {0, 0};   /* no kept weights: this ray solves for its own */
+    float t = ws_first_root_post(ws_posterior_block(means, first), solve_here, kp[0],
+                                 means + first, mc, cdf, nc, M, keys[r], 0, vload3(r, o),
+                                 vload3(r, d), t0, t1, tol, &n, &status, &evals);
     hit[r] = (float4)(n, t);
     st[r] = (int2)(status, evals);
 }

@@ -165,7 +165,7 @@ inline float ws_first_negative(float a, float pa, float k, float pk, float b, fl
  * M-feature passes (bounds and point evaluations, and the n of a posterior's solve when
  * it runs), the search's cost. B: the object's posterior block (n = 0: the prior); S: the
  * path's slot for its weights (ws_post_weights), or none. */
-inline float ws_first_root_slot(WsPostBlock B, WsPostSlot S, GpKernel k,
+inline float ws_first_root_post(WsPostBlock B, WsPostSlot S, GpKernel k,
                                 __global const MeanNode* mean, int mean_count,
                                 __global const float* order_cdf, int order_count, int M,
                                 uint2 key, int object, float3 o, float3 d, float t0, float t1,
@@ -366,18 +366,6 @@ inline float ws_first_root_slot(WsPostBlock B, WsPostSlot S, GpKernel k,
     return hit;
 }
 
-/* The search without a slot: a posterior's weights solved for this ray alone. */
-inline float ws_first_root_post(WsPostBlock B, GpKernel k, __global const MeanNode* mean,
-                                int mean_count, __global const float* order_cdf,
-                                int order_count, int M, uint2 key, int object, float3 o,
-                                float3 d, float t0, float t1, float tol, float3* normal,
-                                int* status, int* evaluations)
-{
-    WsPostSlot none = {0, 0};
-    return ws_first_root_slot(B, none, k, mean, mean_count, order_cdf, order_count, M, key,
-                              object, o, d, t0, t1, tol, normal, status, evaluations);
-}
-
 /* The prior's search (no posterior). */
 inline float ws_first_root_counted(GpKernel k, __global const MeanNode* mean,
                                    int mean_count, __global const float* order_cdf,
@@ -386,8 +374,9 @@ inline float ws_first_root_counted(GpKernel k, __global const MeanNode* mean,
                                    int* status, int* evaluations)
 {
     WsPostBlock none = {0, 0, 0, 0};
-    return ws_first_root_post(none, k, mean, mean_count, order_cdf, order_count, M, key,
-                              object, o, d, t0, t1, tol, normal, status, evaluations);
+    WsPostSlot no_slot = {0, 0};
+    return ws_first_root_post(none, no_slot, k, mean, mean_count, order_cdf, order_count, M,
+                              key, object, o, d, t0, t1, tol, normal, status, evaluations);
 }
 
 /* ws_first_root_counted without the evaluation count (the count is for profiling). */

@@ -48,7 +48,7 @@ inline float ws_object_first_root(__global const GpisObject* gpis, int k,
     int status = 0, evaluations;
     WsPostBlock B = ws_posterior_block(means, g->mean_first);
     /* two call sites: the prior's compiles to the search without any posterior code */
-    float t = B.n ? ws_first_root_slot(B, S, kernels[k], means + g->mean_first, g->mean_count,
+    float t = B.n ? ws_first_root_post(B, S, kernels[k], means + g->mean_first, g->mean_count,
                                        order_table + g->order_first, g->order_count,
                                        g->features, key, k, o, d, t0, t1, g->tolerance,
                                        normal, &status, &evaluations)
