@@ -146,6 +146,12 @@ def step_size(kernel, d, c):
 
 H_MAX, H_MIN, ELL_CORR, WINDOW = 2.0, 1e-3, math.exp(-0.5), 16
 RULE_SAMPLES = 4   # the step rule conditions on the last 4-8 samples (fs_rule_build)
+# the step rule's quadrature on [0, 1] (fs_march.h FS_RULE_NODE*/FS_RULE_WEIGHT*): the
+# three-point Gauss-Radau rule with its fixed node at the step's start, where the rate is
+# 0; the free nodes (6 +- sqrt 6) / 10, the one nearer the end first (a try may stop
+# there: a rate grows toward the end, where f is least pinned)
+RULE = (((6.0 + math.sqrt(6.0)) / 10.0, (16.0 - math.sqrt(6.0)) / 36.0),
+        ((6.0 - math.sqrt(6.0)) / 10.0, (16.0 + math.sqrt(6.0)) / 36.0))
 # the root search (fs_root_point): final bracket (l_d), the regula falsi point's offset
 # toward the midpoint (root widths) and the points allowed beyond bisection's worst case
 ROOT_WIDTH, ROOT_OFFSET, ROOT_SLACK = 1e-2, 0.45, 2
@@ -183,12 +189,12 @@ def march_realization(kernel, mean, o, d, ts, F, tol):
     given its last RULE_SAMPLES samples (the device's memory rows are absent here: the
     ray starts fresh at F[0]) and goes on through every crossing. Returns the sampled grid indices
     and the missed down-crossings: those of the dense path inside a step whose ends do
-    not show them (the event the tolerance bounds)."""
+    not show them (the event the tolerance bounds), and the rate evaluations it made."""
     o, d = np.asarray(o, float), np.asarray(d, float)
     dt = ts[1] - ts[0]
     ell = step_size(kernel, d, ELL_CORR)
     down = (F[:-1] >= 0.0) & (F[1:] < 0.0)          # dense down-crossings per cell
-    idx, i, h, grow, missed, first = [0], 0, 0.5 * ell, 1.0, 0, 0
+    idx, i, h, grow, missed, first, evals = [0], 0, 0.5 * ell, 1.0, 0, 0, 0
     while i < len(ts) - 1:
         if len(idx) - first > 2 * RULE_SAMPLES:     # fs_rule_build: the last 4 again
             first = len(idx) - RULE_SAMPLES
@@ -199,10 +205,14 @@ def march_realization(kernel, mean, o, d, ts, F, tol):
         while True:
             k = max(1, min(int(h / dt), len(ts) - 1 - i))
             hs = k * dt
-            # Radau: (3h/4) nu(t + 2h/3), nu(t) = 0
-            node = o + (ts[i] + 2.0 * hs / 3.0) * d
-            ratio = 0.75 * return_rate(*_moments(kernel, mean, xr, yr, node, d), outside) \
-                * ell / tol
+            ratio = 0.0
+            for u, w in RULE:          # a try stops at the first node that rejects it
+                node = o + (ts[i] + u * hs) * d
+                ratio += w * return_rate(*_moments(kernel, mean, xr, yr, node, d), outside) \
+                    * ell / tol
+                evals += 1
+                if ratio > 1.0:
+                    break
             if ratio <= 1.0 or h <= H_MIN * ell or k == 1:
                 grow = 2.0 if ratio < 0.05 else (1.5 if ratio < 0.3 else 1.1)
                 break
@@ -210,7 +220,7 @@ def march_realization(kernel, mean, o, d, ts, F, tol):
         missed += int(down[i:i + k].sum()) - int(F[i] >= 0.0 > F[i + k])
         i += k
         idx.append(i)
-    return np.array(idx), missed
+    return np.array(idx), missed, evals
 
 
 def root_budget(w0, width):

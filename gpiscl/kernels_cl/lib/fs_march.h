@@ -32,10 +32,21 @@
  *   g^2 = w - c^2 / v    (its variance given f(s) = 0).
  * Inside (after an up-crossing has been seen, or a ray starting inside) the missed event
  * is up-then-down, bounded by the down-crossings: the same with m, m1 -> -m, -m1. The
- * integral is the two-point Radau rule with the fixed node at t, where nu(t) = 0 because
- * f(t) is a row: (3h/4) nu(t + 2h/3), exact for quadratics, one evaluation per try
- * (Simpson's middle and end nodes took ~2.6 evaluations per step against ~1.6; on dense
- * realizations both keep the measured misses below the tolerance, numpy twin). A step is
+ * integral is the three-point Gauss-Radau rule with its fixed node at t, where nu(t) = 0
+ * because f(t) is a row: h [w0 nu(t + u0 h) + w1 nu(t + u1 h)], u = (6 -+ sqrt 6) / 10,
+ * exact for degree 4; the node nearer the end is evaluated first and a try stops as soon
+ * as the sum exceeds the bound (2.8-2.9 evaluations a step in the numpy twin). Why two
+ * nodes: nu is largest where f is least pinned, toward the step's end, and climbs there
+ * steeply when the conditional mean heads for 0; the one-node Radau rule used before,
+ * (3h/4) nu(t + 2h/3) (exact for quadratics, ~1.7 evaluations a step), underestimated
+ * exactly those steps: on dense realizations at the default tolerance it skipped 2.3e-4
+ * crossings per l at mu = 0 (100x the tolerance; 0.13% of the crossings) and 0.84% of
+ * them at mu = 2.5 sigma, each inside a step whose end value landed near 0 with the dip
+ * in the last third, and the device's Rice count was low by 0.17 +- 0.05% and 1.3 +-
+ * 0.4% (the crossing-rate tests' tolerances could not see it). This rule skipped 1 of
+ * 10356 at mu = 0 and none of 906 at 2.5 sigma; Simpson's (h/6)(4 nu(h/2) + nu(h)) 4 of
+ * 10356, three-point Gauss-Legendre none at 5.6 evaluations a step (numpy twin,
+ * tests/test_fs_adaptive.py test07b). A step is
  * accepted when the bound is at most tol h / l_d, i.e. the mean miss rate over the step
  * is at most `miss_tolerance` expected misses per along-ray length scale l_d (SE: l /
  * sqrt(d'Ad); others: the lag of correlation e^-1/2, fs_step with an l(x) field's
@@ -58,8 +69,8 @@
  * the numpy twin (SE, dense realizations, tol 1e-5 and 1e-3, mu / sigma = 0, 1, 2) the
  * steps per length given the last 4 samples are within 1-7% of those given 16, with
  * the same misses (none), while an evaluation costs O(|R|^2) instead of O((memory +
- * window)^2). Cost per step: one row of the full system (the value) and ~1.6 evaluations
- * of R (each a (value, slope) pair: one kernel jet per row of R); steps are ~0.6-1 l_d,
+ * window)^2). Cost per step: one row of the full system (the value) and ~2.9 evaluations
+ * of R (each a (value, slope) pair: one kernel jet per row of R); steps are ~0.6-0.9 l_d,
  * against 0.46 l_d (c = 0.9) and 0.14 l_d (c = 0.99) for the uniform grid. A row's
  * prior mean, field multipliers and posterior solve are computed once, when it is
  * drawn (fs_row_prep), and travel with it into R, into the slid window and into the
@@ -69,7 +80,7 @@
  * A posteriori bridge check (the issue's second half): not done. A one-node bridge
  * bound (the midpoint given both ends, ends' rates 0) missed 8e-3 crossings per l at
  * tol 1e-3 in the numpy twin (the dip sits near an end where the midpoint cannot see
- * it), so it would need 2-3 nodes per step: more than the up-front rule costs.
+ * it), so it would need 2-3 nodes per step on top of the up-front rule's.
  * FsParams.step_corr > 0 replaces the rule by the fixed step of fs_step (correlation c
  * between neighbours, first step u dt, u uniform in (0, 1]): the old uniform grid, kept
  * as the benchmarks' baseline only (scenes cannot select it).
@@ -123,10 +134,14 @@
 #endif
 #define FS_MEAN_Z 6.0
 #define FS_MEAN_HOPS 8             /* fs_mean_step */
-/* two-point Radau rule on [0, 1] with the fixed node at 0 (weight 1/4, where nu = 0) and
- * the free one at 2/3 (weight 3/4): exact for quadratics, one evaluation per try */
-#define FS_RADAU_NODE (2.0 / 3.0)
-#define FS_RADAU_WEIGHT 0.75
+/* the three-point Gauss-Radau rule on [0, 1] with its fixed node at 0 (where nu = 0, so
+ * its weight 1/9 drops out) and free nodes (6 -+ sqrt 6) / 10: exact for degree 4, two
+ * evaluations per accepted try; the node nearer the end first, so that most rejected
+ * tries stop after one (see "Step rule") */
+#define FS_RULE_NODE0 0.8449489742783178   /* (6 + sqrt 6) / 10 */
+#define FS_RULE_WEIGHT0 0.37640306270046727  /* (16 - sqrt 6) / 36 */
+#define FS_RULE_NODE1 0.3550510257216822   /* (6 - sqrt 6) / 10 */
+#define FS_RULE_WEIGHT1 0.5124858261884216   /* (16 + sqrt 6) / 36 */
 #define FS_H_MIN 1e-3              /* l_d: a floor for degenerate starts (f = 0 exactly) */
 #define FS_ELL_CORR 0.6065306597126334   /* e^-1/2: SE's lag is exactly l / sqrt(d'Ad) */
 #define FS_U_SLOPE 1100
@@ -485,7 +500,7 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
             tb = fmin(ta + h, ray.t1);
             h = dt;
         } else {
-            /* the rule on its small system R (see "Step rule"): one Radau node per try */
+            /* the rule on its small system R (see "Step rule"): 1-2 nodes per try */
             /* the mean's cap; its numbers at ta are a row's (fs_start_mean) */
             double sd0 = 0.0, m0 = lip > 0.0
                 ? fs_start_mean(p, mean, mc, S, fixed, n, ray.o + ta * ray.d, dn, &sd0) : 0.0;
@@ -499,13 +514,20 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
             for (; !st;) {
                 int clipped = ta + h >= ray.t1;
                 double hs = clipped ? ray.t1 - ta : h;
-                FsMoments M;
-                st = fs_moments(p, mean, mc, R, nr, ray, dn, ta + FS_RADAU_NODE * hs, &M);
+                /* Gauss-Radau with nu(ta) = 0: the mean rate over the step (per length)
+                 * times l_d (per t), relative to the tolerance; the try stops at the
+                 * first node that takes the sum past 1 */
+                double r = 0.0;
+                for (int q = 0; q < 2 && r <= 1.0; ++q) {
+                    FsMoments M;
+                    st = fs_moments(p, mean, mc, R, nr, ray, dn,
+                                    ta + (q ? FS_RULE_NODE1 : FS_RULE_NODE0) * hs, &M);
+                    if (st) break;
+                    res.evals++;
+                    r += (q ? FS_RULE_WEIGHT1 : FS_RULE_WEIGHT0) * fs_return_rate(M, outside)
+                         * dlen * ell / tol;
+                }
                 if (st) break;
-                res.evals++;
-                /* Radau with nu(ta) = 0: the mean rate over the step (per length) times
-                 * l_d (per t), relative to the tolerance */
-                double r = FS_RADAU_WEIGHT * fs_return_rate(M, outside) * dlen * ell / tol;
                 if (r <= 1.0 || h <= FS_H_MIN * ell) {
                     tb = clipped ? ray.t1 : ta + hs;
                     /* the next step's first try: grow where the bound is slack */
@@ -602,7 +624,7 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
     /* global: the ring takes this ray's rows, f(x_h) = 0 included: x_h is a draw of the
      * root's location, so f(x_h) = 0 is an observation of the realization (the old
      * interpolated root contradicted the bracket values by O(width^2 f'')), and the next
-     * ray's step rule needs f known at its start (Radau's nu(t) = 0) */
+     * ray's step rule needs f known at its start (the rule's nu(t) = 0) */
     res.new_first = n_old;
     res.new_end = n + 4;
     return res;

@@ -54,10 +54,13 @@
  * 40 l ray (mean 0, renewal_plus, refine 0; tests/test_fs_markov.py test03c), fixed
  * factors -> predictor: Matern 3/2 279 samples and 544 evaluations -> 251 and 350 (1.39
  * evaluations a sample, 43% of first tries rejected), 5/2 108 and 161 -> 103 and 110.
- * The floor of this rule: the largest accepted step found by bisection at every step (an
- * oracle, its evaluations not counted) takes 199 / 87 samples, so 175 / 58 steps.
- * Tried and dropped (counts of evaluations + samples per ray, 3/2 / 5/2; fixed factors
- * 820 / 269, this 602 / 213): log-linear extrapolation with the secant's exponent (817 /
+ * The floor of that (one-node) rule: the largest accepted step found by bisection at every
+ * step (an oracle, its evaluations not counted) takes 199 / 87 samples, so 175 / 58 steps.
+ * With the two-node Gauss-Radau rule (both nodes on every accepted try, so at least 2
+ * evaluations a step; shorter steps, as the one-node rule undercounted the rate):
+ * 303 samples and 723 evaluations (2.38 a sample), 5/2 120 and 241 (2.02).
+ * Tried and dropped with the one-node rule (counts of evaluations + samples per ray, 3/2 /
+ * 5/2; fixed factors 820 / 269, this 602 / 213): log-linear extrapolation with the secant's exponent (817 /
  * 286) or with the exact d log r / d log h (the derivative of every term, 790 / 289:
  * log r is far from linear in log h); z^2 alone instead of X (667 / 233); a leading-
  * order model of z and a separately (584 / 214, the same time); the next step from the
@@ -552,20 +555,36 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
             ? fmax(FS_MEAN_KAPPA * sd, fabs(mua) - FS_MEAN_Z * sd) / lip : INFINITY;
         h = fmin(fmin(grow * h, FS_H_MAX * ell), hmean);
         for (;;) {
-            /* fs_march.h's Radau rule: one node at 2h/3 per try (nu(ta) = 0) */
+            /* fs_march.h's Gauss-Radau rule (nu(ta) = 0): the node nearer the end first,
+             * whose numbers feed the predictor; the second node decides against what the
+             * first left of the ratio (its returned ratio bounds the true one from above,
+             * so an accepted try's sum is <= 1) */
             int clipped = ta + h >= ray.t1;
-            double hs = clipped ? ray.t1 - ta : h, mu1m;
-            double mum = fs_mk_mean_on(flat, mu, mean, mc, ray, dn, ta + FS_RADAU_NODE * hs,
-                                      &mu1m);
-            fs_mk_transition(m, FS_RADAU_NODE * hs * dlen, Am, Qm);
-            double y0 = 0.0, y1 = 0.0;   /* the node's conditional means: A x */
-            for (int k = 0; k < m.n; ++k) { y0 += Am[0][k] * x[k]; y1 += Am[1][k] * x[k]; }
-            float X, gam, hn = (float)(FS_RADAU_NODE * hs * dlen);
-            double r = fs_mk_rule_ratio(mum + y0, mu1m + y1, Qm, outside,
-                                        FS_RADAU_WEIGHT * dlen * ell / tol, hn, &X, &gam);
-            res.evals++;
-            /* the predictor's numbers: the node's mean on the safe side (> 0), gam */
-            float sg = outside ? 1.0f : -1.0f, mn = sg * (float)(mum + y0);
+            double hs = clipped ? ray.t1 - ta : h, r = 0.0;
+            float X = 0.0f, gam = 0.0f, hn = (float)(FS_RULE_NODE0 * hs * dlen), mn = 0.0f;
+            float sg = outside ? 1.0f : -1.0f;
+            for (int q = 0; q < 2 && r <= 1.0; ++q) {
+                double u = q ? FS_RULE_NODE1 : FS_RULE_NODE0, mu1m;
+                double mum = fs_mk_mean_on(flat, mu, mean, mc, ray, dn, ta + u * hs, &mu1m);
+                fs_mk_transition(m, u * hs * dlen, Am, Qm);
+                double y0 = 0.0, y1 = 0.0;   /* the node's conditional means: A x */
+                for (int k = 0; k < m.n; ++k) { y0 += Am[0][k] * x[k]; y1 += Am[1][k] * x[k]; }
+                double left = 1.0 - r;      /* > 0: the loop stops once r > 1 */
+                float Xq, gq;
+                double rq = fs_mk_rule_ratio(mum + y0, mu1m + y1, Qm, outside,
+                                             (q ? FS_RULE_WEIGHT1 : FS_RULE_WEIGHT0) * dlen
+                                             * ell / tol / fmax(left, 1e-300),
+                                             (float)(u * hs * dlen), &Xq, &gq);
+                r += rq * left;
+                if (rq > 1.0) r = fmax(r, 1.0 + 1e-12);   /* rounding must not accept it */
+                res.evals++;
+                if (!q) {
+                    X = Xq;
+                    gam = gq;
+                    mn = sg * (float)(mum + y0);   /* the node's mean on the safe side */
+                }
+            }
+            /* the predictor's numbers: the first node's X, mean and gam, the try's ratio */
             float lx = fs_mk_log2(X) - fs_mk_target_x(X, fs_mk_log2((float)fmin(r, 1e30)));
             gam = gam > 0.5f && gam < 5.0f ? gam : 3.0f;
             if (r <= 1.0 || h <= FS_H_MIN * ell) {
