@@ -174,6 +174,9 @@ def test_a_render_frees_its_work_buffers_before_the_film_and_gets_them_back(devi
         "render": {"spp": 8, "seed": 3}}
     used, _ = prepare_render(scene, device=device)
     assert used.render_batch(0, 0, used.batch)     # every queue and scratch page touched
+    # no AOV asked for: their path fields hold one element (every access is guarded)
+    assert all(used.paths.buffers[f].size == 16 for f in ("aov_position", "aov_normal",
+                                                          "aov_albedo"))
     work = sum(b.size for b in used.function_space.work)
     work += sum(b.size for q in (used.paths, *used.rays, used.hits, used.escaped, used.shadow)
                 for b in q.buffers.values())
