@@ -46,6 +46,22 @@ rings before reading the film, malloc_trim, film.read in place: the peak was at 
 The peak is now inside the render: ~133 MB before the first batch (fs_sphere_se: 81 MB of
 file pages, libLLVM's text 42 of them, and 52 MB anonymous), then the queues (~12 MB
 touched at 2^15 paths) and function-space scratch (15 MB allocated at 16 groups a unit).
+
+Peak RSS, every example scene, 4 spp at its own resolution (2026-12-03, MB; before =
+6d13af0, after = af7da05: function-space stages grid-stride at 4 groups a unit and 4 MB of
+scratch, AOV queue fields of one element without AOVs, OpenEXR imported on use). ONE run
+per scene and tree, same session, load ~4 (a full test suite alongside; the 3-round run was
+cut short by the time limit; ws_sphere_rq/se and ws_volume_room by /usr/bin/time):
+  ws_* (7 scenes)           140-142 -> 137-140     fs_mirror_ball_sun     150 -> 140
+  fs_sphere_matern32 / 52   147 / 148 -> 144 / 144  fs_sphere_se           152 -> 144
+  csg_two_spheres / baked   159 / 156 -> 149 / 153  bunny_grid             173 -> 165
+  wedge_volume              162 -> 149             fs_volume_room_global  162 -> 153
+  knob_no_csg / knob        167 / 180 -> 162 / 172
+Queue pages touched follow the batch, which BatchSizer sizes from the throughput, so the
+peak moves by a few MB with the machine's load. The knob's floor (measured in-process):
+~116 MB after the Device (libLLVM 51 MB resident of which 8 relocated, libclang-cpp 17),
+its grid records 18 MB (compile also peaks 20 MB above its result: HWM 162), ~6 MB per
+built PoCL program (two), the film 4 MB, then ~11 MB in the render.
 """
 from __future__ import annotations
 

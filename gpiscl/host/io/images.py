@@ -11,7 +11,9 @@ import sys
 import zlib
 
 import numpy as np
-import OpenEXR
+
+# OpenEXR is imported where it is used: a render that writes only a PNG and reads no EXR
+# does not map the binding and its libraries
 
 
 def write_exr(path, rgb, extra=None, attributes=None) -> None:
@@ -20,6 +22,7 @@ def write_exr(path, rgb, extra=None, attributes=None) -> None:
 
     ZIP compression is lossless, so a read gives back the same bits.
     """
+    import OpenEXR
     rgb = np.asarray(rgb, dtype=np.float32)
     if rgb.ndim != 3 or rgb.shape[2] != 3:
         raise ValueError(f"write_exr: rgb must have shape (H, W, 3), got {rgb.shape}")
@@ -60,6 +63,7 @@ def _library_output_muted():
 
 def read_exr_attributes(path) -> dict:
     """The header attributes of an EXR file."""
+    import OpenEXR
     with _library_output_muted():
         return dict(OpenEXR.File(str(path)).header())
 
@@ -67,6 +71,7 @@ def read_exr_attributes(path) -> dict:
 def read_exr_channel_names(path) -> set:
     """The channel names of an EXR file, from its header where the binding can read a
     header alone (OpenEXR 3.2's File reads the pixels too)."""
+    import OpenEXR
     with _library_output_muted():
         if hasattr(OpenEXR, "InputFile"):
             f = OpenEXR.InputFile(str(path))
@@ -79,6 +84,7 @@ def read_exr_channel_names(path) -> set:
 
 def read_exr(path) -> dict:
     """All channels of an EXR file as {name: (H,W) float32} (half channels are widened)."""
+    import OpenEXR
     with _library_output_muted():
         f = OpenEXR.File(str(path), separate_channels=True)
         return {name: np.asarray(ch.pixels, dtype=np.float32)

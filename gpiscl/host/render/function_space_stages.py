@@ -3,8 +3,8 @@
 They form a second program because fs_sampling.h needs gp_kernel.h in double
 (-DGP_REAL=double) while the weight-space stages stay in float; it is built only when a
 scene has function-space objects. Per-path state (the vertex record, its object and the
-global model's ring) is indexed by path id; scratch is per work item and the stages run
-in chunks, so its size does not grow with the batch.
+global model's ring) is indexed by path id; scratch is per work item and a launch's items
+stride over the rays, so its size does not grow with the batch.
 """
 from __future__ import annotations
 
@@ -16,19 +16,20 @@ from .program_sources import FS_HEADERS, FS_STAGE_FILES
 from .device import Device, KernelTimings, Program
 from ..layout import function_space_records as FL
 
-# Bytes of global-model rings per batch (cap the batch) and of scratch per launch (cap the
-# chunk). On a CPU the device's memory is the process's and every page a batch or a chunk
-# touches stays resident, while 16 MB already keeps two cores busy: the global-memory room
-# (4 KB of ring a path, 58 KB of scratch per item) held 59 MB of scratch and 32 MB of
-# rings at 256 MB budgets, 16 + 16 MB at these, at the same paths/s (tools/bench_scenes.py, same run).
+# Bytes of global-model rings per batch (cap the batch). On a CPU the device's memory is
+# the process's and every page a batch touches stays resident, while 16 MB already keeps
+# two cores busy: the global-memory room (4 KB of ring a path) held 32 MB of rings at
+# 256 MB, 16 MB at this, at the same paths/s (tools/bench_scenes.py, same run).
 BUDGET, CPU_BUDGET = 256 << 20, 16 << 20
-# Work-groups per compute unit in one chunk: enough that the units finish together (the
-# work per ray varies by several times), few enough that the scratch stays small. A CPU
-# touches every scratch page a chunk uses: chunks of the whole batch (up to ~15,000 items
-# of 17.7 KB each for the knob) held ~250 MB resident where 16 groups a unit hold ~9 MB
-# on two cores, at the same paths/s (tools/bench_scenes.py). A GPU's many units still
-# reach BUDGET first.
-GROUPS_PER_UNIT = 16
+# Bytes of scratch per launch (cap the work items launched, which stride over the rays).
+# A CPU touches every scratch page: 16 MB of it held 15 MB resident for the knob.
+SCRATCH_BUDGET, CPU_SCRATCH_BUDGET = 256 << 20, 4 << 20
+# Work-groups per compute unit in one launch: its items loop over the rays (grid-stride),
+# so the units finish together however the work per ray varies, and a few groups a unit
+# keep them busy. Launches in chunks of the batch needed 16 groups a unit to balance the
+# work (every chunk waited for its slowest ray). A GPU's many units reach SCRATCH_BUDGET
+# first.
+GROUPS_PER_UNIT = 4
 
 
 def _fs_objects(objects: np.ndarray) -> np.ndarray:
@@ -43,8 +44,13 @@ def ring_stride(objects: np.ndarray) -> int:
 
 
 def budget(device: Device) -> int:
-    """Bytes of rings per batch, and of scratch per launch, on this device."""
+    """Bytes of rings per batch on this device."""
     return CPU_BUDGET if device.is_cpu else BUDGET
+
+
+def scratch_budget(device: Device) -> int:
+    """Bytes of scratch per launch on this device."""
+    return CPU_SCRATCH_BUDGET if device.is_cpu else SCRATCH_BUDGET
 
 
 def max_batch(objects: np.ndarray, device: Device) -> int:
@@ -110,9 +116,10 @@ class FunctionSpaceStages:
             self.program.timings = self.timings
         slice_bytes = 8 * defines["FS_SCRATCH_DOUBLES"]
         parallel = int(self.device.device.max_compute_units) * self.local * GROUPS_PER_UNIT
-        chunk = max(1, min(self.batch, budget(self.device) // (2 * slice_bytes), parallel))
-        self.chunk = int(-(-chunk // self.local) * self.local)
-        self.scratch_bytes = 2 * slice_bytes * self.chunk
+        items = max(1, min(self.batch, scratch_budget(self.device) // (2 * slice_bytes),
+                           parallel))
+        self.items = int(-(-items // self.local) * self.local)   # work items a launch
+        self.scratch_bytes = 2 * slice_bytes * self.items
         self.release()        # a rebuilt program may need a larger scratch
 
     def _work(self) -> tuple:
@@ -138,27 +145,28 @@ class FunctionSpaceStages:
         vertex, vertex_object, rings, scratch = self._work()
         return vertex, vertex_object, rings, np.int32(self.stride), scratch
 
-    def _chunks(self, name, n, head, tail):
-        """Launch over [0, n) in chunks with a fixed local size: PoCL compiles a kernel
-        once per work-group size, and these kernels take seconds to compile."""
-        kernel, queue = self.program.kernels[name], self.device.queue
-        for first in range(0, n, self.chunk):
-            m = min(self.chunk, n - first)
-            kernel.set_args(*head, np.int32(first), np.int32(first + m), *tail)
-            padded = -(-m // self.local) * self.local
-            event = cl.enqueue_nd_range_kernel(queue, kernel, (padded,), (self.local,))
-            self.program.timings.record(name, m, event)
+    def _launch(self, name, n, head, tail):
+        """One launch of at most self.items work items striding over [0, n), with a fixed
+        local size: PoCL compiles a kernel once per work-group size, and these kernels
+        take seconds to compile."""
+        if n <= 0:
+            return
+        kernel = self.program.kernels[name]
+        kernel.set_args(*head, np.int32(n), *tail)
+        items = min(self.items, -(-n // self.local) * self.local)
+        event = cl.enqueue_nd_range_kernel(self.device.queue, kernel, (items,), (self.local,))
+        self.program.timings.record(name, n, event)
 
     def free_flight(self, params, paths, rays, n, gpis_objects, kernels, means, counters):
         """Rays [0, n) of `rays`: hits moved to function-space crossings, vertices recorded."""
         self._check_posterior(means)
-        self._chunks("gpis_function_space", n, (params,),
+        self._launch("gpis_function_space", n, (params,),
                      (*paths.args, *rays.args, gpis_objects, kernels, means, *self._args(),
                       counters))
 
     def shadow(self, params, paths, shadow, n, gpis_objects, kernels, means, counters):
         """Shadow rays (at most n: one per hit) blocked by function-space crossings."""
         self._check_posterior(means)
-        self._chunks("gpis_shadow_function_space", n, (params,),
+        self._launch("gpis_shadow_function_space", n, (params,),
                      (*paths.args, *shadow.args, gpis_objects, kernels, means, *self._args(),
                       counters))

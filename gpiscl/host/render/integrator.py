@@ -29,6 +29,11 @@ from ..compile.scene import CompiledScene
 DEFAULT_BATCH, CPU_DEFAULT_BATCH = 1 << 18, 1 << 15
 
 
+# PATH_STATE's first-hit fields (aov.py): one element each when no AOV is asked for, as
+# every kernel's access is guarded by params->aov (32768 paths: 1.5 MB)
+AOV_FIELDS = ("aov_position", "aov_normal", "aov_albedo")
+
+
 def default_batch(device: Device) -> int:
     return CPU_DEFAULT_BATCH if device.is_cpu else DEFAULT_BATCH
 
@@ -171,7 +176,9 @@ class WavefrontIntegrator:
         if self.paths is not None:
             return
         ctx, cap = self.device.ctx, self.batch
-        self.paths = DeviceQueue(ctx, layouts.PATH_STATE, cap)
+        # the first-hit AOV fields are written and read only when params.aov is set
+        unused = () if self.params_host[0]["aov"] else AOV_FIELDS
+        self.paths = DeviceQueue(ctx, layouts.PATH_STATE, cap, unused)
         self.rays = [DeviceQueue(ctx, layouts.RAY_QUEUE, cap) for _ in range(2)]
         self.hits = DeviceQueue(ctx, layouts.INDEX_QUEUE, cap)
         self.escaped = DeviceQueue(ctx, layouts.INDEX_QUEUE, cap)

@@ -7,14 +7,17 @@ from ..layout.records import Queue
 
 
 class DeviceQueue:
-    """One buffer per field of a Queue layout, in the order the C macro lists them."""
+    """One buffer per field of a Queue layout, in the order the C macro lists them.
+    unused: fields no kernel touches in this render (their launches are guarded, e.g. by
+    params->aov), given one element only."""
 
-    def __init__(self, ctx: cl.Context, layout: Queue, capacity: int):
+    def __init__(self, ctx: cl.Context, layout: Queue, capacity: int, unused=()):
         self.layout = layout
         self.capacity = capacity
         self.buffers = {}
         for _, fname in layout.fields:
-            nbytes = layout.numpy_dtype(fname).itemsize * max(capacity, 1)
+            n = 1 if fname in unused else max(capacity, 1)
+            nbytes = layout.numpy_dtype(fname).itemsize * n
             self.buffers[fname] = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, nbytes)
 
     @property

@@ -24,9 +24,11 @@ __kernel void generate_camera_rays(__constant RenderParams* params,
     path_prev_pos[i] = (float4)(camera->position.xyz, 0.0f);  /* pdf 0: seen directly */
     path_depth[i] = 0;
     path_medium[i] = -1;
-    path_aov_position[i] = (float4)(0.0f);   /* no hit yet: adds nothing to the film */
-    path_aov_normal[i] = (float4)(0.0f);
-    path_aov_albedo[i] = (float4)(0.0f);
+    if (params->aov) {   /* without AOVs these fields hold one element (integrator.py) */
+        path_aov_position[i] = (float4)(0.0f);   /* no hit yet: adds nothing to the film */
+        path_aov_normal[i] = (float4)(0.0f);
+        path_aov_albedo[i] = (float4)(0.0f);
+    }
     out_o[i] = (float4)(camera->position.xyz, 0.0f);
     out_d[i] = (float4)(d, T_INFINITY);
     out_path[i] = i;

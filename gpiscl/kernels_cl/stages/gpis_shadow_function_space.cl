@@ -19,9 +19,11 @@
  * that one shared realization would put between a shadow ray and the later path (weight
  * space has it, we do not) cannot change any expectation. Crossings are found by the
  * same adaptive march as free flight (fs_march.h), so the visibility agrees in law with
- * what a continuation ray along the same segment would see. */
-__kernel void gpis_shadow_function_space(__constant RenderParams* params, int first,
-                                         int end, PATH_PARAMS(path),
+ * what a continuation ray along the same segment would see.
+ *
+ * A fixed number of work items stride over the shadow rays (one scratch slice each). */
+__kernel void gpis_shadow_function_space(__constant RenderParams* params, int n,
+                                         PATH_PARAMS(path),
                                          SHADOW_PARAMS(shadow),
                                          __global const GpisObject* gpis,
                                          __global const GpKernel* kernels,
@@ -31,27 +33,28 @@ __kernel void gpis_shadow_function_space(__constant RenderParams* params, int fi
                                          __global const FsObs* rings, int ring_stride,
                                          __global double* scratch, __global int* counters)
 {
-    int item = get_global_id(0), i = first + item;
-    if (i >= end || i >= counters[COUNT_SHADOW]) return;
-    if (max3(shadow_contribution[i].xyz) <= 0.0f) return;   /* blocked already */
-    float4 o = shadow_o[i], d = shadow_d[i];
-    int p = shadow_path[i], vk = vertex_object[p];
-    FsVertex none = {0}, prev = vertex[p];
-    float4 g = shadow_grad[i];
-    if (g.w > 0.0f) {   /* a light sample that chose its own normal (fs_normal_pdf.h) */
-        prev.grad = (float4)(g.xyz, 0.0f);
-        prev.implied = 1;
-    }
-    __global const FsObs* ring = rings + (size_t)p * ring_stride;
+    int item = get_global_id(0), end = min(n, counters[COUNT_SHADOW]);
     FsScratch S = fs_scratch(scratch, item);
-    for (int k = 0; k < params->num_gpis; ++k) {
-        FsRay r;
-        FsParams prm;
-        if (fs_object_flight(params, gpis, k, kernels, means, o, d, d.w, path_pixel[p],
-                             path_sample[p], 1u, vk == k ? prev : none, ring, S, counters, &r,
-                             &prm).hit) {
-            shadow_contribution[i] = (float4)(0.0f);
-            return;
+    for (int i = item; i < end; i += get_global_size(0)) {
+        if (max3(shadow_contribution[i].xyz) <= 0.0f) continue;   /* blocked already */
+        float4 o = shadow_o[i], d = shadow_d[i];
+        int p = shadow_path[i], vk = vertex_object[p];
+        FsVertex none = {0}, prev = vertex[p];
+        float4 g = shadow_grad[i];
+        if (g.w > 0.0f) {   /* a light sample that chose its own normal (fs_normal_pdf.h) */
+            prev.grad = (float4)(g.xyz, 0.0f);
+            prev.implied = 1;
+        }
+        __global const FsObs* ring = rings + (size_t)p * ring_stride;
+        for (int k = 0; k < params->num_gpis; ++k) {
+            FsRay r;
+            FsParams prm;
+            if (fs_object_flight(params, gpis, k, kernels, means, o, d, d.w, path_pixel[p],
+                                 path_sample[p], 1u, vk == k ? prev : none, ring, S, counters,
+                                 &r, &prm).hit) {
+                shadow_contribution[i] = (float4)(0.0f);
+                break;
+            }
         }
     }
 }
