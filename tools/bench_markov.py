@@ -61,6 +61,11 @@ step's state draw with its transition 78 / 141 ns, a bridge draw 145 / 230 ns (b
 us (base 1.4). The rate at 32^2 is mostly the host's: at 64^2 and 16 spp the kernels'
 share shows. Where a flight's time goes, the predictor and what was tried besides it:
 fs_markov.h's header ("Step rule", "Cost").
+Measured 2026-12-03 (the two-node step rule in both samplers; defaults, one run, load ~6):
+samples/s Markov / general and ratio, l/s ratio: m32 mu 0 2.21e6 / 3.41e5 6.47x, 8.24x;
+m32 mu 2 1.87e6 / 2.80e5 6.67x, 8.53x; m52 mu 0 1.46e6 / 3.01e5 4.84x, 6.42x; m52 mu 2
+1.68e6 / 2.85e5 5.87x, 7.92x; render 32^2, 4 spp 3.63e4 / 1.15e4 paths/s 3.17x. Per ray
+the second node raised m32's samples 252 -> 303 and evaluations 350 -> 723 (fs_markov.h).
 What stands between this and the issue's 30x: the goal assumed a Cholesky over whole
 rays; the general sampler keeps a window of 16 rows and evaluates its step rule on <= 14,
 ~1.6-2 us of CPU per sample. 30x would be ~55-65 ns a sample. A Markov step costs its
