@@ -54,7 +54,12 @@
  * bound was below 5%, 30% or 100% of the tolerance (capped at FS_H_MAX l_d and at the
  * ray's end, and at fs_mean_step: the prior mean must not change faster than the node
  * can see; on the knob every step was that cap's, fs_mean_step has the numbers); a
- * rejected try halves (floor FS_H_MIN l_d). So a ray's expected misses are
+ * rejected try halves (floor FS_H_MIN l_d). fs_markov.h's step predictor (each try aimed at
+ * ratio 2^-3 from the first node's z, a and gam) was tried here in the numpy twin (SE,
+ * dense paths, mu / sigma = 0, 1, 2, the default tolerance): 2.35-2.45 evaluations a step
+ * instead of 2.83-2.87, but 7-13% more steps (it aims below the bound), so evaluations per
+ * length fell only 7-10% and steps + evaluations / 2 per length stayed within 1%; targets
+ * 2^-1..2^-5 the same; not ported. So a ray's expected misses are
  * at most tol * (its length / l_d), and the crossing rate's relative bias at most
  * tol / (l_d * Rice's rate) = 2 pi tol e^(mu^2 / 2 sigma^2) for SE: the default 2e-6
  * gives <= 0.11% for mu / sigma <= 3 (1e-5, the earlier default, allowed 0.57% there).
@@ -319,8 +324,9 @@ inline double fs_downcrossing_slope(double mean, double sd, double2 u)
     return -sd * fmax(y, DBL_MIN);
 }
 
-/* The longest step the prior mean allows: the rule sees the process only at its node
- * (t + 2h/3) and the samples at the step's ends, so a mean that dips to 0 between them (a
+/* The longest step the prior mean allows: the rule sees the process only at its nodes
+ * (t + 0.355 h and t + 0.845 h; one node at t + 2h/3 when this cap was set) and the
+ * samples at the step's ends, so a mean that dips to 0 between them (a
  * feature thinner than the step, with sigma << l: the knob's l = 1.4, sigma = 0.01) hides
  * the rate's peak, and steps of 2 l_d went through such features (the knob 6% too
  * bright). With the mean's Lipschitz bound `lip` (per unit t) the mean moves by at most
@@ -329,7 +335,12 @@ inline double fs_downcrossing_slope(double mean, double sd, double2 u)
  * sample within 2 sd of its dip, whose rate rejects the step or whose value is likely
  * below 0 (with Simpson's nodes, 3 sd: the knob's brightness was the same at kappa 1, 2,
  * 3 and 6 and with steps capped to 0.035 l, while the cost fell from 21 to 8 samples per
- * flight), and far from it the step is the sphere-tracing distance to |mean| = FS_MEAN_Z
+ * flight; with the two nodes of "Step rule" the gaps are at most 0.49 h, so kappa 8 would
+ * keep "4 sd apart", but paired renders of the knob (24^2, 2048 spp, the same seeds, only
+ * kappa changed) read 1.27031 at kappa 3, +0.014% at 4.5, +0.055% at 6 and +0.11% at 8
+ * (two seeds agreed on 6 -> 8 to 1e-5) for 3.94 -> 3.54 samples and 6.95 -> 6.08
+ * evaluations a flight (6 -> 8, ~3% faster): a small bias that grows with kappa, so 6
+ * stays), and far from it the step is the sphere-tracing distance to |mean| = FS_MEAN_Z
  * sd (a crossing there needs a residual of that size: rate ~ e^{-Z^2/2} / l, far below
  * any tolerance). m and sd are the prior's at x(ta) (sigma(x) fields and a posterior
  * included; fs_start_mean); a posterior's mean correction varies on the kernel's scale,
