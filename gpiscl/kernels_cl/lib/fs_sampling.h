@@ -398,6 +398,36 @@ inline void fs_row_copy(GpKernel p, FsScratch S, int k, FsScratch D, int i)
     for (int j = 0; j < S.post.n; ++j) fs_post_v(D, i)[j] = fs_post_v(S, k)[j];
 }
 
+/* The stationary kernel's jets at x - (row j's position) for rows j0 .. j0 + FS_LANES - 1
+ * of S (lanes at j >= n repeat row n - 1 and are for the caller to ignore): a radial
+ * kernel's exps are taken in one double4, which PoCL's CPU runs several times faster than
+ * as scalars (ws_posterior.h measured 5.6e8 against 5.8e7 a second in double8), and these
+ * exps were the largest single cost of a function-space flight (gp_radial ~1/4 of it,
+ * perf). Why 4 lanes, not 8 (renders, paths per CPU s, same run): adaptive flights hold
+ * few rows (memory + ~5 samples), and 4 lanes were 6-10% faster there than 8 and as fast
+ * for the uniform step's longer systems. Used where rows are factored (fs_factor_known);
+ * the step rule's small system (fs_moments) measured no faster with it. The same
+ * operations as gp_kernel_jet lane by lane; the vector exp may round differently from the
+ * scalar one (images moved by <= 7e-7 on the room, none on the SE sphere). */
+#define FS_LANES 4
+inline void fs_jets(GpKernel p, FsScratch S, int j0, int n, double3 x, GpJet* J)
+{
+    double3 r[FS_LANES];
+    for (int l = 0; l < FS_LANES; ++l) r[l] = x - fs_pos(S.rows + min(j0 + l, n - 1));
+    if (gp_kernel_is_product(p)) {
+        for (int l = 0; l < FS_LANES; ++l) J[l] = gp_kernel_jet(p, r[l]);
+        return;
+    }
+    double3 A = gp_aniso(p);
+    double s[FS_LANES], a[FS_LANES], e[FS_LANES];
+    for (int l = 0; l < FS_LANES; ++l) {
+        s[l] = dot(A * r[l], r[l]);
+        a[l] = gp_radial_arg(p, s[l]);
+    }
+    vstore4(exp(vload4(0, a)), 0, e);
+    for (int l = 0; l < FS_LANES; ++l) J[l] = gp_radial_jet(p, r[l], s[l], e[l]);
+}
+
 /* Covariance rows and factor of rows [from, n), whose own numbers are in place. */
 inline int fs_factor_known(GpKernel p, __global const MeanNode* mean, FsScratch S, int from,
                            int n)
@@ -406,15 +436,33 @@ inline int fs_factor_known(GpKernel p, __global const MeanNode* mean, FsScratch 
     for (int i = from; i < n; ++i) {
         __global const FsObs* ri = S.rows + i;
         double3 xi = fs_pos(ri), ui = fs_dir(ri);
-        /* stationary: unit multipliers, unused */
-        GpFieldsAt fi = ns ? fs_row_fields(S, i) : fs_fields(p, mean, xi);
         __global double* Li = S.L + fs_tri(i);
-        for (int j = 0; j <= i; ++j) {
-            __global const FsObs* rj = S.rows + j;
-            Li[j] = gp_cov_at(p, fs_pos(rj), fs_dir(rj), rj->kind,
-                              ns ? fs_row_fields(S, j) : fi, xi, ui, ri->kind, fi);
-            if (np) Li[j] -= fs_post_dot(fs_post_v(S, j), fs_post_v(S, i), np);
+        if (ns) {
+            GpFieldsAt fi = fs_row_fields(S, i);
+            for (int j = 0; j <= i; ++j) {
+                __global const FsObs* rj = S.rows + j;
+                Li[j] = gp_cov_at(p, fs_pos(rj), fs_dir(rj), rj->kind, fs_row_fields(S, j),
+                                  xi, ui, ri->kind, fi);
+            }
+        } else {
+            /* stationary: gp_cov's k(x_i - x_j) jets, FS_LANES at a time (fs_jets), the
+             * last < FS_LANES one by one (a part-filled vector cost more than it saved) */
+            int j0 = 0;
+            for (; j0 + FS_LANES <= i + 1; j0 += FS_LANES) {
+                GpJet J[FS_LANES];
+                fs_jets(p, S, j0, i + 1, xi, J);
+                for (int l = 0; l < FS_LANES; ++l) {
+                    __global const FsObs* rj = S.rows + j0 + l;
+                    Li[j0 + l] = gp_jet_cov(J[l], fs_dir(rj), rj->kind, ui, ri->kind);
+                }
+            }
+            for (int j = j0; j <= i; ++j) {
+                __global const FsObs* rj = S.rows + j;
+                Li[j] = gp_cov(p, fs_pos(rj), fs_dir(rj), rj->kind, xi, ui, ri->kind);
+            }
         }
+        for (int j = 0; np && j <= i; ++j)
+            Li[j] -= fs_post_dot(fs_post_v(S, j), fs_post_v(S, i), np);
     }
     return fs_cholesky(S.L, from, n, 0);
 }
