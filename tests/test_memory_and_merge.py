@@ -198,3 +198,30 @@ def test_a_render_frees_its_work_buffers_before_the_film_and_gets_them_back(devi
     np.testing.assert_array_equal(again, fresh.batch_radiance(n))
     used.render(1)
     assert used.paths is None and used.function_space.work is None
+
+
+def test_the_command_line_frees_the_integrator_before_writing_the_outputs(tmp_path,
+                                                                          monkeypatch):
+    """render drops the integrator (its film and scene buffers: the process's memory on a
+    CPU) once the film is read, so the output files' buffers do not come on top of them
+    (csg_baked's peak RSS was there)."""
+    import weakref
+    import gpiscl.api
+    import gpiscl.host.render.output as output
+    refs, alive = [], []
+    prepare, write = gpiscl.api.prepare_render, output.write_outputs
+
+    def prepare_and_watch(*args, **kwargs):
+        integrator, scene = prepare(*args, **kwargs)
+        refs.append(weakref.ref(integrator))
+        return integrator, scene
+
+    def write_and_look(*args, **kwargs):
+        alive.append(refs[0]() is not None)
+        return write(*args, **kwargs)
+    monkeypatch.setattr(gpiscl.api, "prepare_render", prepare_and_watch)
+    monkeypatch.setattr(output, "write_outputs", write_and_look)
+    scene = tmp_path / "s.json"
+    scene.write_text(json.dumps(TINY))
+    assert main(["render", str(scene), "-o", str(tmp_path / "out.png")]) == 0
+    assert alive == [False]

@@ -10,7 +10,11 @@ so imports, scene preparation, OpenCL compiles and caches count as a user sees t
           (its own timer), paths per CPU second of the whole process (ru_utime + ru_stime:
           steadier than wall time on a shared, oversubscribed machine; startup included,
           ~0.7 s of it), and peak RSS (the process's ru_maxrss); PoCL's and the bake
-          cache warm (a small render of each scene fills them first);
+          cache warm (a 1-spp render of each scene at its own resolution fills them
+          first: PoCL builds another variant of a kernel for a large launch, e.g. the
+          accumulate kernel over a 256x256 film, which a 16x16 render never makes, and
+          that compile inside the measured render added 13 MB to the knob's peak, 184
+          against 171 MB the next round);
   first   time to first pixel with nothing cached: an empty PoCL kernel cache, pyopencl's
           cache off, an empty bake cache ($GPISCL_CACHE): process start to the end of a
           16x16, 1-spp render (an upper bound on the first sample accumulated);
@@ -62,6 +66,29 @@ peak moves by a few MB with the machine's load. The knob's floor (measured in-pr
 ~116 MB after the Device (libLLVM 51 MB resident of which 8 relocated, libclang-cpp 17),
 its grid records 18 MB (compile also peaks 20 MB above its result: HWM 162), ~6 MB per
 built PoCL program (two), the film 4 MB, then ~11 MB in the render.
+
+Peak RSS, every example scene, 4 spp at its own resolution (2026-12-03, MB, medians of 3,
+same run, load 1.5-3.5; before = dbf1396, after = the render command dropping its
+integrator before writing; both measured with the warm-up at the scene's own resolution,
+so the before column is the steady state: bunny_grid's 165 above was a kernel compiled
+inside its one measured round):
+  ws_* (7 scenes)           137-139 -> 133-135     fs_mirror_ball_sun     137 -> 137
+  fs_sphere_matern32 / 52   144 / 144 -> 143 / 144  fs_sphere_se           144 -> 146
+  csg_two_spheres / baked   148 / 153 -> 150 / 148  bunny_grid             153 -> 153
+  wedge_volume              148 -> 149             fs_volume_room_global  153 -> 153
+  knob_no_csg / knob        162 / 171 -> 162 / 170
+(+-2 MB between rounds of one tree; paths/CPU-s x0.94-1.06, noise: the render is the same
+code.) The write phase was the peak of the ws_* scenes and csg_baked: the film's device
+buffers and the scene's records stayed allocated under the PNG/EXR buffers. Every other
+peak is inside the render (VmHWM at stages: the knob 115 MB after the Device, 142 after
+compile (records 18.4, all tracemalloc finds kept), 158 after the two programs and the
+film, 170 at the last batch: 21 MB of queues, rings and scratch at 2^15 paths). What did
+not lower it: a fixed malloc mmap threshold (MALLOC_MMAP_THRESHOLD_=131072: the knob's
+compile peak 162 -> 152 and its end 152 -> 134, the render's 170 unchanged: the queues
+reuse the heap's free pages otherwise), MALLOC_ARENA_MAX=1, malloc_trim before the first
+batch, building the programs from their binaries (no clang preprocessing: -1 MB a
+program), the stage program without the weight-space kernels (-1 MB). A profiler that
+imports pyopencl before gpiscl loads PyPI's PoCL as well (+21 MB: opencl_vendors.py).
 """
 from __future__ import annotations
 
@@ -143,12 +170,16 @@ def main(argv=None):
         if "render" in modes:
             # 'render' is the steady state: the first-ever PoCL compile (~150 MB of LLVM
             # and 10 s) and the bakes are the 'first' and 'cold' modes' business, so a
-            # small render per scene and tree fills both caches before the rounds
+            # render per scene and tree fills both caches before the rounds. At the
+            # scene's own resolution: the accumulate kernel spans every pixel, and PoCL
+            # builds another variant of a kernel for a large launch (its cache held
+            # accumulate twice, "64-1-1-goffs0" and "...-smallgrid").
             for scene in scenes:
                 for tree in trees:
                     pocl, bake = caches[tree]
-                    run(tree, scene, small, {"POCL_CACHE_DIR": str(pocl),
-                                             "GPISCL_CACHE": str(bake)}, tmp / "out.png")
+                    run(tree, scene, ["--spp", "1"], {"POCL_CACHE_DIR": str(pocl),
+                                                      "GPISCL_CACHE": str(bake)},
+                        tmp / "out.png")
         for rnd in range(args.repeats):
             for scene in scenes:
                 for mode in modes:
