@@ -86,6 +86,20 @@ unbiased samplers can differ by no more than their cost per path, so the issue's
 against uniform 0.99 is out of reach by construction (at most its ~2x here). The knob's
 mean/ref z of every variant scatters by +-3 with its sun glints (heavy-tailed pixels:
 short renders read low).
+
+Measured 2026-12-03 after fs_sampling.h's covariance exps in double4 lanes (2270dd2), the
+defaults above, one run at load ~1-2: paths per CPU s adaptive / uniform 0.9 / uniform
+0.99, MSE of uniform 0.9 / 0.99 relative to adaptive's (GP values and evaluations per
+flight unchanged, the same steps):
+    fs_sphere_se           3.36e4 / 4.99e4 / 2.36e4   0.62 / 1.51
+    knob                   1.72e4 / 3.45e4 / 2.86e4   1.00 / 1.00
+    wedge_volume           5.85e4 / 6.85e4 / 5.82e4   1.04 / 1.06
+    fs_volume_room_global  1.25e4 / 1.36e4 / 6.01e3   0.94 / 1.28
+Adaptive / uniform 0.9: 0.67, 0.50, 0.85, 0.92. The lanes sped up the systems with many
+rows most (same-run A/B, tree before vs after: the room x1.44 adaptive, x1.57 uniform
+0.9; the sphere x1.13 / x1.34), i.e. uniform's longer windows more than adaptive's short
+ones, so the ratio to uniform 0.9 barely moved; uniform 0.99 gained as much and stays
+1.3-1.5x the MSE on the sphere and the room.
 """
 from __future__ import annotations
 
