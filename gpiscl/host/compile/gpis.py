@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 from dataclasses import dataclass
 from statistics import NormalDist
 
@@ -20,6 +21,7 @@ from ..scene.gpis import FIELD_KEYS, field_minimum
 from .colour_fields import pack_field
 from ..errors import SceneError
 from .posterior import build_posterior, pack_posterior
+from .proxy_cut import CUT_EPSILON, cut_share
 from ..layout import function_space_records as FSL
 
 _KERNELS = {"squared_exponential": K.SquaredExponential, "rational_quadratic": K.RationalQuadratic,
@@ -177,6 +179,20 @@ def occupancy_level(g: dict) -> float:
     return float(np.nextafter(np.float32(level), np.float32(np.inf)))
 
 
+def _warn_if_cut(g: dict, mean: M.Mean, source: str, key: str) -> None:
+    """One line on stderr when the object reaches its proxy's boundary (proxy_cut.py):
+    the render is still what the scene says, but a cut nobody asked for is a wrong image
+    nobody sees coming."""
+    eps = (g.get("bounds") or {}).get("occupancy") or CUT_EPSILON
+    level = occupancy_level(dict(g, bounds={"occupancy": eps}))
+    share = cut_share(mean, g["proxy"], level)
+    if share > 0.0:
+        print(f"gpiscl: warning: {source}: {key}.proxy: cuts the object: P(f < 0) >= {eps:g} "
+              f"on {100.0 * share:.3g}% of the proxy's boundary (prior mean below "
+              f"{level:.4g}), where the render shows a flat cut face; enlarge the proxy, or "
+              f"set {key}.clip to true if the cut is meant", file=sys.stderr)
+
+
 def _posterior_block(g: dict, proxy: dict, source: str, key: str, bakes=None) -> np.ndarray:
     try:
         post = build_posterior(g["observations"], build_kernel(g["kernel"], proxy),
@@ -231,9 +247,12 @@ def compile_gpis(shapes: list, material_of, source: str = "<scene>",
         o["occupancy_level"] = occupancy_level(g)
         o["occupancy_step"] = OCCUPANCY_MIN_STEP * kernel_length_scale(g["kernel"])
         try:
-            prog = pack_mean_parts(build_mean(g["mean"], bakes))
+            mean = build_mean(g["mean"], bakes)
         except ValueError as exc:
             raise SceneError(source, f"{keys[i]}.mean", str(exc)) from None
+        if not g.get("clip"):
+            _warn_if_cut(g, mean, source, keys[i])
+        prog, mean = pack_mean_parts(mean), None
         if g.get("observations") is not None:
             # the posterior block sits just before the mean program (fs_posterior.h)
             block = _posterior_block(g, proxy, source, keys[i], bakes)

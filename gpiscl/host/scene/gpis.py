@@ -298,5 +298,8 @@ GPIS = SHAPES.register("gpis", Record({
     "emission": Field(EMISSION, None),
     "bounds": Field(BOUNDS, {}),
     "observations": Field(Nullable(OBSERVATIONS), None),
+    # true: the proxy cuts the object on purpose (a medium's container, the authors'
+    # wedge prism); false: compile/proxy_cut.py warns where the object reaches it
+    "clip": Field(Bool(), False),
 }, checks=[mesh_proxy_problem, _weight_space_kernel, _thin_plate_span, _fields_positive,
            observations_problem]))
