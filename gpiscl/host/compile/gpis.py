@@ -21,7 +21,7 @@ from ..scene.gpis import FIELD_KEYS, field_minimum
 from .colour_fields import pack_field
 from ..errors import SceneError
 from .posterior import build_posterior, pack_posterior
-from .proxy_cut import CUT_EPSILON, cut_share
+from .proxy_cut import CUT_EPSILON, cut_extent
 from ..layout import function_space_records as FSL
 
 _KERNELS = {"squared_exponential": K.SquaredExponential, "rational_quadratic": K.RationalQuadratic,
@@ -184,13 +184,12 @@ def _warn_if_cut(g: dict, mean: M.Mean, source: str, key: str) -> None:
     the render is still what the scene says, but a cut nobody asked for is a wrong image
     nobody sees coming."""
     eps = (g.get("bounds") or {}).get("occupancy") or CUT_EPSILON
-    level = occupancy_level(dict(g, bounds={"occupancy": eps}))
-    share = cut_share(mean, g["proxy"], level)
+    share, p = cut_extent(mean, build_kernel(g["kernel"], g["proxy"]), g["proxy"], eps)
     if share > 0.0:
         print(f"gpiscl: warning: {source}: {key}.proxy: cuts the object: P(f < 0) >= {eps:g} "
-              f"on {100.0 * share:.3g}% of the proxy's boundary (prior mean below "
-              f"{level:.4g}), where the render shows a flat cut face; enlarge the proxy, or "
-              f"set {key}.clip to true if the cut is meant", file=sys.stderr)
+              f"on {100.0 * share:.3g}% of the proxy's boundary (up to {p:.2g}), where the "
+              f"render shows a flat cut face; enlarge the proxy, or set {key}.clip to true "
+              f"if the cut is meant", file=sys.stderr)
 
 
 def _posterior_block(g: dict, proxy: dict, source: str, key: str, bakes=None) -> np.ndarray:

@@ -4,12 +4,17 @@ there, which is right for a medium's container (the authors' wedge, a room of fo
 silent error for a proxy drawn too tight around a surface. compile/gpis.py warns unless
 the scene says the cut is meant (the object's "clip": true).
 
-The test is the occupancy bound's (compile/gpis.py occupancy_level): at a boundary point
-x the object can be present when the prior mean is below z sigma_max, i.e. P(f(x) < 0) >=
-epsilon (the scene's occupancy epsilon, else its default). Points are spread over the
-boundary by area (a fixed seed: the same scene warns the same way every run).
+The test is the occupancy bound's (compile/gpis.py occupancy_level) point by point: the
+object can be present at a boundary point x where P(f(x) < 0) = Phi(-m(x) / sd(x)) >=
+epsilon (the scene's occupancy epsilon, else its default), with the prior's mean and sd
+there (sigma(x) fields included; occupancy_level's sigma_max flagged the bunny's and the
+baked CSG's boundaries where sigma(x) is smaller). Points are spread over the boundary by
+area, with a fixed seed: the same scene warns the same way every run.
 """
 from __future__ import annotations
+
+import math
+from statistics import NormalDist
 
 import numpy as np
 
@@ -54,10 +59,14 @@ def boundary_points(proxy: dict, n: int = BOUNDARY_POINTS, seed: int = 0):
     return x
 
 
-def cut_share(mean, proxy: dict, level: float) -> float:
-    """The share of the proxy's boundary where the prior mean is below `level` (the
-    object can be there): 0 for the "scene" proxy."""
+def cut_extent(mean, kernel, proxy: dict, eps: float):
+    """(share, p): the share of the proxy's boundary where P(f < 0) >= eps under the prior
+    (mean and the kernel's sd there, sigma(x) fields included), and the largest P(f < 0)
+    on it; (0, 0) for the "scene" proxy."""
     x = boundary_points(proxy)
     if x is None:
-        return 0.0
-    return float(np.mean(np.asarray(mean.value(x)) < level))
+        return 0.0, 0.0
+    var = kernel.variance_at(x) if hasattr(kernel, "variance_at") else kernel.variance
+    z = np.asarray(mean.value(x)) / np.sqrt(np.broadcast_to(np.asarray(var, float), len(x)))
+    share = float(np.mean(z < NormalDist().inv_cdf(1.0 - eps)))
+    return share, 0.5 * math.erfc(float(z.min()) / math.sqrt(2.0))
