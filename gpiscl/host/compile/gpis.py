@@ -247,11 +247,12 @@ def compile_gpis(shapes: list, material_of, source: str = "<scene>",
         o["occupancy_step"] = OCCUPANCY_MIN_STEP * kernel_length_scale(g["kernel"])
         try:
             mean = build_mean(g["mean"], bakes)
+            prog = pack_mean_parts(mean)
         except ValueError as exc:
             raise SceneError(source, f"{keys[i]}.mean", str(exc)) from None
         if not g.get("clip"):
             _warn_if_cut(g, mean, source, keys[i])
-        prog, mean = pack_mean_parts(mean), None
+        mean = None                         # its grids live on in prog alone
         if g.get("observations") is not None:
             # the posterior block sits just before the mean program (fs_posterior.h)
             block = _posterior_block(g, proxy, source, keys[i], bakes)
