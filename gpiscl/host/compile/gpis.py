@@ -17,11 +17,11 @@ from ..scene.transforms import transform_matrix
 from ..gp.weight_space import pack_order_tables
 from ..layout.gp_records import (GP_KERNEL, MEAN_NODE, pack_kernel, pack_kernel_grids,
                                  pack_mean_parts)
-from ..scene.gpis import FIELD_KEYS, field_minimum
+from ..scene.gpis import DEFAULT_OCCUPANCY, FIELD_KEYS, field_minimum
 from .colour_fields import pack_field
 from ..errors import SceneError
 from .posterior import build_posterior, pack_posterior
-from .proxy_cut import CUT_EPSILON, cut_extent
+from .proxy_cut import cut_extent
 from ..layout import function_space_records as FSL
 
 _KERNELS = {"squared_exponential": K.SquaredExponential, "rational_quadratic": K.RationalQuadratic,
@@ -179,12 +179,12 @@ def occupancy_level(g: dict) -> float:
     return float(np.nextafter(np.float32(level), np.float32(np.inf)))
 
 
-def _warn_if_cut(g: dict, mean: M.Mean, source: str, key: str) -> None:
+def _warn_if_cut(g: dict, mean: M.Mean, kernel: K.Kernel, source: str, key: str) -> None:
     """One line on stderr when the object reaches its proxy's boundary (proxy_cut.py):
     the render is still what the scene says, but a cut nobody asked for is a wrong image
-    nobody sees coming."""
-    eps = (g.get("bounds") or {}).get("occupancy") or CUT_EPSILON
-    share, p = cut_extent(mean, build_kernel(g["kernel"], g["proxy"]), g["proxy"], eps)
+    nobody sees coming. With the occupancy bound off, its default epsilon."""
+    eps = (g.get("bounds") or {}).get("occupancy") or DEFAULT_OCCUPANCY
+    share, p = cut_extent(mean, kernel, g["proxy"], eps)
     if share > 0.0:
         print(f"gpiscl: warning: {source}: {key}.proxy: cuts the object: P(f < 0) >= {eps:g} "
               f"on {100.0 * share:.3g}% of the proxy's boundary (up to {p:.2g}), where the "
@@ -251,7 +251,7 @@ def compile_gpis(shapes: list, material_of, source: str = "<scene>",
         except ValueError as exc:
             raise SceneError(source, f"{keys[i]}.mean", str(exc)) from None
         if not g.get("clip"):
-            _warn_if_cut(g, mean, source, keys[i])
+            _warn_if_cut(g, mean, built[i], source, keys[i])
         mean = None                         # its grids live on in prog alone
         if g.get("observations") is not None:
             # the posterior block sits just before the mean program (fs_posterior.h)

@@ -18,11 +18,9 @@ from statistics import NormalDist
 
 import numpy as np
 
-from ..scene.proxies import bounding_proxy
 from ..scene.transforms import mesh_triangles
 
 BOUNDARY_POINTS = 4096
-CUT_EPSILON = 1e-4   # scene/gpis.py BOUNDS' default occupancy epsilon, where bounds are off
 
 
 def boundary_points(proxy: dict, n: int = BOUNDARY_POINTS, seed: int = 0):
@@ -41,17 +39,14 @@ def boundary_points(proxy: dict, n: int = BOUNDARY_POINTS, seed: int = 0):
         u, v = np.where(flip, 1.0 - u, u), np.where(flip, 1.0 - v, v)
         t = tris[pick]
         return t[:, 0] + u[:, None] * (t[:, 1] - t[:, 0]) + v[:, None] * (t[:, 2] - t[:, 0])
-    box = bounding_proxy(proxy)   # a box or sphere is its own
-    if box["type"] == "sphere":
+    if proxy["type"] == "sphere":
         d = rng.standard_normal((n, 3))
         d /= np.linalg.norm(d, axis=1, keepdims=True)
-        return np.asarray(box["center"], float) + box["radius"] * d
-    lo, hi = np.asarray(box["min"], float), np.asarray(box["max"], float)
-    size = hi - lo
+        return np.asarray(proxy["center"], float) + proxy["radius"] * d
+    lo, hi = np.asarray(proxy["min"], float), np.asarray(proxy["max"], float)
+    size = hi - lo   # > 0 in every component (scene/records.py box_extent)
     # face pairs normal to x, y, z, weighted by their areas
     areas = np.array([size[1] * size[2], size[0] * size[2], size[0] * size[1]])
-    if not areas.sum() > 0.0:
-        return lo + rng.random((n, 3)) * size
     axis = rng.choice(3, size=n, p=areas / areas.sum())
     x = lo + rng.random((n, 3)) * size
     side = rng.random(n) < 0.5

@@ -273,7 +273,9 @@ def _fields_positive(g):
 # (3.4x faster on scenes/knob_no_csg.json), weight space is about even (its search
 # already strides where |f| >> sigma); tools/bench_occupancy.py measures.
 # >= 1e-12: below ~1e-16, 1 - epsilon rounds to 1 and has no normal quantile
-BOUNDS = Record({"occupancy": Field(Nullable(Number(ge=1e-12, lt=0.5)), 1e-4)})
+DEFAULT_OCCUPANCY = 1e-4
+BOUNDS = Record({"occupancy": Field(Nullable(Number(ge=1e-12, lt=0.5)),
+                                   DEFAULT_OCCUPANCY)})
 
 # Posterior GPIS (compile/posterior.py): f conditioned on points observed on the surface,
 # f = 0 with standard deviation `noise` (world units), and with "normals": true also

@@ -399,7 +399,7 @@ inline void fs_row_copy(GpKernel p, FsScratch S, int k, FsScratch D, int i)
 }
 
 /* The stationary kernel's jets at x - (row j's position) for rows j0 .. j0 + FS_LANES - 1
- * of S (lanes at j >= n repeat row n - 1 and are for the caller to ignore): a radial
+ * of S: a radial
  * kernel's exps are taken in one double4, which PoCL's CPU runs several times faster than
  * as scalars (ws_posterior.h measured 5.6e8 against 5.8e7 a second in double8), and these
  * exps were the largest single cost of a function-space flight (gp_radial ~1/4 of it,
@@ -408,12 +408,12 @@ inline void fs_row_copy(GpKernel p, FsScratch S, int k, FsScratch D, int i)
  * for the uniform step's longer systems. Used where rows are factored (fs_factor_known);
  * the step rule's small system (fs_moments) measured no faster with it. The same
  * operations as gp_kernel_jet lane by lane; the vector exp may round differently from the
- * scalar one (images moved by <= 7e-7 on the room, none on the SE sphere). */
+ * scalar one (images moved by <= 1e-6 on the room, none on the SE sphere). */
 #define FS_LANES 4
-inline void fs_jets(GpKernel p, FsScratch S, int j0, int n, double3 x, GpJet* J)
+inline void fs_jets(GpKernel p, FsScratch S, int j0, double3 x, GpJet* J)
 {
     double3 r[FS_LANES];
-    for (int l = 0; l < FS_LANES; ++l) r[l] = x - fs_pos(S.rows + min(j0 + l, n - 1));
+    for (int l = 0; l < FS_LANES; ++l) r[l] = x - fs_pos(S.rows + j0 + l);
     if (gp_kernel_is_product(p)) {
         for (int l = 0; l < FS_LANES; ++l) J[l] = gp_kernel_jet(p, r[l]);
         return;
@@ -450,7 +450,7 @@ inline int fs_factor_known(GpKernel p, __global const MeanNode* mean, FsScratch 
             int j0 = 0;
             for (; j0 + FS_LANES <= i + 1; j0 += FS_LANES) {
                 GpJet J[FS_LANES];
-                fs_jets(p, S, j0, i + 1, xi, J);
+                fs_jets(p, S, j0, xi, J);
                 for (int l = 0; l < FS_LANES; ++l) {
                     __global const FsObs* rj = S.rows + j0 + l;
                     Li[j0 + l] = gp_jet_cov(J[l], fs_dir(rj), rj->kind, ui, ri->kind);

@@ -45,13 +45,18 @@ inline GP_REAL3 gp_aniso(GpKernel p)
  * runs ~10x faster in double8 than scalar): gp_radial_arg is the exponent x whose exp the
  * kernel takes (0 for the thin plate, which takes none), gp_radial_of the three numbers
  * given e = exp(x). gp_radial is the two in a row: the same operations as one function. */
+/* Matern's c = sqrt(2 nu) / l (kernels.py Matern32/Matern52) */
+inline GP_REAL gp_matern_c(GpKernel p)
+{
+    return (p.kind == GP_KERNEL_MATERN32 ? (GP_REAL)1.7320508075688772
+                                         : (GP_REAL)2.23606797749979) / (GP_REAL)p.length_scale;
+}
+
 inline GP_REAL gp_radial_arg(GpKernel p, GP_REAL s)
 {
     if (p.kind == GP_KERNEL_THIN_PLATE) return 0;
-    if (p.kind == GP_KERNEL_MATERN32)
-        return -((GP_REAL)1.7320508075688772 / (GP_REAL)p.length_scale) * sqrt(s);
-    if (p.kind == GP_KERNEL_MATERN52)
-        return -((GP_REAL)2.23606797749979 / (GP_REAL)p.length_scale) * sqrt(s);
+    if (p.kind == GP_KERNEL_MATERN32 || p.kind == GP_KERNEL_MATERN52)
+        return -gp_matern_c(p) * sqrt(s);
     GP_REAL l2 = (GP_REAL)p.length_scale * (GP_REAL)p.length_scale;
     if (p.kind == GP_KERNEL_RATIONAL_QUADRATIC) {
         GP_REAL a = (GP_REAL)p.alpha;
@@ -77,14 +82,14 @@ inline void gp_radial_of(GpKernel p, GP_REAL s, GP_REAL e, GP_REAL* k, GP_REAL* 
     if (p.kind == GP_KERNEL_MATERN32 || p.kind == GP_KERNEL_MATERN52) {
         /* kernels.py Matern32/Matern52: c = sqrt(2 nu) / l, rho = sqrt(s), e = exp(-c rho) */
         GP_REAL rho = sqrt(s);
+        GP_REAL c = gp_matern_c(p);
         if (p.kind == GP_KERNEL_MATERN32) {
-            GP_REAL c = (GP_REAL)1.7320508075688772 / (GP_REAL)p.length_scale;
             *k = v * (1 + c * rho) * e;
             *dk2 = -v * c * c * e;
             /* c^3 e / rho multiplies (u.Ar)(v.Ar) = O(rho^2): the limit at rho = 0 is 0 */
             *ddk4 = rho > 0 ? v * c * c * c * e / rho : (GP_REAL)0;
         } else {
-            GP_REAL c = (GP_REAL)2.23606797749979 / (GP_REAL)p.length_scale, cr = c * rho;
+            GP_REAL cr = c * rho;
             *k = v * (1 + cr + cr * cr / 3) * e;
             *dk2 = -v * c * c * (1 + cr) * e / 3;
             *ddk4 = v * c * c * c * c * e / 3;
