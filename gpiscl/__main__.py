@@ -110,7 +110,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--device", help="OpenCL device: 'P:D' indices or a name fragment")
     r.add_argument("--batch-size", type=_batch_size, metavar="N",
                    help="the most paths in flight per batch (batches are sized to take "
-                   "~0.5 s each below it; default 32768 on a CPU, 262144 elsewhere)")
+                   "~0.5 s each below it; default 16384 on a CPU, 262144 elsewhere)")
     r.add_argument("--exposure", type=float, default=0.0, help="PNG preview exposure (stops)")
     r.add_argument("--tonemap", choices=("clamp", "filmic"),
                    help="PNG preview curve (default: the scene's render.tonemap)")

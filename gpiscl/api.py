@@ -13,6 +13,7 @@ from .host.scene import arguments
 from .host.render.device import Device, shared_device
 from .host.render.device_bakes import DeviceBakes
 from .host.render.integrator import RenderResult, WavefrontIntegrator
+from .host.render.memory import return_freed_pages
 from .host.scene.loading import Scene, load_scene
 from .host.errors import SceneError
 from .host.compile.scene import compile_scene
@@ -46,7 +47,7 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
         device, shared between calls).
     batch_size : int, optional
         The most paths traced at once, in [1, 2**24]; batches are sized to take about
-        0.5 s each below it (default 32768 on a CPU, 262144 elsewhere).
+        0.5 s each below it (default 16384 on a CPU, 262144 elsewhere).
     time_limit : float, optional
         Stop after this many seconds of rendering (> 0, finite); holds to within one batch.
     progress : callable or bool, optional
@@ -129,6 +130,10 @@ def prepare_render(scene, spp=None, seed=None, resolution=None, device=None, bat
     if not isinstance(device, Device):
         device = shared_device(device)
     compiled = compile_scene(data, scene.source, DeviceBakes(device))
+    # the compile's temporaries (a bake's samples read and checked, grid records packed)
+    # are freed, but glibc keeps them in its heap; handed back, the programs and the film
+    # do not come on top of them
+    return_freed_pages()
     integrator = WavefrontIntegrator(device, compiled, settings, batch_size, max_memory,
                                      scene.source, aov)
     return integrator, Scene.resolved(data, scene.source, scene.base_dir)

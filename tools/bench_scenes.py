@@ -89,6 +89,26 @@ reuse the heap's free pages otherwise), MALLOC_ARENA_MAX=1, malloc_trim before t
 batch, building the programs from their binaries (no clang preprocessing: -1 MB a
 program), the stage program without the weight-space kernels (-1 MB). A profiler that
 imports pyopencl before gpiscl loads PyPI's PoCL as well (+21 MB: opencl_vendors.py).
+
+Peak RSS, every example scene, 4 spp at its own resolution (2026-12-03, MB, medians of 3,
+same run, load ~1-2; before = 0528d5b, after = CPU batch cap 2^14, global rings 8 MB, the
+compile's freed heap handed back before the programs, grid checks and evaluations without
+a float64 copy of the whole grid): paths per CPU s x0.97-1.05 (bunny_grid x0.92 here, x0.99
+in a render-only A/B of 3 rounds at 8 spp):
+  ws_* (7 scenes)           133-142 -> 133-141     fs_mirror_ball_sun     146 -> 141
+  fs_sphere_matern32 / 52   151 / 150 -> 147 / 147  fs_sphere_se           153 -> 147
+  csg_two_spheres / baked   159 / 150 -> 152 / 149  bunny_grid             156 -> 149
+  wedge_volume              149 -> 142             fs_volume_room_global  153 -> 144
+  knob_no_csg / knob        168 / 182 -> 162 / 172
+(the before column is higher than the table above's: a quieter machine sizes larger
+batches). What stays above 150 is fixed before the first path (in-process VmRSS): the
+runtime 114 MB (Python + numpy + pyopencl 37, PoCL's LLVM 15 and clang mapped and
+relocated 77: libLLVM 42-51 MB resident from its load alone), ~8 MB of libraries a compile
+touches (OpenEXR for the sky, libcrypto for the bake keys), the grid records (knob 19.3 MB,
+knob_no_csg 9.7), the two programs' LLVM modules (~6.5 MB each: PoCL keeps a program's
+bitcode parsed while it lives) and the film (4 MB): 149 MB for knob_no_csg and 159 MB for
+the knob before any queue. PyPI's PoCL 3.0 (LLVM linked in, 21 MB resident) builds this
+project's programs with no kernels on this machine (render/device.py now says so).
 """
 from __future__ import annotations
 

@@ -418,7 +418,7 @@ class GridField:
 
     def eval(self, x):
         x = _vec(x)
-        values = np.asarray(self.values, np.float64)
+        values = np.asarray(self.values)   # gathered corners go to float64 (GridMean's)
         hi = np.asarray(values.shape, float) - 1.0
         u = (x - _vec(self.origin)) / self.voxel_size
         c = np.clip(u, 0.0, hi)
@@ -431,7 +431,7 @@ class GridField:
                 for e in (0, 1):
                     w = [t[..., 0] if a else 1 - t[..., 0], t[..., 1] if b else 1 - t[..., 1],
                          t[..., 2] if e else 1 - t[..., 2]]
-                    v = values[i + a, j + b, k + e]
+                    v = values[i + a, j + b, k + e].astype(np.float64)
                     m = m + w[0] * w[1] * w[2] * v
                     for ax, sign in enumerate((a, b, e)):
                         others = [w[q] for q in range(3) if q != ax]

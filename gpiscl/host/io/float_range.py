@@ -18,11 +18,16 @@ def array_problem(a, what: str, nonnegative: bool = False):
     a = np.asarray(a)
     if a.dtype.kind != "f":   # floats as they are: a float32 grid needs no double copy
         a = a.astype(np.float64)
-    bad = np.count_nonzero(~np.isfinite(a))
-    if bad:
+    if not a.size:
+        return None
+    # the extremes alone decide, without a temporary per number (an 8 MB bake's check
+    # added 17 MB to compile's peak RSS): a NaN propagates into both, an infinity is one
+    lo, hi = a.min(), a.max()
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        bad = np.count_nonzero(~np.isfinite(a))
         return f"{what} has {bad} NaN or infinite value(s)"
-    if a.size and np.abs(a).max() > MAGNITUDE:
+    if max(-lo, hi) > MAGNITUDE:
         return f"{what} has values beyond +-{MAGNITUDE:g} ({WHY_MAGNITUDE})"
-    if nonnegative and a.size and a.min() < 0:
-        return f"{what} has negative values (min {a.min():g})"
+    if nonnegative and lo < 0:
+        return f"{what} has negative values (min {lo:g})"
     return None

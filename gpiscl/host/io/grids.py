@@ -76,7 +76,7 @@ def check_grid_values(values, shape_ok: bool, expected: str, dtype=np.float64) -
         raise ValueError(f"grid array 'values' must be {expected} (got shape {values.shape})")
     if not np.issubdtype(values.dtype, np.number) or np.iscomplexobj(values):
         raise ValueError(f"grid array 'values' must be real numbers (got {values.dtype})")
-    values = values.astype(dtype)
+    values = values.astype(dtype, copy=False)   # a float32 bake read as float32: no copy
     problem = array_problem(values, "grid array 'values'")
     if problem:
         raise ValueError(problem)

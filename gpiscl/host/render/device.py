@@ -151,7 +151,16 @@ class Program:
                 f.write(self.source)
             raise DeviceError(f"OpenCL build failed on '{device.name}' with options "
                               f"{' '.join(opts)}; source saved to {path}:\n{exc}") from None
-        return {k.function_name: k for k in prg.all_kernels()}
+        kernels = {k.function_name: k for k in prg.all_kernels()}
+        if not kernels:
+            # PyPI's PoCL 3.0-rc2 does this on this project's programs (measured
+            # 2026-12-03, Zen CPU): a build that "succeeds" with no kernels, which would
+            # otherwise end in a KeyError at the first launch
+            raise DeviceError(f"the OpenCL build on '{device.name}' returned no kernels (a "
+                              "fault of this OpenCL driver); install the distribution's PoCL "
+                              "(Debian, Ubuntu: apt-get install pocl-opencl-icd) or choose "
+                              "another --device" + _drivers_limited())
+        return kernels
 
     def launch(self, name: str, global_size: int, *args):
         """Enqueue kernel `name` over global_size items; returns the event."""

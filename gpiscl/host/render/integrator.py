@@ -22,15 +22,19 @@ from .program_sources import GPIS_HEADERS, STAGE_FILES
 from .queues import DeviceQueue
 from ..compile.scene import CompiledScene
 
-# The most paths in flight unless asked otherwise (queue memory, ~440 bytes a path). On a
-# CPU the queues are the process's own memory and every page a batch touches stays
-# resident, while 2^15 paths already keep its cores as busy as 2^18 (wedge_volume, 4 spp,
-# same run: paths per CPU second x1.00, per wall second x0.98) and touch 14 MB, not 110.
-DEFAULT_BATCH, CPU_DEFAULT_BATCH = 1 << 18, 1 << 15
+# The most paths in flight unless asked otherwise (queue memory, ~440 bytes a path, ~560
+# with function space's vertex records). On a CPU the queues are the process's own memory
+# and every page a batch touches stays resident, while 2^15 paths already kept its cores as
+# busy as 2^18 (wedge_volume, 4 spp, same run: paths per CPU second x1.00, per wall second
+# x0.98), and 2^14 as busy as 2^15 (2026-12-03, 8 spp, alternating in one run, paths per CPU
+# second: fs_sphere_se x1.10 / x1.02 / x0.98, wedge_volume x1.05 / x1.05, knob_no_csg x1.01
+# / x1.05, csg_two_spheres x1.01, fs_mirror_ball_sun x1.04, ws_sphere_rq x0.99), touching
+# 5-7 MB less at the peak (knob_no_csg 167 -> 161 MB, fs_sphere_se 151 -> 145).
+DEFAULT_BATCH, CPU_DEFAULT_BATCH = 1 << 18, 1 << 14
 
 
 # PATH_STATE's first-hit fields (aov.py): one element each when no AOV is asked for, as
-# every kernel's access is guarded by params->aov (32768 paths: 1.5 MB)
+# every kernel's access is guarded by params->aov (16384 paths: 0.8 MB)
 AOV_FIELDS = ("aov_position", "aov_normal", "aov_albedo")
 
 
