@@ -154,8 +154,8 @@ class Program:
         kernels = {k.function_name: k for k in prg.all_kernels()}
         if not kernels:
             # PyPI's PoCL 3.0-rc2 does this on this project's programs (measured
-            # 2026-12-03, Zen CPU): a build that "succeeds" with no kernels, which would
-            # otherwise end in a KeyError at the first launch
+            # 2026-12-03 on an AVX-512 AMD EPYC): a build that "succeeds" with no
+            # kernels, which would otherwise end in a KeyError at the first launch
             raise DeviceError(f"the OpenCL build on '{device.name}' returned no kernels (a "
                               "fault of this OpenCL driver); install the distribution's PoCL "
                               "(Debian, Ubuntu: apt-get install pocl-opencl-icd) or choose "
