@@ -259,7 +259,7 @@ def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
         For a mistake in the scene or an argument, naming it.
     """
     from .host.io.output_files import check_writable, scene_inputs
-    from .host.scene.schema import Context, Int
+    from .host.schema import Context, Int
     from .host.commands.uq import check_uq_scene, render_realizations, uq_output_paths, write_uq_outputs
 
     ctx = Context(arguments.API_SOURCE, ".")

@@ -315,7 +315,7 @@ def test_not_a_scene_argument():
 def test_new_kinds_are_declared_not_coded():
     """A later object kind needs only a declaration (here registered and then removed)."""
     from gpiscl.host.scene.records import SHAPES, shape
-    from gpiscl.host.scene.schema import Field, Number, Vector
+    from gpiscl.host.schema import Field, Number, Vector
     SHAPES.register("blob", shape({"center": Field(Vector(), [0, 0, 0]),
                                    "lengthscale": Field(Number(gt=0), 0.5)}))
     try:

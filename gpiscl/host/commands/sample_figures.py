@@ -47,7 +47,7 @@ def resolve_target(spec: str, obj: int = 0) -> Target:
     from ..compile.gpis import build_kernel, build_mean
     from ..scene.gpis import KERNELS
     from ..scene.loading import load_scene
-    from ..scene.schema import Context
+    from ..schema import Context
 
     if spec.lstrip().startswith("{"):
         try:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 
 from .records import CAMERA, MAX_BATCH, RENDER
-from .schema import Context, Int, Nullable, Number
+from ..schema import Context, Int, Nullable, Number
 
 # spp: the device counts sample indices in int32
 SPECS = {

@@ -36,7 +36,7 @@ import numpy as np
 
 from ..io.grids import load_rgb_grid, problem_of
 from .records import ALBEDO, RGB, VEC3
-from .schema import Field, File, Number, Record, Spec, Tagged, is_number, is_sequence
+from ..schema import Field, File, Number, Record, Spec, Tagged, is_number, is_sequence
 
 
 # ---- declarations -------------------------------------------------------------------------

@@ -17,7 +17,7 @@ from __future__ import annotations
 from ..io.meshes import mesh_problem
 from .records import ALBEDO, ROUGH_CONDUCTOR, SHAPES, TRANSFORM, VEC3, box_extent
 from ..layout import function_space_records as FSL
-from .schema import (Bool, Enum, Field, File, Int, Nullable, Number, Record, Tagged,
+from ..schema import (Bool, Enum, Field, File, Int, Nullable, Number, Record, Tagged,
                      Vector, child)
 from .proxies import bounding_proxy, mesh_proxy_problem
 from ..io.grids import load_field_grid, load_grid, problem_of

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 from . import gpis  # noqa: F401  (registers the "gpis" shape with records.SHAPES)
 from .records import SCENE
-from .schema import Context, kind_of
+from ..schema import Context, kind_of
 
 
 @dataclass

@@ -15,7 +15,7 @@ from .conductors import CONDUCTORS
 from ..io.float_range import array_problem
 from ..io.images import TONEMAPS
 from ..io.meshes import mesh_problem
-from .schema import (Bool, Enum, Field, File, Int, ListOf, Nullable, String, Number, Record,
+from ..schema import (Bool, Enum, Field, File, Int, ListOf, Nullable, String, Number, Record,
                      Tagged, Vector, show)
 
 __all__ = ["SHAPES", "LIGHTS", "BSDFS", "ENVIRONMENT_TYPES", "SCENE"]

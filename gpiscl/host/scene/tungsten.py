@@ -88,7 +88,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SceneError
-from .schema import kind_of
+from ..schema import kind_of
 from .tungsten_keys import CAMERA, INTEGRATOR, MEDIUM, notes_for
 
 MEMORIES = {"elephant": "global", "goldfish": "renewal_plus", "dori": "renewal", "none": "none"}
