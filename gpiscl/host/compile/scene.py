@@ -1,7 +1,6 @@
 """Turns a resolved scene (scene.py) into the flat arrays the device traverses."""
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -162,7 +161,7 @@ def scene_box(data: dict, prims: np.ndarray | None = None):
             if s["type"] != "gpis":
                 _add_shape(b, s)
         for lt in data["lights"]:
-            if lt["type"] in ("sphere", "rectangle"):
+            if LIGHTS[lt["type"]].traits["area"]:
                 _add_light(b, lt, {})
         prims = np.array(b.prims, dtype=layouts.PRIMITIVE.dtype)
     pts = [np.asarray(data["camera"]["position"], float)[None]]
@@ -175,8 +174,8 @@ def scene_box(data: dict, prims: np.ndarray | None = None):
                 pts.append(np.asarray([box["min"], box["max"]], float))
             else:
                 pts.append(np.asarray(box["center"], float) + box["radius"] * np.array([[-1.0], [1.0]]))
-    pts += [np.asarray(lt["position"], float)[None] for lt in data["lights"]
-            if lt["type"] == "point"]
+    pts += [np.asarray(LIGHTS[lt["type"]].host(lt)["p0"][:3], float)[None]
+            for lt in data["lights"] if LIGHTS[lt["type"]].traits["positioned"]]
     pts = np.concatenate(pts)
     lo, hi = pts.min(0), pts.max(0)
     grow = 0.01 * float(np.linalg.norm(hi - lo)) + 1e-3

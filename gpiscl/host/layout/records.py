@@ -43,7 +43,7 @@ MATERIAL = Struct("Material", (
     ("float", "roughness"),  # rough_conductor: Beckmann alpha
 ))
 
-# Lights: the meaning of the vectors depends on kind (see lights.h).
+# Lights: the meaning of the vectors depends on kind (see lib/lights/<kind>.h).
 LIGHT = Struct("Light", (
     ("float4", "radiance"),  # radiance, intensity (point) or in-cone radiance (sun)
     ("float4", "p0"),

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from ..io.images import TONEMAPS
 from ..io.meshes import mesh_problem
-from ..kinds.lights import LIGHTS as LIGHT_KINDS
+from ..kinds.lights import LIGHTS as LIGHT_TABLE
 from ..kinds.materials import MATERIALS
 from ..kinds.values import (ALBEDO, DIRECTION, NONZERO, RGB, VEC3, parallel,
                             rectangle_area)
@@ -103,12 +103,12 @@ SHAPES.register("disk", shape({"center": Field(VEC3, [0, 0, 0]),
 SHAPES.register("mesh", shape({"file": Field(File((".obj", ".ply", ".stl"), mesh_problem)),
                                "transform": Field(TRANSFORM, {})}))
 
-LIGHTS = LIGHT_KINDS.schema
+LIGHTS = LIGHT_TABLE.schema
 
 # The renderer has one environment slot (rays that escape the scene look it up).
 def _one_environment(scene):
     found = [i for i, lt in enumerate(scene["lights"])
-             if LIGHT_KINDS[lt["type"]].traits["environment"]]
+             if LIGHT_TABLE[lt["type"]].traits["environment"]]
     if len(found) > 1:
         return (f"lights[{found[1]}]", f"at most one environment light per scene "
                                        f"(lights[{found[0]}] is one already)")
