@@ -50,14 +50,14 @@ def _device_functions(table, kind, wanted):
     return [f for f in needed if not re.search(rf"\b{kind.name}_{f}\s*\(", text)]
 
 
-@pytest.mark.parametrize("table, record, functions, examples, extras", [
-    (MATERIALS, layouts.MATERIAL, MATERIAL_FUNCTIONS, {}, set()),
-    (LIGHTS, layouts.LIGHT, LIGHT_FUNCTIONS, LIGHT_EXAMPLES, LIGHT_EXTRAS),
+@pytest.mark.parametrize("table, axis, record, functions, examples, extras", [
+    (MATERIALS, materials, layouts.MATERIAL, MATERIAL_FUNCTIONS, {}, set()),
+    (LIGHTS, lights, layouts.LIGHT, LIGHT_FUNCTIONS, LIGHT_EXAMPLES, LIGHT_EXTRAS),
 ], ids=["materials", "lights"])
 def test_every_kind_has_schema_packer_device_id_and_device_functions(
-        table, record, functions, examples, extras):
+        table, axis, record, functions, examples, extras):
     header = layouts.c_header()
-    source = table is MATERIALS and materials.device_source() or lights.device_source()
+    source = axis.device_source()   # with the generated dispatch
     for i, kind in enumerate(table):
         assert table.schema.variants[kind.name] is kind.schema
         packed = kind.host(_resolve(table, kind.name, examples.get(kind.name, {})))
