@@ -56,7 +56,7 @@ class KindTable:
                              f"{sorted(missing)}, unknown {sorted(unknown)}")
         if kind.device_file is not None and not self.device_path(kind).is_file():
             raise ValueError(f"{self.axis}: kind {kind.name!r}: no device file "
-                             f"kernels_cl/{kind.device_file}")
+                             f"{self.device_path(kind)}")
         self._kinds.append(kind)
         if kind.schema is not None:
             self.schema.register(kind.name, kind.schema)
