@@ -206,7 +206,7 @@ BAD = [
     ("unknown_shape_type", minimal(shapes=[{"type": "cube"}]), "shapes[0].type",
      'unknown shape type "cube" (expected one of: sphere, rectangle, box, disk, mesh, gpis)'),
     ("unknown_bsdf_type", minimal(shapes=[{"type": "sphere", "bsdf": {"type": "glass"}}]),
-     "shapes[0].bsdf.type", "expected one of: diffuse, mirror, rough_conductor, null"),
+     "shapes[0].bsdf.type", "expected one of: diffuse, mirror, null, rough_conductor"),
     ("vector_length", minimal(camera={"position": [0, 1]}), "camera.position",
      "expected a list of 3 numbers (got 2 items)"),
     ("nan", '{"lights": [{"type": "environment", "radiance": [1, NaN, 1]}]}',

@@ -1,6 +1,6 @@
 """Importance sampling of a lat-long environment map, with numpy reference samplers.
 
-Convention (shared with kernels_cl/lights.h):
+Convention (shared with kernels_cl/lib/lights/environment_map.h):
     d = (sin(theta) cos(phi), cos(theta), sin(theta) sin(phi)),
     theta in [0, pi] measured from +y, phi = atan2(z, x) in [0, 2 pi).
     Column x covers phi in [2 pi x / W, 2 pi (x+1) / W); row y covers
@@ -78,7 +78,7 @@ def _pixel_prob(tables: EnvmapTables, row, col) -> np.ndarray:
 
 
 def _search(cdfs: np.ndarray, which: np.ndarray, u: np.ndarray):
-    """cdf_search of lights.h, per sample k on the CDF cdfs[which[k]] (each n+1 long).
+    """cdf_search of lights/environment_map.h, per sample k on the CDF cdfs[which[k]] (each n+1 long).
 
     Returns the largest i < n with cdf[i] <= u and u's fraction inside bin i. That i is
     never a zero-width bin since cdf[n] = 1 > u.

@@ -41,6 +41,7 @@ class KindTable:
         self.family = family or axis
         self._kinds: list[Kind] = []
         self.schema = Tagged(self.family)
+        self._views: list = []   # (trait, Tagged): schema_where's
         for kind in kinds:
             self.register(kind)
 
@@ -53,12 +54,15 @@ class KindTable:
         if missing or unknown:
             raise ValueError(f"{self.axis}: kind {kind.name!r} traits: missing "
                              f"{sorted(missing)}, unknown {sorted(unknown)}")
-        if kind.device_file is not None and not (KERNELS_CL / kind.device_file).is_file():
+        if kind.device_file is not None and not self.device_path(kind).is_file():
             raise ValueError(f"{self.axis}: kind {kind.name!r}: no device file "
-                             f"kernels_cl/{kind.device_file}")
+                             f"{self.device_path(kind)}")
         self._kinds.append(kind)
         if kind.schema is not None:
             self.schema.register(kind.name, kind.schema)
+            for trait, view in self._views:
+                if kind.traits[trait]:
+                    view.register(kind.name, kind.schema)
         return kind
 
     def unregister(self, name: str):
@@ -68,6 +72,8 @@ class KindTable:
                              f"positions)")
         self._kinds.pop()
         self.schema.variants.pop(name, None)
+        for _, view in self._views:
+            view.variants.pop(name, None)
 
     @contextlib.contextmanager
     def registered(self, kind: Kind):
@@ -103,6 +109,19 @@ class KindTable:
 
     def with_trait(self, trait: str, value=True) -> tuple:
         return tuple(k.name for k in self._kinds if k.traits[trait] == value)
+
+    def schema_where(self, trait: str, family: str) -> Tagged:
+        """A scene schema of the kinds whose bool `trait` is true (e.g. the micro-BSDFs a
+        GPIS takes), kept in step with later registrations."""
+        view = Tagged(family, {k.name: k.schema for k in self._kinds
+                               if k.schema is not None and k.traits[trait]})
+        self._views.append((trait, view))
+        return view
+
+    @staticmethod
+    def device_path(kind: Kind) -> Path:
+        """Its device file: relative to kernels_cl/, or absolute (a test's own kind)."""
+        return KERNELS_CL / kind.device_file
 
     # --- generated C ------------------------------------------------------------------
     def c_name(self, name: str) -> str:
@@ -141,3 +160,9 @@ class KindTable:
 
     def device_files(self) -> list:
         return [k.device_file for k in self._kinds if k.device_file is not None]
+
+    def device_source(self) -> str:
+        """Every kind's device file in id order, with #line markers for the compiler's
+        messages (the axis's shared header and generated dispatch go around it)."""
+        return "\n".join(f'#line 1 "{k.device_file}"\n{self.device_path(k).read_text()}'
+                         for k in self._kinds if k.device_file is not None)

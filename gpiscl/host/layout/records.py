@@ -7,6 +7,7 @@ drift apart; tests/test_layouts.py checks the offsets on the device itself.
 from __future__ import annotations
 
 
+from ..kinds import lights, materials
 from .gp_records import c_declarations as gp_declarations
 from .struct import Queue, Struct
 
@@ -42,7 +43,7 @@ MATERIAL = Struct("Material", (
     ("float", "roughness"),  # rough_conductor: Beckmann alpha
 ))
 
-# Lights: the meaning of the vectors depends on kind (see lights.h).
+# Lights: the meaning of the vectors depends on kind (see lib/lights/<kind>.h).
 LIGHT = Struct("Light", (
     ("float4", "radiance"),  # radiance, intensity (point) or in-cone radiance (sun)
     ("float4", "p0"),
@@ -169,9 +170,6 @@ SHADOW_QUEUE = Queue("shadow", (
 # --- enumerations shared with the device (emitted as #defines) ----------------------
 
 PRIM_KINDS = {"sphere": 0, "rectangle": 1, "disk": 2, "triangle": 3}
-MATERIAL_KINDS = {"diffuse": 0, "mirror": 1, "null": 2, "rough_conductor": 3}
-LIGHT_KINDS = {"environment": 0, "environment_map": 1, "point": 2, "sphere": 3,
-               "rectangle": 4, "directional": 5}
 # Device-side counters, int32. The host reads them after every bounce; the first four are
 # the bounce's queue sizes, the rest counts of failures and work.
 COUNTERS = {"rays_out": 0, "hits": 1, "escaped": 2, "shadow": 3, "nan_paths": 4,
@@ -191,11 +189,12 @@ GPIS_HIT_BASE = -2
 
 def _defines() -> str:
     lines = []
-    for prefix, table in (("PRIM", PRIM_KINDS), ("MATERIAL", MATERIAL_KINDS),
-                          ("LIGHT", LIGHT_KINDS), ("COUNT", COUNTERS),
+    for prefix, table in (("PRIM", PRIM_KINDS), ("COUNT", COUNTERS),
                           ("GPIS_PROXY", GPIS_PROXIES), ("GPIS_SAMPLER", GPIS_SAMPLERS),
                           ("GPIS_MEMORY", GPIS_MEMORIES)):
         lines += [f"#define {prefix}_{k.upper()} {v}" for k, v in table.items()]
+    # the kind tables' ids and traits, read at each call: a test's temporary kind shows
+    lines += materials.c_declarations() + lights.c_declarations()
     lines.append(f"#define NUM_COUNTERS {NUM_COUNTERS}")
     lines.append(f"#define GPIS_HIT_BASE ({GPIS_HIT_BASE})")
     return "\n".join(lines) + "\n"

@@ -11,21 +11,23 @@ from pathlib import Path
 
 import pyopencl as cl
 
+from ..kinds import lights, materials
 from ..layout import records
 from ..layout.function_space_records import c_declarations, defines
 
 KERNEL_DIR = Path(__file__).resolve().parent.parent.parent / "kernels_cl"
 PYOPENCL_CL_DIR = Path(cl.__file__).resolve().parent / "cl"
 
-# The library every program starts with.
-SHARED_HEADERS = ("compat.h", "rng.h", "geometry.h", "bvh.h", "lights.h", "bsdf.h",
-                  "gp_kernel.h", "gp_mean.h")
+# The library every program starts with. A kind table stands for its kinds' device files
+# and generated dispatch (host/kinds/), joined at build time: a test's own kind shows.
+SHARED_HEADERS = ("compat.h", "rng.h", "geometry.h", "bvh.h", "lights.h", lights,
+                  materials, "gp_kernel.h", "gp_mean.h")
 # The path tracer's stages, and the weight-space GPIS library they need.
 STAGE_FILES = ("generate_camera_rays.cl", "intersect.cl", "gpis_weight_space.cl",
                "queue_hits.cl", "escaped_rays.cl", "emission.cl", "scatter.cl",
                "gpis_shadow_weight_space.cl", "shadow_rays.cl", "accumulate.cl")
 GPIS_HEADERS = ("gpis_proxy.h", "ws_features.h", "ws_posterior.h", "ws_intersect.h",
-                "ws_objects.h", "gpis_fields.h", "fs_normal_pdf.h")
+                "ws_objects.h", "gpis_fields.h", "fs_normal_pdf.h", "fs_random_normal.h")
 # The function-space stages (a second program, built only for scenes that use them).
 FS_STAGE_FILES = ("gpis_function_space.cl", "gpis_shadow_function_space.cl")
 FS_HEADERS = ("gpis_proxy.h", "fs_linalg.h", "fs_sampling.h", "fs_march.h", "fs_markov.h",
@@ -43,8 +45,10 @@ def kernel_source(name: str) -> str:
     return (KERNEL_DIR / ("lib" if name.endswith(".h") else "stages") / name).read_text()
 
 
-def _marked(name: str) -> str:
+def _marked(name) -> str:
     # #line markers keep compiler messages pointing at the real files
+    if not isinstance(name, str):  # a kind module (host/kinds/)
+        return name.device_source()
     return f'#line 1 "{name}"\n{kernel_source(name)}'
 
 

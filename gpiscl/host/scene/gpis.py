@@ -15,7 +15,8 @@ Importing this module registers the "gpis" shape with the scene loader.
 from __future__ import annotations
 
 from ..io.meshes import mesh_problem
-from .records import ALBEDO, ROUGH_CONDUCTOR, SHAPES, TRANSFORM, VEC3, box_extent
+from ..kinds.materials import MICRO_BSDFS
+from .records import SHAPES, TRANSFORM, VEC3, box_extent
 from ..layout import function_space_records as FSL
 from ..schema import (Bool, Enum, Field, File, Int, Nullable, Number, Record, Tagged,
                      Vector, child)
@@ -202,11 +203,6 @@ SAMPLERS = Tagged("sampler", {
     }),
 })
 
-MICRO_BSDFS = Tagged("micro-BSDF", {
-    "diffuse": Record({"albedo": Field(ALBEDO, 0.8)}),
-    "mirror": Record({"albedo": Field(ALBEDO, 1.0)}),
-    "rough_conductor": ROUGH_CONDUCTOR,   # scene.py: Beckmann microfacets on the realization
-})
 
 
 def _weight_space_kernel(g):
