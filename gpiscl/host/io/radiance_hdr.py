@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .float_range import array_problem
 from .images import read_exr_rgb
 
 
@@ -46,18 +47,34 @@ def write_hdr(path, rgb) -> None:
     Path(path).write_bytes(_codecs().rgbe_encode(rgb))
 
 
+def environment_texels_problem(rgb) -> str | None:
+    """Why decoded (H, W, 3) radiance cannot be an environment map, or None: no pixels (a
+    .hdr header may say 0 x 0 and decode to an empty array, which the device would read
+    past), or numbers the device cannot take."""
+    height, width = rgb.shape[:2]
+    if height < 1 or width < 1:
+        return f"the image has no pixels ({width} x {height})"
+    return array_problem(rgb, "environment map", nonnegative=True)
+
+
 def read_environment_rgb(path) -> np.ndarray:
-    """An environment map's (H, W, 3) float32 radiance, from .hdr or OpenEXR."""
+    """An environment map's (H, W, 3) float32 radiance, from .hdr or OpenEXR; ValueError
+    naming the file when it cannot be one."""
     if str(path).lower().endswith(".hdr"):
-        return read_hdr_rgb(path)
-    return read_exr_rgb(path)
+        rgb = read_hdr_rgb(path)
+    else:
+        rgb = read_exr_rgb(path)
+    problem = environment_texels_problem(rgb)
+    if problem:
+        raise ValueError(f"{path}: {problem}")
+    return rgb
 
 
 def hdr_problem(path) -> str | None:
     """Why a .hdr file cannot serve as an environment map, or None (for the scene
     loader's File checks)."""
     try:
-        read_hdr_rgb(path)
+        read_environment_rgb(path)
     except (OSError, ValueError) as exc:
         return str(exc).removeprefix(f"{path}: ")
     return None

@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 
 from .conductors import CONDUCTORS
-from ..io.float_range import array_problem
 from ..io.images import TONEMAPS
 from ..io.meshes import mesh_problem
 from ..schema import (Bool, Enum, Field, File, Int, ListOf, Nullable, String, Number, Record,
@@ -65,7 +64,8 @@ def _exr_problem(path):
         rgb = read_exr_rgb(path)
     except Exception:  # OpenEXR reports damage as several types
         return "cannot read the pixels of this OpenEXR image (damaged or truncated?)"
-    return array_problem(rgb, "environment map", nonnegative=True)
+    from ..io.radiance_hdr import environment_texels_problem
+    return environment_texels_problem(rgb)
 
 
 def _envmap_problem(path):

@@ -1,0 +1,131 @@
+"""The second round of bad inputs and faults: an environment map without pixels, memory
+limits other than free RAM, an 8k environment map's compile, a mesh mean without extent
+and a Scene edited after loading. Each refusal is one line naming the file, the key path
+and the reason, before any work."""
+import json
+import os
+import resource
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gpiscl.host.errors import SceneError
+from gpiscl.host.io.memory_budget import memory_budget, process_limits
+from gpiscl.host.scene.loading import load_scene
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+FLOOR_AND_BLOB = [
+    {"type": "rectangle", "center": [0, -1, 0], "u": [6, 0, 0], "v": [0, 0, -6]},
+    {"type": "gpis", "proxy": {"type": "sphere", "radius": 1.4},
+     "mean": {"type": "sphere", "radius": 0.8},
+     "kernel": {"type": "squared_exponential", "sigma": 0.05, "length_scale": 0.15},
+     "sampler": {"type": "weight_space", "features": 64}}]
+
+
+def write_scene(folder, shapes=FLOOR_AND_BLOB, lights=None, resolution=(12, 12)):
+    doc = {"camera": {"position": [0, 0.3, 4], "look_at": [0, 0, 0],
+                      "resolution": list(resolution)},
+           "render": {"spp": 1}, "shapes": list(shapes),
+           "lights": lights or [{"type": "environment", "radiance": 0.6}]}
+    path = Path(folder) / "scene.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def render_cli(scene, out, preexec_fn=None, timeout=300):
+    return subprocess.run([sys.executable, "-m", "gpiscl", "render", str(scene), "-o",
+                           str(out), "--spp", "1"], capture_output=True, text=True, env=ENV,
+                          cwd=ROOT, preexec_fn=preexec_fn, timeout=timeout)
+
+
+def assert_refused_in_one_line(r, *fragments):
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert "Traceback" not in r.stderr and all(f in r.stderr for f in fragments), r.stderr
+
+
+# ---- E01: a .hdr whose header says 0 x 0 decodes to an empty array; the device read past it
+
+def empty_hdr(width, height):
+    return f"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y {height} +X {width}\n".encode()
+
+
+@pytest.mark.parametrize("width,height", [(0, 0), (5, 0), (0, 1)])
+def test_an_environment_map_without_pixels_is_refused_at_load(tmp_path, width, height):
+    (tmp_path / "empty.hdr").write_bytes(empty_hdr(width, height))
+    scene = write_scene(tmp_path, lights=[{"type": "environment_map", "file": "empty.hdr"}])
+    with pytest.raises(SceneError) as info:
+        load_scene(str(scene))
+    assert info.value.key == "lights[0].file", str(info.value)
+    assert f"has no pixels ({width} x {height})" in info.value.reason
+    assert str(tmp_path / "empty.hdr") in info.value.reason
+
+
+def test_the_command_line_refuses_an_empty_environment_map_and_writes_nothing(tmp_path):
+    (tmp_path / "empty.hdr").write_bytes(empty_hdr(0, 0))
+    scene = write_scene(tmp_path, lights=[{"type": "environment_map", "file": "empty.hdr"}])
+    r = render_cli(scene, tmp_path / "out.exr")
+    assert_refused_in_one_line(r, f"{scene}: lights[0].file: the image has no pixels (0 x 0)")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["empty.hdr", "scene.json"]
+
+
+# ---- E02: the memory check saw only free RAM, not the process's or its cgroup's limits
+
+def test_a_film_beyond_the_address_space_limit_is_one_line_not_an_opencl_traceback(tmp_path):
+    """Under `ulimit -v 3G` an 8192^2 film (~14 GiB) failed in create_buffer."""
+    scene = write_scene(tmp_path, resolution=(8192, 8192))
+
+    def limit_address_space():
+        resource.setrlimit(resource.RLIMIT_AS, (3 << 30, resource.RLIM_INFINITY))
+    r = render_cli(scene, tmp_path / "out.exr", preexec_fn=limit_address_space)
+    assert_refused_in_one_line(r, f"{scene}: camera.resolution: 67108864 pixels need",
+                               "RLIMIT_AS (ulimit -v) of 3 GiB")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.json"]
+
+
+def fake_tree(tmp_path, cgroup_lines, files):
+    """A /proc with 20 GiB free and the given /proc/self/cgroup, and a cgroup root holding
+    files {relative path: text}."""
+    proc, root = tmp_path / "proc", tmp_path / "cgroup"
+    (proc / "self").mkdir(parents=True)
+    (proc / "meminfo").write_text(f"MemTotal: {32 << 20} kB\nMemAvailable: {20 << 20} kB\n")
+    (proc / "self" / "cgroup").write_text("".join(line + "\n" for line in cgroup_lines))
+    for name, text in files.items():
+        (root / name).parent.mkdir(parents=True, exist_ok=True)
+        (root / name).write_text(text)
+    return proc, root
+
+
+def test_the_budget_reads_a_v2_cgroup_limit_less_its_working_set(tmp_path):
+    proc, root = fake_tree(tmp_path, ["0::/job/step"], {
+        "job/step/memory.max": "max\n", "job/step/memory.current": str(1 << 30),
+        "job/memory.max": str(2 << 30), "job/memory.current": str(3 << 29),
+        "job/memory.stat": f"anon 100\ninactive_file {1 << 28}\nactive_file 5\n"})
+    budget = memory_budget(proc, root)
+    # 2 GiB less (1.5 GiB used, of which 0.25 GiB inactive page cache the kernel reclaims)
+    assert budget.bytes == (2 << 30) - (3 << 29) + (1 << 28)
+    assert str(root / "job" / "memory.max") in budget.limit
+
+
+def test_the_tightest_level_of_a_v1_memory_hierarchy_binds(tmp_path):
+    proc, root = fake_tree(tmp_path, ["4:memory:/outer/inner", "0::/"], {
+        "memory/memory.limit_in_bytes": "9223372036854771712",     # v1's "unlimited"
+        "memory/memory.usage_in_bytes": str(5 << 30),
+        "memory/outer/memory.limit_in_bytes": str(4 << 30),
+        "memory/outer/memory.usage_in_bytes": str(1 << 30),
+        "memory/outer/inner/memory.limit_in_bytes": str(2 << 30),
+        "memory/outer/inner/memory.usage_in_bytes": str(1 << 30),
+        "memory/outer/inner/memory.stat": f"cache 9\ntotal_inactive_file {1 << 29}\n"})
+    budget = memory_budget(proc, root)
+    assert budget.bytes == (1 << 30) + (1 << 29)
+    assert "inner/memory.limit_in_bytes" in budget.limit
+
+
+def test_a_cgroup_without_a_limit_leaves_free_ram_and_the_rlimits(tmp_path):
+    proc, root = fake_tree(tmp_path, ["0::/"], {"memory.max": "max\n",
+                                                "memory.current": str(30 << 30)})
+    rlimits = [b.bytes for b in process_limits(proc)]   # none where the shell set none
+    assert memory_budget(proc, root).bytes == min([20 << 30] + rlimits)
