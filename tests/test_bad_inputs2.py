@@ -129,3 +129,80 @@ def test_a_cgroup_without_a_limit_leaves_free_ram_and_the_rlimits(tmp_path):
                                                 "memory.current": str(30 << 30)})
     rlimits = [b.bytes for b in process_limits(proc)]   # none where the shell set none
     assert memory_budget(proc, root).bytes == min([20 << 30] + rlimits)
+
+
+# ---- E05: an 8192 x 4096 map peaked at 2.7 GB (~80 bytes a texel) and was a MemoryError
+# traceback under a 3 GiB address-space limit
+
+RSS_PROBE = """
+import sys
+from gpiscl.host.compile.envmap import compile_envmap
+from gpiscl.host.io.images import read_exr_rgb
+read_exr_rgb(sys.argv[2])       # a small map: the reader's own first-use allocations
+def status(key):
+    with open("/proc/self/status") as f:
+        return next(int(l.split()[1]) * 1024 for l in f if l.startswith(key + ":"))
+with open("/proc/self/clear_refs", "w") as f:
+    f.write("5")                # the peak (VmHWM) starts again from here
+before = status("VmRSS")
+env = compile_envmap(sys.argv[1])
+print((status("VmHWM") - before) / len(env.texels))
+"""
+
+
+def test_an_environment_map_compiles_in_under_30_bytes_a_texel(tmp_path):
+    from gpiscl.host.io.images import write_exr
+    rgb = np.random.default_rng(1).random((1024, 2048, 3), dtype=np.float32)
+    write_exr(tmp_path / "sky.exr", rgb)
+    write_exr(tmp_path / "small.exr", rgb[:4, :8])
+    del rgb
+    r = subprocess.run([sys.executable, "-c", RSS_PROBE, str(tmp_path / "sky.exr"),
+                        str(tmp_path / "small.exr")],
+                       capture_output=True, text=True, env=ENV, cwd=ROOT, timeout=300)
+    assert r.returncode == 0, r.stderr
+    # 12 (the decoded RGB) + 16 (the float4 texels) at the peak; the tables come after the
+    # RGB is freed. The whole-map double code took ~80.
+    assert float(r.stdout) < 30, r.stdout
+
+
+LOAD_UNDER_A_LIMIT = """
+import resource, sys
+import OpenEXR
+from gpiscl.host.errors import SceneError
+from gpiscl.host.scene.loading import load_scene
+with open("/proc/self/status") as f:
+    vm = next(int(l.split()[1]) * 1024 for l in f if l.startswith("VmSize:"))
+resource.setrlimit(resource.RLIMIT_AS, (vm + (96 << 20), resource.RLIM_INFINITY))
+try:
+    load_scene(sys.argv[1])
+except SceneError as e:
+    print(e)
+"""
+
+
+def test_a_map_the_memory_budget_cannot_hold_is_refused_before_reading(tmp_path):
+    """4096 x 2048 texels need ~200 MB to read; 96 MB of address space is left."""
+    from gpiscl.host.io.images import write_exr
+    write_exr(tmp_path / "big.exr", np.ones((2048, 4096, 3), np.float32))
+    scene = write_scene(tmp_path, lights=[{"type": "environment_map", "file": "big.exr"}])
+    r = subprocess.run([sys.executable, "-c", LOAD_UNDER_A_LIMIT, str(scene)],
+                       capture_output=True, text=True, env=ENV, cwd=ROOT, timeout=300)
+    assert r.returncode == 0 and r.stdout.count("\n") == 1, r.stdout + r.stderr
+    assert r.stdout.startswith(f"{scene}: lights[0].file: a 4096 x 2048 environment map "
+                               "needs about 0.188 GiB"), r.stdout
+    assert "RLIMIT_AS" in r.stdout and r.stdout.rstrip().endswith("big.exr")
+
+
+def test_the_compile_refuses_a_map_emptied_after_the_scene_was_checked(tmp_path):
+    """The device never gets an empty map, even when the checks were passed earlier."""
+    from gpiscl.host.compile.scene import compile_scene
+    from gpiscl.host.io.radiance_hdr import write_hdr
+    sky = tmp_path / "sky.hdr"
+    write_hdr(sky, np.ones((4, 8, 3), np.float32))
+    scene = write_scene(tmp_path, lights=[{"type": "environment_map", "file": "sky.hdr"}])
+    data = load_scene(str(scene)).data
+    sky.write_bytes(empty_hdr(0, 0))
+    with pytest.raises(SceneError) as info:
+        compile_scene(data, str(scene))
+    assert info.value.key == "lights[0].file"
+    assert info.value.reason == f"the image has no pixels (0 x 0): {sky}"

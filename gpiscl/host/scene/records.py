@@ -58,14 +58,15 @@ def _exr_problem(path):
         return (f"EXR image lacks channel(s) {', '.join(missing)} "
                 f"(has: {', '.join(sorted(names)) or 'none'})")
     # the pixels too: a truncated file has a good header, and radiance must be >= 0 like
-    # a light's radiance in the scene
+    # a light's radiance in the scene; the size and the memory to read it first
+    from ..io.radiance_hdr import read_environment_rgb
     try:
-        from ..io.images import read_exr_rgb
-        rgb = read_exr_rgb(path)
+        read_environment_rgb(path)
+    except ValueError as exc:    # ours, naming the problem
+        return str(exc).removeprefix(f"{path}: ")
     except Exception:  # OpenEXR reports damage as several types
         return "cannot read the pixels of this OpenEXR image (damaged or truncated?)"
-    from ..io.radiance_hdr import environment_texels_problem
-    return environment_texels_problem(rgb)
+    return None
 
 
 def _envmap_problem(path):
