@@ -206,3 +206,46 @@ def test_the_compile_refuses_a_map_emptied_after_the_scene_was_checked(tmp_path)
         compile_scene(data, str(scene))
     assert info.value.key == "lights[0].file"
     assert info.value.reason == f"the image has no pixels (0 x 0): {sky}"
+
+
+# ---- E14: a mesh mean without extent said "grid voxel_size must be positive (got 0.0)"
+
+CUBE = """v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1
+f 1 3 2\nf 1 4 3\nf 5 6 7\nf 5 7 8\nf 1 2 6\nf 1 6 5\nf 2 3 7\nf 2 7 6\nf 3 4 8
+f 3 8 7\nf 4 1 5\nf 4 5 8\n"""
+POINT = "v 0.1 0.1 0.1\nv 0.1 0.1 0.1\nv 0.1 0.1 0.1\nf 1 2 3\n"
+
+
+def mesh_mean_blob(file, **mean):
+    blob = json.loads(json.dumps(FLOOR_AND_BLOB[1]))
+    blob["proxy"]["radius"] = 2.5
+    blob["mean"] = {"type": "mesh", "file": file, "resolution": 16, **mean}
+    return [FLOOR_AND_BLOB[0], blob]
+
+
+def test_a_mesh_whose_vertices_are_one_point_is_refused_naming_the_file(tmp_path):
+    (tmp_path / "point.obj").write_text(POINT)
+    scene = write_scene(tmp_path, mesh_mean_blob("point.obj"))
+    r = render_cli(scene, tmp_path / "out.exr")
+    assert_refused_in_one_line(r, f"{scene}: shapes[1].mean.file: the mesh has no extent "
+                                  f"(all vertices at one point): {tmp_path / 'point.obj'}")
+    assert not (tmp_path / "out.exr").exists()
+    # the same file as a mesh shape shows nothing: refused alike
+    scene = write_scene(tmp_path, [{"type": "mesh", "file": "point.obj"}])
+    with pytest.raises(SceneError, match="no extent") as info:
+        load_scene(str(scene))
+    assert info.value.key == "shapes[0].file"
+
+
+def test_a_mesh_mean_too_small_to_bake_is_refused_naming_the_file(tmp_path):
+    """A cube scaled by 1e-30 collapses when the bake merges corners closer than 1e-8."""
+    from gpiscl.host.compile.scene import compile_scene
+    (tmp_path / "cube.obj").write_text(CUBE)
+    scene = write_scene(tmp_path, mesh_mean_blob("cube.obj", transform={"scale": 1e-30}))
+    with pytest.raises(SceneError) as info:
+        compile_scene(load_scene(str(scene)).data, str(scene))
+    assert info.value.key == "shapes[1].mean", str(info.value)
+    assert info.value.reason.startswith("the mesh has no extent once corners closer than "
+                                        "1e-08 are merged (its size after the transform is "
+                                        "1e-30)")
+    assert info.value.reason.endswith(str(tmp_path / "cube.obj"))
