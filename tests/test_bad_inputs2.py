@@ -249,3 +249,28 @@ def test_a_mesh_mean_too_small_to_bake_is_refused_naming_the_file(tmp_path):
                                         "1e-08 are merged (its size after the transform is "
                                         "1e-30)")
     assert info.value.reason.endswith(str(tmp_path / "cube.obj"))
+
+
+# ---- E13: a Scene whose data was edited after its checks crashed in the film (OpenCL's
+# INVALID_BUFFER_SIZE); the film's check before allocating names camera.resolution
+
+def test_a_film_without_pixels_is_a_scene_error_not_an_opencl_error(device):
+    import gpiscl
+    from gpiscl.scenes import furnace_sphere
+    doc = furnace_sphere()
+    doc["camera"]["resolution"] = [8, 8]
+    scene = gpiscl.load_scene(doc)
+    scene.data["camera"]["resolution"] = [0, 0]      # edited after validation
+    with pytest.raises(SceneError) as info:
+        gpiscl.render(scene, spp=1, device=device)
+    assert info.value.key == "camera.resolution" and "no pixels" in info.value.reason
+
+
+def test_the_header_size_of_a_radiance_file_is_read_in_either_order(tmp_path):
+    from gpiscl.host.io.radiance_hdr import hdr_size, write_hdr
+    write_hdr(tmp_path / "a.hdr", np.ones((3, 5, 3), np.float32))
+    assert hdr_size(tmp_path / "a.hdr") == (5, 3)
+    (tmp_path / "b.hdr").write_bytes(b"#?RGBE\nEXPOSURE=1\n\n+X 7 -Y 2\n")
+    assert hdr_size(tmp_path / "b.hdr") == (7, 2)
+    (tmp_path / "c.hdr").write_bytes(b"#?RGBE\n-Y 2 +X 7\n")     # no blank line: no size
+    assert hdr_size(tmp_path / "c.hdr") is None

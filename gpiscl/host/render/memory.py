@@ -60,6 +60,9 @@ def plan(device, num_pixels: int, batch: int, max_memory: int | None = None,
     and host parts add up against the device's global memory and the host's budget,
     whichever is smaller; on a GPU the device part is held against the device's memory
     and the host part (the read-back) against the host's budget."""
+    if num_pixels < 1:   # OpenCL has no empty buffers (a Scene's data edited after checks)
+        raise SceneError(source, key, f"the film has no pixels ({num_pixels}): the camera's "
+                         "resolution must be at least 1 x 1")
     dev = device.device
     film_device = num_pixels * (FILM_BYTES_PER_PIXEL + (AOV_BYTES_PER_PIXEL if aov else 0))
     film_host = num_pixels * (HOST_BYTES_PER_PIXEL + (2 * AOV_BYTES_PER_PIXEL if aov else 0))
