@@ -35,7 +35,7 @@ MATERIAL_FUNCTIONS = {None: ("eval", "sample")}
 LIGHT_FUNCTIONS = {None: ("sample",), "at_infinity": ("radiance",),
                    "area": ("area_radiance",)}
 # packer keys that are not record fields: compile/scene.py's instructions
-LIGHT_EXTRAS = {"primitive", "environment_rgb"}
+LIGHT_EXTRAS = {"primitive", "environment_file"}
 
 
 def _resolve(table, name, example):

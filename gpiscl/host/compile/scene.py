@@ -10,10 +10,11 @@ from ..kinds.materials import MATERIALS
 from ..layout import records as layouts
 from .bvh import build_bvh
 from .camera import compile_camera
-from .envmap import build_envmap_tables
+from .envmap import compile_envmap, no_envmap
 from .gpis import CompiledGpis, compile_gpis
 from ..scene.proxies import bounding_proxy
 from ..scene.transforms import mesh_triangles
+from ..errors import SceneError
 
 PRIM = layouts.PRIM_KINDS
 
@@ -123,8 +124,8 @@ def _add_shape(b: _Builder, s: dict):
 
 def _add_light(b: _Builder, lt: dict, env: dict):
     packed = dict(LIGHTS[lt["type"]].host(lt))
-    if "environment_rgb" in packed:
-        env["rgb"] = packed.pop("environment_rgb")
+    if "environment_file" in packed:
+        env["file"] = packed.pop("environment_file")
     carrier = packed.pop("primitive", None)
     li = b.light(lt["type"], **packed)
     if carrier is not None:  # a light rays can hit: a black primitive carries it
@@ -215,19 +216,16 @@ def compile_scene(data: dict, source: str = "<scene>", bakes=None) -> CompiledSc
     # area lights need to know their primitive after the BVH reordering
     for pi in np.nonzero(prims["light"] >= 0)[0]:
         lights["primitive"][prims["light"][pi]] = pi
-    if "rgb" in env:
-        rgb = env["rgb"]
-        tables = build_envmap_tables(rgb)
-        h, w = rgb.shape[:2]
-        texels = np.zeros((h * w, 4), np.float32)
-        texels[:, :3] = rgb.reshape(-1, 3)
-        marginal, conditional = tables.marginal_cdf, tables.conditional_cdf.reshape(-1)
-    else:
-        w = h = 1
-        texels = np.zeros((1, 4), np.float32)
-        marginal = np.array([0.0, 1.0], np.float32)
-        conditional = np.array([0.0, 1.0], np.float32)
+    envmap = no_envmap()
+    if "file" in env:
+        try:
+            envmap = compile_envmap(env["file"])
+        except ValueError as exc:    # a Scene edited after its checks, or memory since
+            key = next(f"lights[{i}].file" for i, lt in enumerate(data["lights"])
+                       if lt["type"] == "environment_map")
+            raise SceneError(source, key, str(exc).removeprefix(f"{env['file']}: ")
+                             + f": {env['file']}") from None
     return CompiledScene(compile_camera(data["camera"]), prims,
                          np.array(b.materials, dtype=layouts.MATERIAL.dtype), lights, nodes,
-                         texels, marginal.astype(np.float32), conditional.astype(np.float32),
-                         (w, h), gpis)
+                         envmap.texels, envmap.marginal, envmap.conditional, envmap.size,
+                         gpis)

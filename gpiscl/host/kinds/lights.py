@@ -4,7 +4,7 @@
 A kind's packer turns its resolved scene object into Light record fields (layout/records.py
 LIGHT: radiance, p0, p1, p2, area, cos_max), plus "primitive": (primitive kind, p0, p1,
 p2) for a light that rays can hit (compile/scene.py adds a black primitive carrying it),
-and "environment_rgb" for the one environment map. Traits:
+and "environment_file" for the one environment map. Traits:
   environment  fills the scene's one environment slot (at most one per scene); a vertex
                may leave these to BSDF sampling (fs_random_normal.h);
   at_infinity  escaped rays look it up: has <name>_radiance;
@@ -19,7 +19,6 @@ import numpy as np
 
 from .table import Kind, KindTable
 from .values import DIRECTION, NONZERO, RGB, VEC3, rectangle_area
-from ..io.float_range import array_problem
 from ..schema import Bool, Field, File, Number, Record
 
 
@@ -34,13 +33,15 @@ def _exr_problem(path):
         return (f"EXR image lacks channel(s) {', '.join(missing)} "
                 f"(has: {', '.join(sorted(names)) or 'none'})")
     # the pixels too: a truncated file has a good header, and radiance must be >= 0 like
-    # a light's radiance in the scene
+    # a light's radiance in the scene; the size and the memory to read it first
+    from ..io.radiance_hdr import read_environment_rgb
     try:
-        from ..io.images import read_exr_rgb
-        rgb = read_exr_rgb(path)
+        read_environment_rgb(path)
+    except ValueError as exc:    # ours, naming the problem
+        return str(exc).removeprefix(f"{path}: ")
     except Exception:  # OpenEXR reports damage as several types
         return "cannot read the pixels of this OpenEXR image (damaged or truncated?)"
-    return array_problem(rgb, "environment map", nonnegative=True)
+    return None
 
 
 def _envmap_problem(path):
@@ -58,9 +59,9 @@ def pack_environment(lt):
 
 
 def pack_environment_map(lt):
-    from ..io.radiance_hdr import read_environment_rgb
+    # the texels are read at the end of the compile, when nothing else is held
     return {"radiance": [lt["scale"]] * 3, "p0": (math.radians(lt["rotation"]),),
-            "environment_rgb": read_environment_rgb(lt["file"]).astype(np.float32)}
+            "environment_file": lt["file"]}
 
 
 def pack_point(lt):
