@@ -91,11 +91,10 @@
  * The vertex record is fs_vertex_at_hit's (position, gradient), which is what the
  * renewal / renewal_plus start above reads.
  *
- * Random numbers: fs_march.h's segments (the step index) and blocks: slots 0..p the
- * state noise of a step, FS_SLOT_REFINE + 2k + j (3/2) or 4k + j (5/2) bisection k (at
- * most 33 or 16: a 2 l_d step needs 8), FS_SLOT_NORMAL and
+ * Random numbers: fs_march.h's segments (the step index) and the ranges of
+ * layout/random_slots.py: slots 0..p the state noise of a step, FS_SLOT_REFINE + 2k + j
+ * (3/2) or 4k + j (5/2) bisection k (a 2 l_d step needs 8), FS_SLOT_NORMAL and
  * FS_U_SLOPE at the hit's step; the start's free components FS_MK_SLOT_START + j. */
-#define FS_MK_SLOT_START 600
 #define FS_MK_ELL32 1.3576766739458992   /* (1 + x) e^-x = e^-1/2 */
 #define FS_MK_ELL52 1.9262524514893138   /* (1 + x + x^2 / 3) e^-x = e^-1/2 */
 #define FS_MK_ROOT_CLAMP 1e-9            /* the root's fraction of the bracket, see fs_mk_hit */
@@ -625,7 +624,7 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
     /* the root search (fs_march.h's fs_root_point: points chosen from values already
      * drawn) by bridge draws in (ta, tb]: x is the state at ta, xb at tb */
     /* an even number of slots per point (fs_mk_normals pairs them): 2 or 4 */
-    int stride = (m.n + 1) & ~1, kmax = (FS_SLOT_NORMAL - FS_SLOT_REFINE) / stride;
+    int stride = (m.n + 1) & ~1, kmax = FS_SLOT_REFINE_COUNT / stride;
     double width = FS_ROOT_WIDTH * ell;
     int budget = fs_root_budget(tb - ta, width);
     for (int k = 0; (k < prm.refine || tb - ta > width) && k < kmax; ++k) {
