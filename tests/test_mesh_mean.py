@@ -44,7 +44,7 @@ ROT = np.array([[0.36, 0.48, -0.8], [-0.8, 0.6, 0.0], [0.48, 0.64, 0.6]])
 def prg(device):
     src = join_sources(
         (), ("ws_features.h", "ws_posterior.h", "ws_intersect.h")) + KERNELS
-    p = cl.Program(device.ctx, src).build(options=[f"-I{PYOPENCL_CL_DIR}"])
+    p = cl.Program(device.ctx, src).build(options=[f"-I{PYOPENCL_CL_DIR}", "-DWS_LANES=8"])
     return {k.function_name: k for k in p.all_kernels()}
 
 

@@ -94,11 +94,12 @@ __kernel void ws_lambda2_k(__global const GpKernel* kp, __global const float* d,
 """
 
 
-def build(device, extra="", options=()):
+def build(device, extra="", options=(), lanes=8):
     """The ws headers, WRAPPERS and extra kernels as one program: name -> kernel."""
     src = join_sources(
         (), ("ws_features.h", "ws_posterior.h", "ws_intersect.h")) + WRAPPERS + extra
-    prg = cl.Program(device.ctx, src).build(options=[f"-I{PYOPENCL_CL_DIR}", *options])
+    prg = cl.Program(device.ctx, src).build(
+        options=[f"-I{PYOPENCL_CL_DIR}", f"-DWS_LANES={lanes}", *options])
     return {k.function_name: k for k in prg.all_kernels()}
 
 
@@ -245,7 +246,7 @@ def test_lanes_do_not_change_the_realization(device, prg):
                    out_shapes=[((len(x), 4), np.float32)])[0]
     v8 = values(prg)
     for lanes in (1, 16):
-        p = build(device, options=[f"-DWS_LANES={lanes}"])
+        p = build(device, lanes=lanes)
         for a, b in zip(dump(device, p, kernel, keys, m), ref):
             np.testing.assert_allclose(a, b, rtol=2 * EPS, atol=2 * EPS)
         # only the order of the M-term sums differs: gamma_M of the absolute terms

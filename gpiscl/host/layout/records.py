@@ -8,6 +8,8 @@ from __future__ import annotations
 
 
 from ..kinds import lights, materials
+from . import constants, random_slots
+from . import function_space_records, gp_records
 from .gp_records import c_declarations as gp_declarations
 from .struct import Queue, Struct
 
@@ -202,11 +204,14 @@ def _defines() -> str:
 
 STRUCTS = (CAMERA, PRIMITIVE, MATERIAL, LIGHT, BVH_NODE, GPIS_OBJECT, RENDER_PARAMS)
 QUEUES = (PATH_STATE, RAY_QUEUE, INDEX_QUEUE, SHADOW_QUEUE)
+# every struct host and device share (tests/test_layouts.py measures each on the device)
+ALL_STRUCTS = STRUCTS + gp_records.STRUCTS + function_space_records.STRUCTS
 
 
 def c_header() -> str:
     """The device-side declarations of every shared layout."""
-    parts = ["/* Generated from gpiscl/host/layout/records.py: do not edit. */\n", _defines()]
+    parts = ["/* Generated from gpiscl/host/layout/records.py: do not edit. */\n", _defines(),
+             constants.c_defines(), random_slots.c_defines()]
     parts += [s.c_declaration() for s in STRUCTS]
     parts.append(gp_declarations())
     parts += [q.c_declaration() for q in QUEUES]

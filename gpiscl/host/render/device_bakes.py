@@ -14,10 +14,11 @@ import pyopencl as cl
 
 from ..gp import knob, means
 from ..gp.means import GridMean
+from ..layout.constants import KNOB_FUNCTIONS
 from .device import Device, Program, to_device
 from .program_sources import BAKE_FILES, BAKE_HEADERS
 
-FUNCTIONS = {"knob": 0, "knob_inner": 1, "knob_outer": 2}   # KNOB_FUNCTION_* of knob_sdf.h
+FUNCTIONS = KNOB_FUNCTIONS   # KNOB_FUNCTION_* ids
 
 
 def _hex(x: float) -> str:

@@ -15,6 +15,7 @@ import pyopencl as cl
 from . import function_space_stages as gpis_function_space
 from . import kriging_cache, memory
 from ..layout import records as layouts
+from ..layout.constants import WS_MAX_LANES
 from .batching import BatchSizer
 from .device import Device, Program, to_device
 from .film import Film, FilmImage
@@ -46,7 +47,7 @@ def ws_defines(device: Device) -> dict:
     """Weight-space features run WS_LANES per work-item in vector types: what makes the
     feature loop SIMD on CPU runtimes; GPUs vectorise across work-items instead."""
     # the native float width measured 1.3-1.6x faster than 8 lanes on a 16-wide CPU
-    lanes = min(16, max(1, device.device.native_vector_width_float))
+    lanes = min(WS_MAX_LANES, max(1, device.device.native_vector_width_float))
     return {"WS_LANES": lanes if device.is_cpu else 1}
 
 

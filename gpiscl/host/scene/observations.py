@@ -11,10 +11,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..io.points import load_points
+from ..layout.constants import WS_POST_MAX
 
 MAX_ROWS = 4096
-# WS_POST_MAX in ws_posterior.h: a ray's solve vector lives in private memory (8 bytes a row)
-WS_MAX_ROWS = 512
+WS_MAX_ROWS = WS_POST_MAX   # a ray's solve vector lives in private memory
 # kernels whose cross-covariance slopes ws_posterior.h bounds along a ray
 WS_KERNELS = ("squared_exponential", "rational_quadratic")
 

@@ -26,29 +26,15 @@
  *    benchmarks' baseline; scenes cannot select it).
  *  - Random numbers: the step index is fs_uniform2's segment (16 bits, hence
  *    FS_MAX_STEPS; a longer ray is counted as failed); fixed slots per draw. */
-#ifndef FS_WINDOW
-#define FS_WINDOW 16
-#endif
 #define FS_MAX_STEPS 65535
-#ifndef FS_H_MAX
-#define FS_H_MAX 2.0               /* l_d */
-#endif
 #ifndef FS_MEAN_KAPPA
 #define FS_MEAN_KAPPA 6.0          /* fs_mean_step */
 #endif
 #define FS_MEAN_Z 6.0
 #define FS_MEAN_HOPS 8             /* fs_mean_step */
-/* the three-point Gauss-Radau rule on [0, 1] with its fixed node at 0 (where nu = 0, so
- * its weight 1/9 drops out) and free nodes (6 -+ sqrt 6) / 10: exact for degree 4, two
- * evaluations per accepted try; the node nearer the end first, so that most rejected
- * tries stop after one (see "Step rule") */
-#define FS_RULE_NODE0 0.8449489742783178   /* (6 + sqrt 6) / 10 */
-#define FS_RULE_WEIGHT0 0.37640306270046727  /* (16 - sqrt 6) / 36 */
-#define FS_RULE_NODE1 0.3550510257216822   /* (6 - sqrt 6) / 10 */
-#define FS_RULE_WEIGHT1 0.5124858261884216   /* (16 + sqrt 6) / 36 */
-#define FS_H_MIN 1e-3              /* l_d: a floor for degenerate starts (f = 0 exactly) */
-#define FS_ELL_CORR 0.6065306597126334   /* e^-1/2: SE's lag is exactly l / sqrt(d'Ad) */
-#define FS_U_SLOPE 1100
+/* FS_WINDOW, FS_H_MAX, FS_H_MIN, FS_ELL_CORR and the step rule's Gauss-Radau quadrature
+ * FS_RULE_NODE* / FS_RULE_WEIGHT* (the node nearer the end first, so that most rejected
+ * tries stop after one, see "Step rule"): layout/constants.py */
 
 typedef struct { double m, m1, s, r, g; } FsMoments;   /* v = s^2, c = r s, g as above */
 

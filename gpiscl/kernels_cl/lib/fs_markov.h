@@ -22,7 +22,6 @@
  *    metric-orthonormal frame (uncorrelated with everything on the ray).
  *  - Random numbers: fs_march.h's segments; slots 0..p the state noise of a step, the
  *    bisection, normal, slope and start slots of the slot plan (FS_SLOT_*). */
-#define FS_MK_SLOT_START 600
 #define FS_MK_ELL32 1.3576766739458992   /* (1 + x) e^-x = e^-1/2 */
 #define FS_MK_ELL52 1.9262524514893138   /* (1 + x + x^2 / 3) e^-x = e^-1/2 */
 #define FS_MK_ROOT_CLAMP 1e-9            /* the root's fraction of the bracket, see fs_mk_hit */
@@ -552,7 +551,7 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
     /* the root search (fs_march.h's fs_root_point: points chosen from values already
      * drawn) by bridge draws in (ta, tb]: x is the state at ta, xb at tb */
     /* an even number of slots per point (fs_mk_normals pairs them): 2 or 4 */
-    int stride = (m.n + 1) & ~1, kmax = (FS_SLOT_NORMAL - FS_SLOT_REFINE) / stride;
+    int stride = (m.n + 1) & ~1, kmax = FS_SLOT_REFINE_COUNT / stride;
     double width = FS_ROOT_WIDTH * ell;
     int budget = fs_root_budget(tb - ta, width);
     for (int k = 0; (k < prm.refine || tb - ta > width) && k < kmax; ++k) {

@@ -59,25 +59,15 @@
  */
 typedef char fs_gp_real_must_be_double[sizeof(GP_REAL) == 8 ? 1 : -1];
 
-#ifndef FS_MAX_ROWS
-#define FS_MAX_ROWS 115
+/* FS_MAX_ROWS, FS_POST_MAX (observation rows of the largest posterior GPIS),
+ * FS_SCRATCH_DOUBLES and FS_MAX_WINDOW (the largest FsParams.window of the program) */
+#if !defined(FS_MAX_ROWS) || !defined(FS_POST_MAX) || !defined(FS_SCRATCH_DOUBLES) \
+    || !defined(FS_MAX_WINDOW)
+#error "FS_MAX_ROWS, ... come from the host (layout/function_space_records.defines)"
 #endif
-#ifndef FS_POST_MAX
-#define FS_POST_MAX 0              /* observation rows of the largest posterior GPIS */
-#endif
-#ifndef FS_SCRATCH_DOUBLES
-#define FS_SCRATCH_DOUBLES (18 * FS_MAX_ROWS + FS_MAX_ROWS * (FS_MAX_ROWS + 1) / 2 \
-                            + FS_MAX_ROWS * FS_POST_MAX)
-#endif
-#ifndef FS_MAX_WINDOW
-#define FS_MAX_WINDOW 16           /* the largest FsParams.window of the program */
-#endif
-#define FS_PHILOX_KEY 0x3c6ef372u
 #define FS_TN_TAIL 30.0            /* beyond: exact rejection tail, erfc would underflow */
-#define FS_SLOT_REFINE 512         /* normal slots: a step's value is 0, bisection these */
-#define FS_SLOT_NORMAL 578
-#define FS_U_GRID 1024             /* uniform blocks */
-#define FS_U_START 1025            /* and the 16 after it (tail rejection retries) */
+/* FS_PHILOX_KEY: layout/constants.py; FS_SLOT_* (normals), FS_U_* (uniform blocks):
+ * layout/random_slots.py */
 
 typedef struct { uint seed, pixel, sample, bounce, stream; } FsRng;
 /* window: samples kept besides the memory (0: FS_WINDOW); step_corr > 0: the uniform
@@ -192,7 +182,7 @@ inline double fs_truncnorm_pos(double mu, double s, FsRng rng, uint seg, uint bl
     if (!(s > 0.0)) return fmax(mu, 0.0);
     double a = -mu / s, z = a;
     if (a > FS_TN_TAIL) {
-        for (uint k = 0; k < 16; ++k) {            /* acceptance > 99.8% */
+        for (uint k = 0; k < FS_TN_TAIL_TRIES; ++k) {
             double2 u = fs_uniform2(rng, seg, block + 1 + k);
             double x = sqrt(a * a - 2.0 * log(1.0 - u.x));
             if (u.y * x <= a) { z = x; break; }

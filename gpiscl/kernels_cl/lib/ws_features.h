@@ -31,7 +31,7 @@
  * |phase| < 2^15), and ws_affine's `round` accounts for the phase error in its bounds.
  */
 #ifndef WS_LANES
-#define WS_LANES 8
+#error "WS_LANES comes from the host (render/integrator.ws_defines)"
 #endif
 /* Features kept in private memory for one root search when M <= WS_CACHE_FEATURES: a
  * search evaluates its ray's realization ~35 times, and regenerating a feature (Philox,
@@ -48,11 +48,7 @@
 #define WS_CACHE_FEATURES 0
 #endif
 #endif
-#define WS_PHILOX_KEY1 0x3c6ef372u   /* SHA-256 IV word 2; rng.h uses word 0 */
-#define WS_CALL_MAIN 0u              /* 3 normals (frequency), w, tau */
-#define WS_CALL_ORDERS 1u            /* periodic orders and signs */
-#define WS_CALL_GAMMA 2u             /* first RQ gamma call; two trials per lane per call */
-#define WS_GAMMA_CALLS 24            /* P(48 trials all rejected) < 0.05^48 */
+/* WS_PHILOX_KEY1, WS_CALL_*, WS_GAMMA_CALLS: layout/constants.py */
 #define WS_TWO_PI 6.28318530717958648f
 
 #if WS_LANES == 1
