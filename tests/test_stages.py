@@ -54,8 +54,8 @@ def test_every_built_kernel_has_its_stages_argument_names_and_types(device):
             names = [kernel.get_arg_info(i, info.NAME) for i in range(kernel.num_args)]
             types = [kernel.get_arg_info(i, info.TYPE_NAME).replace(" ", "")
                      for i in range(kernel.num_args)]
-            assert names == stage.c_names(), stage.name
-            assert types == [p.type_name for _, _, p in stage.flat()], stage.name
+            assert names == stage.c_names, stage.name
+            assert types == [p.type_name for _, _, p, _ in stage.flat], stage.name
     assert sorted(built) == sorted(BY_NAME)
 
 
@@ -120,3 +120,13 @@ def test_kernels_are_launched_only_through_stages():
                 found.setdefault(call, []).append(path.name)
     assert found == {".enqueue(": ["launch.py"], "set_args(": ["device.py"],
                      "enqueue_nd_range_kernel(": ["device.py"]}
+
+
+def test_a_queue_of_another_layout_or_released_is_an_error(device, queue_hits_arguments):
+    _, named = queue_hits_arguments
+    rays = DeviceQueue(device.ctx, records.RAY_QUEUE, 1)
+    with pytest.raises(LaunchError, match=r"kernel queue_hits: unknown .*hits_o"):
+        launch(stage_program(device), stages.QUEUE_HITS, 1, **{**named, "hits": rays})
+    rays.release()
+    with pytest.raises(LaunchError, match=r"kernel queue_hits: missing argument 'in_o'"):
+        launch(stage_program(device), stages.QUEUE_HITS, 1, **{**named, "in_": rays})

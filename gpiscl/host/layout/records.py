@@ -202,7 +202,6 @@ def _defines() -> str:
 
 
 STRUCTS = (CAMERA, PRIMITIVE, MATERIAL, LIGHT, BVH_NODE, GPIS_OBJECT, RENDER_PARAMS)
-QUEUES = (PATH_STATE, RAY_QUEUE, INDEX_QUEUE, SHADOW_QUEUE)
 
 
 def c_header() -> str:
@@ -210,5 +209,4 @@ def c_header() -> str:
     parts = ["/* Generated from gpiscl/host/layout/records.py: do not edit. */\n", _defines()]
     parts += [s.c_declaration() for s in STRUCTS]
     parts.append(gp_declarations())
-    parts += [q.c_declaration() for q in QUEUES]
     return "\n".join(parts)

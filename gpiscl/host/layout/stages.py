@@ -9,6 +9,7 @@ host passes prefix=<mapping of field to value>.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -28,11 +29,11 @@ class Param:
     name: str
     ctype: str
 
-    @property
+    @cached_property
     def is_buffer(self) -> bool:
         return "*" in self.ctype
 
-    @property
+    @cached_property
     def dtype(self) -> np.dtype:
         """The numpy dtype a scalar argument must have."""
         return np.dtype(SCALAR_DTYPES[self.ctype])
@@ -50,11 +51,13 @@ class Group:
 
     prefix: str
     params: tuple
+    queue: Queue | None = None    # the layout whose buffers these are, if a queue's
 
 
 def queue(prefix: str, layout: Queue) -> Group:
     """A structure-of-arrays queue's buffers (render/queues.py), in its field order."""
-    return Group(prefix, tuple(Param(f, f"__global {c}* restrict") for c, f in layout.fields))
+    return Group(prefix, tuple(Param(f, f"__global {c}* restrict") for c, f in layout.fields),
+                 layout)
 
 
 @dataclass(frozen=True)
@@ -64,27 +67,29 @@ class Stage:
     name: str
     params: tuple     # Param or Group, in the kernel's order
 
-    def flat(self) -> list:
-        """(host name, group field or None, Param) per kernel argument, in order; the C
-        name of the argument is host name_field for a group member."""
+    @cached_property
+    def flat(self) -> tuple:
+        """(host name, group field or None, Param, C name) per kernel argument, in order:
+        a group member's C name is prefix_field."""
         out = []
         for p in self.params:
             if isinstance(p, Group):
-                out += [(p.prefix, q.name, q) for q in p.params]
+                out += [(p.prefix, q.name, q, f"{p.prefix}_{q.name}") for q in p.params]
             else:
-                out.append((p.name, None, p))
-        return out
-
-    def c_names(self) -> list:
-        return [name if field is None else f"{name}_{field}" for name, field, _ in self.flat()]
+                out.append((p.name, None, p, p.name))
+        return tuple(out)
 
     @property
-    def host_names(self) -> tuple:
+    def c_names(self) -> list:
+        return [c_name for *_, c_name in self.flat]
+
+    @cached_property
+    def host_names(self) -> frozenset:
         """The keywords a launch takes: parameter names and group prefixes."""
-        return tuple(p.prefix if isinstance(p, Group) else p.name for p in self.params)
+        return frozenset(p.prefix if isinstance(p, Group) else p.name for p in self.params)
 
     def c_macro(self) -> str:
-        decls = [f"{p.ctype} {c}" for (_, _, p), c in zip(self.flat(), self.c_names())]
+        decls = [f"{p.ctype} {c_name}" for _, _, p, c_name in self.flat]
         return f"#define {self.name.upper()}_PARAMS \\\n    " + ", \\\n    ".join(decls) + "\n"
 
 

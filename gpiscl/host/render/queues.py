@@ -22,9 +22,14 @@ class DeviceQueue(Mapping):
             n = 1 if fname in unused else max(capacity, 1)
             nbytes = layout.numpy_dtype(fname).itemsize * n
             self.buffers[fname] = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, nbytes)
+        # in the layout's order: what a launch takes without a check per buffer
+        self.in_layout_order = list(self.buffers.values())
 
     def __getitem__(self, fname: str) -> cl.Buffer:
         return self.buffers[fname]
+
+    def get(self, fname: str, default=None):   # dict's, not Mapping's slower one: per launch
+        return self.buffers.get(fname, default)
 
     def __iter__(self):
         return iter(self.buffers)
@@ -35,4 +40,4 @@ class DeviceQueue(Mapping):
     def release(self) -> None:
         for buf in self.buffers.values():
             buf.release()
-        self.buffers = {}
+        self.buffers, self.in_layout_order = {}, None
