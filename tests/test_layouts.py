@@ -40,8 +40,3 @@ def test_struct_offsets_match_device(device, struct):
     assert list(out[1:]) == [dtype.fields[f][1] for _, f in struct.fields]
 
 
-def test_every_stage_kernel_is_built_once_under_its_own_name(device):
-    from gpiscl.host.render.integrator import stage_program
-    from gpiscl.host.render.program_sources import STAGE_FILES
-    program = stage_program(device)
-    assert sorted(program.kernels) == sorted(f[:-3] for f in STAGE_FILES)

@@ -8,6 +8,7 @@ import numpy as np
 from ..kinds.lights import LIGHTS
 from ..kinds.materials import MATERIALS
 from ..layout import records as layouts
+from ..layout import stages
 from .bvh import build_bvh
 from .camera import compile_camera
 from .envmap import compile_envmap, no_envmap
@@ -35,6 +36,18 @@ class CompiledScene:
     @property
     def resolution(self) -> tuple:
         return int(self.camera["width"][0]), int(self.camera["height"][0])
+
+    def device_arrays(self) -> dict:
+        """The arrays the stage kernels read, by their parameter names (layout/stages.py):
+        the render uploads each once and launches take them by name."""
+        pairs = ((stages.CAMERA, self.camera), (stages.NODES, self.bvh_nodes),
+                 (stages.PRIMS, self.primitives), (stages.MATERIALS, self.materials),
+                 (stages.LIGHTS, self.lights), (stages.GPIS, self.gpis.objects),
+                 (stages.KERNELS, self.gpis.kernels), (stages.MEAN_NODES, self.gpis.mean_nodes),
+                 (stages.ORDER_TABLE, self.gpis.order_table),
+                 *zip(stages.ENV_MAP, (self.env_texels, self.env_marginal,
+                                       self.env_conditional)))
+        return {param.name: array for param, array in pairs}
 
 
 class _Builder:

@@ -203,7 +203,6 @@ def _defines() -> str:
 
 
 STRUCTS = (CAMERA, PRIMITIVE, MATERIAL, LIGHT, BVH_NODE, GPIS_OBJECT, RENDER_PARAMS)
-QUEUES = (PATH_STATE, RAY_QUEUE, INDEX_QUEUE, SHADOW_QUEUE)
 # every struct host and device share (tests/test_layouts.py measures each on the device)
 ALL_STRUCTS = STRUCTS + gp_records.STRUCTS + function_space_records.STRUCTS
 
@@ -214,5 +213,4 @@ def c_header() -> str:
              constants.c_defines(), random_slots.c_defines()]
     parts += [s.c_declaration() for s in STRUCTS]
     parts.append(gp_declarations())
-    parts += [q.c_declaration() for q in QUEUES]
     return "\n".join(parts)

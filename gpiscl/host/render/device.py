@@ -203,8 +203,12 @@ class Program:
                               "another --device" + _drivers_limited())
         return kernels
 
-    def launch(self, name: str, global_size: int, *args):
-        """Enqueue kernel `name` over global_size items; returns the event."""
+    def enqueue(self, name: str, global_size: int, args, local: int | None = None,
+                max_items: int | None = None):
+        """Enqueue kernel `name` over global_size items (timed under its name) with the
+        arguments in kernel order (render/launch.py orders and checks them); returns the
+        event. max_items: launch at most this many work items (a multiple of local), for
+        kernels whose items stride over the rest."""
         if global_size <= 0:
             return None
         kernel = self.kernels[name]
@@ -212,8 +216,10 @@ class Program:
         # One fixed work-group size: PoCL compiles a work-group function per local size,
         # so letting it pick one per global size recompiles big kernels every bounce
         # (seconds each). Kernels bound-check their index, so padding is harmless.
-        local = min(WORK_GROUP, self.device.device.max_work_group_size)
+        local = local or min(WORK_GROUP, self.device.device.max_work_group_size)
         padded = -(-int(global_size) // local) * local
+        if max_items is not None:
+            padded = min(padded, max_items)
         event = cl.enqueue_nd_range_kernel(self.device.queue, kernel, (padded,), (local,))
         self.timings.record(name, int(global_size), event)
         return event

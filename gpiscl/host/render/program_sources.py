@@ -2,8 +2,9 @@
 
 gpiscl/kernels_cl/lib/ holds the shared device library (.h), gpiscl/kernels_cl/stages/
 one .cl per wavefront stage (file, kernel, host method and timing label share a name).
-Sources are concatenated, not #included: the generated layout header comes first, then
-the library in the order below (each header uses only those before it), then stages.
+Sources are concatenated, not #included: the generated layout header and every stage's
+parameter list (layout/stages.py) come first, then the library in the order below (each
+header uses only those before it), then stages.
 """
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from pathlib import Path
 import pyopencl as cl
 
 from ..kinds import lights, materials
-from ..layout import records
+from ..layout import records, stages
 from ..layout.function_space_records import c_declarations, defines
 
 KERNEL_DIR = Path(__file__).resolve().parent.parent.parent / "kernels_cl"
@@ -53,8 +54,9 @@ def _marked(name) -> str:
 
 
 def join_sources(stage_files, extra_headers=(), extra_c="") -> str:
-    """The whole program text: generated layouts, shared headers, then stages."""
-    parts = [records.c_header(), extra_c]
+    """The whole program text: generated layouts and parameter lists, shared headers, then
+    stages."""
+    parts = [records.c_header(), stages.c_declarations(), extra_c]
     parts += [_marked(name) for name in (*SHARED_HEADERS, *extra_headers, *stage_files)]
     return "\n".join(parts)
 

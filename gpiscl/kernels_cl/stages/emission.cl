@@ -2,10 +2,7 @@
  * against light sampling from the previous vertex (path_prev_pos.w: the BSDF sample's
  * density, 0 for a delta; a function-space mirror has one, fs_random_normal.h), and by GPIS
  * emission fields where rays meet a realization (never light-sampled, so with weight 1). */
-__kernel void emission(__constant RenderParams* params, PATH_PARAMS(path), RAY_PARAMS(in),
-                       INDEX_PARAMS(hits), __global int* counters,
-                       __global const Primitive* prims, __global const Light* lights,
-                       __global const GpisObject* gpis, __global const MeanNode* mean_nodes)
+__kernel void emission(EMISSION_PARAMS)
 {
     int i = get_global_id(0);
     if (i >= counters[COUNT_HITS]) return;

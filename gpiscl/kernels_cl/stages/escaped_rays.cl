@@ -1,10 +1,6 @@
 /* From: escaped queue.  To: radiance of the lights at infinity added to each path,
  * weighted by MIS against light sampling. The path ends here. */
-__kernel void escaped_rays(__constant RenderParams* params, PATH_PARAMS(path),
-                           RAY_PARAMS(in), INDEX_PARAMS(escaped), __global int* counters,
-                           __global const Light* lights, __global const float4* env_texels,
-                           __global const float* env_marginal,
-                           __global const float* env_conditional)
+__kernel void escaped_rays(ESCAPED_RAYS_PARAMS)
 {
     int i = get_global_id(0);
     if (i >= counters[COUNT_ESCAPED]) return;

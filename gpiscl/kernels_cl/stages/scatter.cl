@@ -1,13 +1,7 @@
 /* From: hit queue.  To: for each surface hit, a shadow ray towards a sampled light
  * (next-event estimation, MIS-weighted) and a continuation ray in ray queue `out`.
  * Null (pass-through) surfaces forward the ray unchanged and switch the medium. */
-__kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PARAMS(in),
-                      RAY_PARAMS(out), INDEX_PARAMS(hits), SHADOW_PARAMS(shadow),
-                      __global int* counters, __global const Primitive* prims,
-                      __global const Material* materials, __global const Light* lights,
-                      __global const float4* env_texels, __global const float* env_marginal,
-                      __global const float* env_conditional, __global const GpisObject* gpis,
-                      __global const MeanNode* mean_nodes)
+__kernel void scatter(SCATTER_PARAMS)
 {
     int i = get_global_id(0);
     if (i >= counters[COUNT_HITS]) return;
