@@ -9,7 +9,7 @@ import pytest
 
 from gpiscl import render_result
 from gpiscl.host.render import rough_conductor as RC
-from gpiscl.host.scene.conductors import CONDUCTORS
+from gpiscl.host.kinds.conductors import CONDUCTORS
 from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, join_sources
 from stats import assert_agree, z_threshold
 

@@ -3,31 +3,19 @@
     python tools/convert_tungsten.py scene.json out.json [--environment 0.8 | sky.exr | sky.hdr]
                                      [--grid-dir DIR]
 
-The scene file is read as their renderer reads it (trailing commas, comments, NaN and
-Infinity). The mapping and what is unsupported are documented in gpiscl/host/scene/tungsten.py.
-The result is validated by the strict scene loader before it is written; errors are one
-line naming the input file, the key path and the reason (exit code 2).
+A thin wrapper of gpiscl.host.scene.tungsten_convert.convert_file, which documents the
+guarantees (outputs checked first, written atomically, nothing written on an error); the
+mapping is documented in gpiscl/host/scene/tungsten.py. Errors are one line naming the
+file, the key path and the reason (exit code 2).
 """
 import argparse
-import json
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # this checkout's gpiscl
 
 from gpiscl.host.errors import SceneError  # noqa: E402
-from gpiscl.host.io.lenient_json import read_lenient_json  # noqa: E402
-from gpiscl.host.scene.loading import load_scene  # noqa: E402
-from gpiscl.host.scene.tungsten import convert_tungsten  # noqa: E402
-
-
-def _environment(text):
-    if text is None:
-        return None
-    try:
-        return {"type": "environment", "radiance": float(text)}
-    except ValueError:
-        return {"type": "environment_map", "file": str(Path(text).resolve())}
+from gpiscl.host.scene.tungsten_convert import convert_file, environment_option  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -37,23 +25,14 @@ def main(argv=None) -> int:
     ap.add_argument("--environment", help="substitute environment: a radiance, or an .exr "
                     "or .hdr map")
     ap.add_argument("--grid-dir", help="where .npz grids converted from .vdb grids go "
-                    "(default: beside the .vdb)")
+                    "(default: the output's folder)")
     args = ap.parse_args(argv)
     try:
-        doc = read_lenient_json(args.scene)
-        scene, notes = convert_tungsten(doc, args.scene, _environment(args.environment),
-                                        args.grid_dir)
-        try:
-            load_scene(scene)  # strict validation before anything is written
-        except SceneError as exc:
-            # a value the importer passed on unchecked: name the input file, and the
-            # converted scene's key (the input's key maps to it as tungsten.py describes)
-            raise SceneError(args.scene, "", f"the converted scene is invalid at "
-                             f"{exc.key or 'its top level'}: {exc.reason}") from None
+        notes = convert_file(args.scene, args.output, environment_option(args.environment),
+                             args.grid_dir)
     except SceneError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    Path(args.output).write_text(json.dumps(scene, indent=1) + "\n")
     for note in notes:
         print(f"note: {note}", file=sys.stderr)
     print(f"wrote {args.output}", file=sys.stderr)

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from . import gpis  # noqa: F401  (registers the "gpis" shape with records.SHAPES)
 from .records import SCENE
 from ..schema import Context, kind_of
+from .tungsten_keys import tungsten_hint, tungsten_hint_of_text
 
 
 @dataclass
@@ -89,7 +90,7 @@ def _read_json(path: str, ctx: Context):
     try:
         return json.loads(text, object_pairs_hook=_object_pairs)
     except json.JSONDecodeError as exc:
-        ctx.fail("", f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}")
+        ctx.fail("", tungsten_hint_of_text(text) or f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}")
     except RecursionError:
         ctx.fail("", "invalid JSON: nested too deeply")
     except ValueError as exc:  # e.g. an integer literal with too many digits
@@ -131,6 +132,8 @@ def load_scene(source) -> Scene:
             ctx.fail("", f"top level must be a JSON object (got {kind_of(doc)})")
     else:
         raise TypeError(f"load_scene takes a path, a dict or a Scene, not {type(source).__name__}")
+    if tungsten_hint(doc):
+        ctx.fail("", tungsten_hint(doc))
     _check_nesting(doc, ctx)
     return Scene.resolved(SCENE.resolve(doc, "", ctx), ctx.file, ctx.base_dir)
 
