@@ -21,7 +21,6 @@ import numpy as np
 from .kernels import covariance_matrix
 
 JITTER = 1e-10
-MEMORIES = ("none", "renewal", "renewal_plus", "global")
 _SQRT2PI = math.sqrt(2.0 * math.pi)
 
 

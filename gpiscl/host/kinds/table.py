@@ -132,12 +132,15 @@ class KindTable:
     def c_dispatch(self, function: str, returns: str, params: str, args: str,
                    default: str = "0", kinds: Sequence[str] | None = None) -> str:
         """`returns prefix_function(int kind, params)`: a switch calling `<name>_<function>
-        (args)` for each kind (or the `kinds` named), `default` for the others."""
+        (args)` for each kind (or the `kinds` named), `default` for the others. A `void`
+        function calls and returns (its default does nothing)."""
         chosen = [self[n] for n in kinds] if kinds is not None else self._kinds
-        cases = "\n".join(f"    case {self.c_name(k.name)}: return {k.name}_{function}({args});"
-                          for k in chosen)
-        head = f"{returns} {self.prefix.lower()}_{function}(int kind, {params})"
-        return f"{head} {{\n  switch (kind) {{\n{cases}\n    default: return {default};\n  }}\n}}"
+        call = "{}; return;" if returns == "void" else "return {};"
+        cases = "\n".join(f"    case {self.c_name(k.name)}: "
+                          + call.format(f"{k.name}_{function}({args})") for k in chosen)
+        tail = "return;" if returns == "void" else f"return {default};"
+        head = f"inline {returns} {self.prefix.lower()}_{function}(int kind, {params})"
+        return f"{head} {{\n  switch (kind) {{\n{cases}\n    default: {tail}\n  }}\n}}"
 
     def device_files(self) -> list:
         return [k.device_file for k in self._kinds if k.device_file is not None]

@@ -17,6 +17,7 @@ import numpy as np
 from .struct import Struct
 from ..gp import kernels as K
 from ..gp import means as M
+from ..kinds.gp_kernels import GP_KERNELS
 
 GP_KERNEL = Struct("GpKernel", (
     ("float4", "aniso"),            # xyz: diagonal of A
@@ -79,8 +80,6 @@ MEAN_NODE = Struct("MeanNode", (
     ("float", "k"),         # ops: smooth blend width, 0 = sharp
 ))
 
-KERNEL_KINDS = {"squared_exponential": 0, "rational_quadratic": 1, "periodic": 2,
-                "locally_periodic": 3, "thin_plate": 4, "matern32": 5, "matern52": 6}
 FIELD_KINDS = {"none": 0, "linear": 1, "radial": 2, "grid": 3}
 MEAN_KINDS = {"constant": 0, "plane": 1, "sphere": 2, "box": 3, "rounded_box": 4,
               "torus": 5, "capsule": 6, "grid": 7, "union": 16, "intersection": 17,
@@ -99,7 +98,7 @@ _F32_MAX = float(np.finfo(np.float32).max)
 def c_declarations() -> str:
     """#defines and struct declarations that gp_kernel.h and gp_mean.h assume."""
     lines = ["/* Generated from gpiscl/host/layout/gp_records.py: do not edit. */"]
-    lines += [f"#define GP_KERNEL_{k.upper()} {v}" for k, v in KERNEL_KINDS.items()]
+    lines += GP_KERNELS.c_enum() + GP_KERNELS.c_traits()
     lines += [f"#define GP_FIELD_{k.upper()} {v}" for k, v in FIELD_KINDS.items()]
     lines += [f"#define GP_MEAN_{k.upper()} {v}" for k, v in MEAN_KINDS.items()]
     lines.append(f"#define GP_MEAN_FIRST_OP {MEAN_KINDS['union']}")
@@ -138,11 +137,10 @@ def pack_kernel(kernel: K.Kernel) -> np.ndarray:
         return out
     out = GP_KERNEL.zeros(1)
     out["aniso"] = (*np.asarray(kernel.aniso, dtype=np.float64), 0.0)
-    out["kind"] = KERNEL_KINDS[kernel.kind]
+    out["kind"] = GP_KERNELS.id(kernel.kind)
     out["sigma2"] = float(kernel.sigma) ** 2
-    for name in ("length_scale", "alpha", "w", "se_length_scale", "radius"):
-        if hasattr(kernel, name):
-            out[name] = getattr(kernel, name)
+    for name in GP_KERNELS[kernel.kind].host.params:
+        out[name] = getattr(kernel, name)
     return out
 
 

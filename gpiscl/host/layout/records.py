@@ -7,6 +7,7 @@ drift apart; tests/test_layouts.py checks the offsets on the device itself.
 from __future__ import annotations
 
 
+from ..kinds.memory_models import MEMORY_MODELS
 from .gp_records import c_declarations as gp_declarations
 from .struct import Queue, Struct
 
@@ -185,7 +186,7 @@ NUM_COUNTERS = len(COUNTERS)
 BOUNCE_SUMMED = ("fs_flights", "fs_samples", "fs_evals")
 GPIS_PROXIES = {"box": 0, "sphere": 1, "mesh": 2}
 GPIS_SAMPLERS = {"weight_space": 0, "function_space": 1}
-GPIS_MEMORIES = {"none": 0, "renewal": 1, "renewal_plus": 2, "global": 3}
+GPIS_MEMORIES = {name: MEMORY_MODELS.id(name) for name in MEMORY_MODELS.names}
 GPIS_HIT_BASE = -2
 
 
@@ -193,9 +194,9 @@ def _defines() -> str:
     lines = []
     for prefix, table in (("PRIM", PRIM_KINDS), ("MATERIAL", MATERIAL_KINDS),
                           ("LIGHT", LIGHT_KINDS), ("COUNT", COUNTERS),
-                          ("GPIS_PROXY", GPIS_PROXIES), ("GPIS_SAMPLER", GPIS_SAMPLERS),
-                          ("GPIS_MEMORY", GPIS_MEMORIES)):
+                          ("GPIS_PROXY", GPIS_PROXIES), ("GPIS_SAMPLER", GPIS_SAMPLERS)):
         lines += [f"#define {prefix}_{k.upper()} {v}" for k, v in table.items()]
+    lines += MEMORY_MODELS.c_enum() + MEMORY_MODELS.c_traits()
     lines.append(f"#define NUM_COUNTERS {NUM_COUNTERS}")
     lines.append(f"#define GPIS_HIT_BASE ({GPIS_HIT_BASE})")
     return "\n".join(lines) + "\n"

@@ -11,12 +11,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..io.points import load_points
+from ..kinds.gp_kernels import GP_KERNELS
 
 MAX_ROWS = 4096
 # WS_POST_MAX in ws_posterior.h: a ray's solve vector lives in private memory (8 bytes a row)
 WS_MAX_ROWS = 512
 # kernels whose cross-covariance slopes ws_posterior.h bounds along a ray
-WS_KERNELS = ("squared_exponential", "rational_quadratic")
+WS_KERNELS = GP_KERNELS.with_trait("ws_posterior")
 
 
 def points_problem(path: str):
