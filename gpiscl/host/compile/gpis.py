@@ -24,6 +24,7 @@ from .posterior import build_posterior, pack_posterior
 from .proxy_cut import cut_extent
 from ..layout import function_space_records as FSL
 from ..kinds.gp_kernels import GP_KERNELS
+from ..kinds.means import MEAN_OPS, MEAN_PRIMITIVES
 
 # Roots are refined to this fraction of the kernel's length scale: far below the scale
 # on which the realization varies, far above float32 resolution of scene coordinates.
@@ -69,27 +70,13 @@ def build_mean(m: dict, bakes=None) -> M.Mean:
     """The mean tree of a resolved mean; bakes: a device's bakes for procedural grids and
     grid slope bounds (render/device_bakes.py; numpy when None, the same numbers)."""
     kind = m["type"]
-    if kind == "constant":
-        return M.Constant(offset=m["value"])
-    if kind == "plane":
-        return M.Plane(point=tuple(m["point"]), normal=tuple(m["normal"]), scale=m["scale"])
-    if kind == "sphere":
-        return M.Sphere(center=tuple(m["center"]), radius=m["radius"])
-    if kind == "box":
-        return M.Box(half_extents=tuple(m["half_extents"]), center=tuple(m["center"]))
-    if kind == "rounded_box":
-        return M.RoundedBox(half_extents=tuple(m["half_extents"]), radius=m["radius"],
-                            center=tuple(m["center"]))
-    if kind == "torus":
-        return M.Torus(major=m["major"], minor=m["minor"], center=tuple(m["center"]))
-    if kind == "capsule":
-        return M.Capsule(a=tuple(m["a"]), b=tuple(m["b"]), radius=m["radius"])
-    if kind in ("union", "intersection", "difference"):
-        cls = {"union": M.Union, "intersection": M.Intersection, "difference": M.Difference}
-        return cls[kind](build_mean(m["left"], bakes), build_mean(m["right"], bakes),
-                         k=m["k"])
+    if kind in MEAN_OPS:
+        return MEAN_OPS[kind].host(build_mean(m["left"], bakes), build_mean(m["right"], bakes),
+                                   k=m["k"])
     if kind == "transform":
         return M.Transform(build_mean(m["child"], bakes), transform_matrix(m))
+    if kind in MEAN_PRIMITIVES and MEAN_PRIMITIVES[kind].schema is not None:
+        return MEAN_PRIMITIVES[kind].host.build(m)
     from .sdf_bake import mesh_mean, prepare_slopes, procedural_mean
     if kind == "mesh":
         grid = mesh_mean(m["file"], m["resolution"], m["margin"], m["band"],

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pyopencl as cl
 
-from ..kinds import gp_kernels
+from ..kinds import gp_kernels, means
 from ..layout import records
 from ..layout.function_space_records import c_declarations, defines
 
@@ -42,7 +42,7 @@ FS_SAMPLER_HEADERS = ("compat.h", "rng.h", "gp_kernel.h", "gp_mean.h", "fs_linal
 
 # `/* @kinds <axis> <part> */` lines in a header stand for that part of every kind's
 # device file and the dispatch generated over them (host/kinds/).
-KIND_PARTS = {"gp_kernels": gp_kernels.device_source}
+KIND_PARTS = {"gp_kernels": gp_kernels.device_source, "gp_means": means.device_source}
 _KIND_LINE = re.compile(r"^/\* @kinds (\w+) (\w+) \*/$", re.M)
 
 

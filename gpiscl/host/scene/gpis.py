@@ -23,12 +23,11 @@ from .proxies import bounding_proxy, mesh_proxy_problem
 from ..io.grids import load_field_grid, load_grid, problem_of
 from ..kinds.gp_kernels import FIELD_KEYS, GP_KERNELS
 from ..kinds.memory_models import MEMORY_MODELS
+from ..kinds.means import MEAN_PRIMITIVES
 from ..io.points import EXTENSIONS as POINT_FILES
 from .observations import observations_problem, points_problem
 from .colour_fields import COLOR, EMISSION
 
-DIRECTION = Vector(normalize=True)
-POSITIVE3 = Vector(broadcast=True, item=Number(gt=0))
 
 PROXIES = Tagged("proxy", {
     "box": Record({"min": Field(VEC3), "max": Field(VEC3)}, [box_extent]),
@@ -42,27 +41,10 @@ PROXIES = Tagged("proxy", {
     "scene": Record({}),
 })
 
-# Means are signed distances, positive outside (gpiscl/host/gp/means.py).
-MEANS = Tagged("mean")
-MEANS.register("constant", Record({"value": Field(Number(), 0.0)}))
-MEANS.register("plane", Record({"point": Field(VEC3, [0, 0, 0]),
-                                "normal": Field(DIRECTION, [0, 1, 0]),
-                                "scale": Field(Number(gt=0), 1.0)}))
-MEANS.register("sphere", Record({"center": Field(VEC3, [0, 0, 0]),
-                                 "radius": Field(Number(gt=0), 1.0)}))
-MEANS.register("box", Record({"center": Field(VEC3, [0, 0, 0]),
-                              "half_extents": Field(POSITIVE3, 1.0)}))
-MEANS.register("rounded_box", Record({"center": Field(VEC3, [0, 0, 0]),
-                                      "half_extents": Field(POSITIVE3, 1.0),
-                                      "radius": Field(Number(gt=0), 0.1)}))
-MEANS.register("torus", Record({"center": Field(VEC3, [0, 0, 0]),
-                                "major": Field(Number(gt=0), 1.0),
-                                "minor": Field(Number(gt=0), 0.25)}))
-MEANS.register("capsule", Record({"a": Field(VEC3, [0, -0.5, 0]), "b": Field(VEC3, [0, 0.5, 0]),
-                                  "radius": Field(Number(gt=0), 0.25)}))
-for _op in ("union", "intersection", "difference"):  # k > 0: smooth blend of width k
-    MEANS.register(_op, Record({"left": Field(MEANS), "right": Field(MEANS),
-                                "k": Field(Number(ge=0), 0.0)}))
+# Means are signed distances, positive outside (gpiscl/host/gp/means.py). The primitives
+# and the CSG operations (k > 0: smooth blend of width k) are declared in kinds/means.py;
+# below, the scene forms that compile into them.
+MEANS = MEAN_PRIMITIVES.schema
 MEANS.register("transform", Record({"child": Field(MEANS), **TRANSFORM.fields}))
 # Sampled means (mesh bakes, grids, procedural shapes) are interpolated "linear"
 # (trilinear: stays within the samples' range, gradient jumps at cell faces, which a
