@@ -17,6 +17,7 @@ import numpy as np
 from .struct import Struct
 from ..gp import kernels as K
 from ..gp import means as M
+from ..kinds.colour_fields import COLOUR_FIELDS
 from ..kinds.gp_kernels import GP_KERNELS
 from ..kinds.means import MEAN_OPS, MEAN_PRIMITIVES, op_of, primitive_of
 
@@ -105,6 +106,7 @@ def c_declarations() -> str:
     lines += MEAN_PRIMITIVES.c_enum() + MEAN_OPS.c_enum(count=False)
     lines.append(f"#define GP_MEAN_PAYLOAD {MEAN_PAYLOAD}")
     lines.append(f"#define GP_MEAN_FIRST_OP {MEAN_OPS.first_id}")
+    lines += COLOUR_FIELDS.c_enum()
     lines.append(f"#define GP_MEAN_FLAG_SWAPPED {MEAN_FLAG_SWAPPED}")
     lines.append(f"#define GP_MEAN_STACK_DEPTH {MEAN_STACK_DEPTH}")
     lines.append(f"#define GP_MEAN_GRID_PAYLOAD_FLOATS {GRID_PAYLOAD_FLOATS}")
