@@ -86,10 +86,12 @@ def kernel_schema(params: dict, length_field: bool) -> Record:
     return Record(fields)
 
 
-def kernel(name: str, params: dict, host: KernelHost, **traits) -> Kind:
-    """The Kind of a kernel whose device maths is in lib/gp_kernels/<name>.h."""
+def kernel(name: str, params: dict, host: KernelHost, device_file: str | None = None,
+           **traits) -> Kind:
+    """The Kind of a kernel whose device maths is in lib/gp_kernels/<name>.h (or, for a
+    test's temporary kernel, the absolute `device_file`)."""
     return Kind(name, kernel_schema(params, traits["length_field"]),
-                f"lib/gp_kernels/{name}.h", traits, host)
+                device_file or f"lib/gp_kernels/{name}.h", traits, host)
 
 
 def required_functions(kind: Kind) -> tuple:
