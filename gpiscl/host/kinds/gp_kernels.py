@@ -190,7 +190,3 @@ def device_source(part: str, table: KindTable = GP_KERNELS) -> str:
         out.append(table.c_dispatch(fn, returns, params, args, default,
                                     kinds=_kinds_with(table, trait)))
     return "\n".join(out) + "\n"
-
-
-def host(name: str) -> KernelHost:
-    return GP_KERNELS[name].host

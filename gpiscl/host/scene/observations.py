@@ -16,8 +16,6 @@ from ..kinds.gp_kernels import GP_KERNELS
 MAX_ROWS = 4096
 # WS_POST_MAX in ws_posterior.h: a ray's solve vector lives in private memory (8 bytes a row)
 WS_MAX_ROWS = 512
-# kernels whose cross-covariance slopes ws_posterior.h bounds along a ray
-WS_KERNELS = GP_KERNELS.with_trait("ws_posterior")
 
 
 def points_problem(path: str):
@@ -39,9 +37,11 @@ def observations_problem(g: dict):
     if o is None:
         return None
     weight_space = g["sampler"]["type"] == "weight_space"
-    if weight_space and g["kernel"]["type"] not in WS_KERNELS:
+    # kernels whose cross-covariance slopes ws_posterior.h bounds along a ray
+    if weight_space and not GP_KERNELS[g["kernel"]["type"]].traits["ws_posterior"]:
+        names = GP_KERNELS.with_trait("ws_posterior")
         return "kernel.type", (f"weight-space posteriors (pathwise conditioning) support the "
-                               f"{' and '.join(WS_KERNELS)} kernels only, whose "
+                               f"{' and '.join(names)} kernels only, whose "
                                f"cross-covariance slopes the root search bounds; use one, or "
                                f"the function_space sampler")
     pts = load_points(o["file"])
