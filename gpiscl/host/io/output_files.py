@@ -17,7 +17,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from ..errors import SceneError
+from ..errors import SceneError, argument_source
 
 FORMATS = {".exr": ("exr", "png", "scene"), ".png": ("png", "scene")}
 
@@ -28,7 +28,7 @@ def plan(path, option: str = "--output", formats=FORMATS) -> dict:
     ext = p.suffix.lower()
     if ext not in formats or not p.stem:
         known = " or ".join(formats)
-        raise SceneError("<command line>", option,
+        raise SceneError(argument_source(option), option,
                          f"cannot tell the image format of {str(p)!r} from its extension "
                          f"(use {known})")
     wanted = formats[ext]
@@ -45,18 +45,18 @@ def check_writable(paths, option: str = "--output", inputs=()) -> None:
     for path in (Path(p) for p in paths if p is not None):
         where = path.absolute()
         if where.resolve() in inputs:
-            raise SceneError("<command line>", option,
+            raise SceneError(argument_source(option), option,
                              f"{path} is an input of this render; it would be overwritten")
         if where.is_dir():
-            raise SceneError("<command line>", option, f"{path} is a folder")
+            raise SceneError(argument_source(option), option, f"{path} is a folder")
         folder = where.parent
         while not folder.exists():
             folder = folder.parent
         if not folder.is_dir():
-            raise SceneError("<command line>", option,
+            raise SceneError(argument_source(option), option,
                              f"cannot create {where.parent}: {folder} is a file")
         if not os.access(folder, os.W_OK | os.X_OK):
-            raise SceneError("<command line>", option,
+            raise SceneError(argument_source(option), option,
                              f"cannot write to {folder} (permission denied)")
 
 
