@@ -183,12 +183,6 @@ def _mode(mode: str):
         _state.mode = previous
 
 
-def noting():
-    """While rendering: a signal is noted for requested(), not raised."""
-    _reassert()   # the device and its programs were built since install()
-    return _mode("noting")
-
-
 @contextmanager
 def rendering():
     """Around a render: start-up mode until the started() it yields is called (once the

@@ -25,8 +25,7 @@ def main(argv=None) -> int:
         return parsed.run(parsed)
     except (SceneError, DeviceError) as exc:
         if isinstance(exc, SceneError) and parsed is not None:
-            from .args import as_cli
-            exc = as_cli(exc, parsed.spelled)
+            exc = args.as_cli(exc, parsed.spelled)   # as the command line names options
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except BaseException:

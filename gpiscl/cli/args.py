@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from ..host.errors import API_SOURCE, CLI_SOURCE, SceneError
+from ..host.scene.arguments import NO_REALIZATION
 from ..version import __version__
 
 
@@ -64,12 +65,13 @@ def resolution(text: str):
 
 
 def int_or_none(text: str):
-    if text.lower() == "none":
-        return "none"
+    if text.lower() == NO_REALIZATION:
+        return NO_REALIZATION
     try:
         return int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer or 'none', got '{text}'") from None
+        raise argparse.ArgumentTypeError(f"expected an integer or '{NO_REALIZATION}', got "
+                                         f"'{text}'") from None
 
 
 def int_list(text: str) -> list:
