@@ -36,7 +36,7 @@ import numpy as np
 
 from ..io.grids import load_rgb_grid
 from ..kinds.colour_fields import COLOUR_FIELDS
-from .records import ALBEDO, RGB
+from ..kinds.values import ALBEDO, RGB
 from ..schema import Spec, Tagged, is_number, is_sequence
 
 

@@ -16,10 +16,11 @@ from __future__ import annotations
 
 from ..io.meshes import mesh_problem
 from ..kinds.materials import MICRO_BSDFS
-from .records import SHAPES, TRANSFORM, VEC3, box_extent
+from ..kinds.values import VEC3
+from .records import SHAPES, TRANSFORM, box_extent
 from ..layout import function_space_records as FSL
 from ..schema import (Bool, Enum, Field, File, Int, Nullable, Number, Record, Tagged,
-                     Vector, child)
+                     child)
 from .proxies import bounding_proxy, mesh_proxy_problem
 from ..io.grids import load_field_grid, load_grid, problem_of
 from ..kinds.gp_kernels import FIELD_KEYS, GP_KERNELS
