@@ -441,3 +441,14 @@ def convert_vdb(input, output, grid: str | None = None) -> dict:
     grid usable as a grid mean; returns {"grid", "shape", "voxel_size", "origin"}."""
     from .host.io.vdb import convert_vdb as convert
     return convert(input, output, grid)
+
+
+def convert_tungsten(scene, output, environment=None, grid_dir=None) -> list:
+    """Convert the GPIS subset of a scene of the authors' Tungsten-based renderer into a
+    gpiscl scene file; returns the notes on lossy mappings. environment substitutes the
+    scene's environment: a radiance (number) or an .exr/.hdr map's path. Nothing is
+    written on an error (SceneError: file, key path, reason); the mapping is documented
+    in gpiscl/host/scene/tungsten.py, the output guarantees in docs/design/tungsten-import.md."""
+    from .host.scene.tungsten_convert import convert_file, environment_option
+    return convert_file(scene, output, environment_option(
+        None if environment is None else str(environment)), grid_dir)
