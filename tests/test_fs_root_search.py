@@ -18,8 +18,9 @@ from gpiscl.host.gp import function_space as FS
 from gpiscl.host.layout import function_space_records as FL
 from gpiscl.host.layout import gp_records
 from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_source
-from stats import z_threshold
-from test_fs_sampling import flights, ks_two_sample, prg  # noqa: F401 (fixture)
+from gpiscl.testing.stats import z_threshold
+from gpiscl.testing.flights import flights
+from gpiscl.testing.stats import ks_two_sample
 
 WRAPPER = r"""
 /* per item: the point for bracket q[0..3] = (ta, tb, fa, fb), width q[4], index q[5],
@@ -141,7 +142,7 @@ def test03_smooth_paths_take_about_half_of_bisections_points():
 
 
 @pytest.mark.parametrize("mu", [0.0, 1.5])
-def test04_first_hit_and_its_slope_match_a_dense_joint_sample(device, prg, mu):
+def test04_first_hit_and_its_slope_match_a_dense_joint_sample(device, flight_prg, mu):
     """At the default refine (0: the root width alone stops the search, so every point is
     the new choice's), first hits along a fresh ray (SE l = 0.5, 6 long, global memory)
     and the slope drawn there against one dense joint sample (numpy Cholesky, 1201
@@ -157,7 +158,7 @@ def test04_first_hit_and_its_slope_match_a_dense_joint_sample(device, prg, mu):
     th, sh = FS.dense_first_hits(kern, Constant(mu), (0, 0, 0), (1, 0, 0), 0.0, 6.0, 1201, n,
                                  np.random.default_rng(seed), slopes=True)
     th = np.where(np.isfinite(th), th, -1.0)
-    out = flights(device, prg, kern, Constant(mu), n, memory="global", refine=FL.DEFAULT_REFINE,
+    out = flights(device, flight_prg, kern, Constant(mu), n, memory="global", refine=FL.DEFAULT_REFINE,
                   seed=seed + 1)
     hit = out[:, 0] >= 0
     D, crit = ks_two_sample(out[:, 0], th, 4)

@@ -8,10 +8,10 @@ import pyopencl as cl
 import pytest
 
 from gpiscl import render_result
-from gpiscl.host.render import rough_conductor as RC
+from gpiscl.testing.reference import rough_conductor as RC
 from gpiscl.host.scene.conductors import CONDUCTORS
 from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, join_sources
-from stats import assert_agree, z_threshold
+from gpiscl.testing.stats import assert_agree, z_threshold
 
 WRAPPER = r"""
 __kernel void rc_eval(__global const float* p, __global const float* n,

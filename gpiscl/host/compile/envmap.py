@@ -1,6 +1,6 @@
 """Importance sampling of a lat-long environment map, with numpy reference samplers.
 
-Convention (shared with kernels_cl/lights.h):
+Convention (shared with kernels_cl/lib/lights.h):
     d = (sin(theta) cos(phi), cos(theta), sin(theta) sin(phi)),
     theta in [0, pi] measured from +y, phi = atan2(z, x) in [0, 2 pi).
     Column x covers phi in [2 pi x / W, 2 pi (x+1) / W); row y covers

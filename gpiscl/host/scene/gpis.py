@@ -205,7 +205,7 @@ SAMPLERS = Tagged("sampler", {
 MICRO_BSDFS = Tagged("micro-BSDF", {
     "diffuse": Record({"albedo": Field(ALBEDO, 0.8)}),
     "mirror": Record({"albedo": Field(ALBEDO, 1.0)}),
-    "rough_conductor": ROUGH_CONDUCTOR,   # scene.py: Beckmann microfacets on the realization
+    "rough_conductor": ROUGH_CONDUCTOR,   # records.py: Beckmann microfacets, realization
 })
 
 

@@ -20,7 +20,7 @@ inline float3 diffuse_eval(float3 albedo, float3 n, float3 wi, float* pdf)
     return albedo * (fmax(c, 0.0f) * INV_PI_F);
 }
 
-/* --- Rough conductor (scene.py ROUGH_CONDUCTOR) ------------------------------------------
+/* --- Rough conductor (scene/records.py ROUGH_CONDUCTOR) -----------------------------------
  * Beckmann microfacets D(m) = exp(-tan^2 theta_m / a^2) / (pi a^2 cos^4 theta_m), the
  * exact unpolarised Fresnel term of eta + i k, height-correlated Smith masking
  * G2 = 1 / (1 + Lambda(v) + Lambda(l)) (Heitz 2014), with v = -wo towards the viewer and
@@ -29,7 +29,7 @@ inline float3 diffuse_eval(float3 albedo, float3 n, float3 wi, float* pdf)
  * Sampling draws m from D(m) cos theta_m (Walter et al. 2007) and reflects v about it:
  *   pdf(l) = D(m) cos theta_m / (4 v.m),  weight = albedo F G2 (v.m) / (cos v cos theta_m);
  * reflections below the surface end the path (weight 0), which is how a single-scattering
- * microfacet model loses energy. gpiscl/host/rough_conductor.py is the numpy twin. */
+ * microfacet model loses energy. Numpy twin: gpiscl/testing/reference/rough_conductor.py. */
 
 /* exact Fresnel reflectance of a conductor for incidence cosine c (PBRT's FrConductor) */
 inline float3 fresnel_conductor(float c, float3 eta, float3 k)

@@ -46,7 +46,7 @@
  * 0.4% (the crossing-rate tests' tolerances could not see it). This rule skipped 1 of
  * 10356 at mu = 0 and none of 906 at 2.5 sigma; Simpson's (h/6)(4 nu(h/2) + nu(h)) 4 of
  * 10356, three-point Gauss-Legendre none at 5.6 evaluations a step (numpy twin,
- * tests/test_fs_adaptive.py test07b). A step is
+ * tests/test_fs_adaptive.py). A step is
  * accepted when the bound is at most tol h / l_d, i.e. the mean miss rate over the step
  * is at most `miss_tolerance` expected misses per along-ray length scale l_d (SE: l /
  * sqrt(d'Ad); others: the lag of correlation e^-1/2, fs_step with an l(x) field's

@@ -51,7 +51,7 @@
  * in float with bit-read log2 / exp2 (its latency is on every step's chain). Laws are
  * unchanged (each accepted step has ratio <= 1, the same miss bound); the step sequence,
  * hence the random numbers' use, is not bit-identical to the fixed factors'. Counts per
- * 40 l ray (mean 0, renewal_plus, refine 0; tests/test_fs_markov.py test03c), fixed
+ * 40 l ray (mean 0, renewal_plus, refine 0; tests/test_fs_markov.py), fixed
  * factors -> predictor: Matern 3/2 279 samples and 544 evaluations -> 251 and 350 (1.39
  * evaluations a sample, 43% of first tries rejected), 5/2 108 and 161 -> 103 and 110.
  * The floor of that (one-node) rule: the largest accepted step found by bisection at every
