@@ -44,6 +44,15 @@ def _specs(selection: str) -> list:
     return select(selection)
 
 
+def pytest_configure(config):
+    selection = _selection(config)
+    if selection:
+        try:
+            _specs(selection)
+        except ValueError as e:
+            raise pytest.UsageError(str(e)) from None
+
+
 def pytest_generate_tests(metafunc):
     selection = _selection(metafunc.config)
     if selection and "device" in metafunc.fixturenames:

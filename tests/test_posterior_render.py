@@ -225,15 +225,17 @@ def test03_objects_without_observations_see_the_prior(device, prg):
 
 # --- scenes ---------------------------------------------------------------------------
 
-def test04_reconstructed_sphere_converges_to_the_sphere(device, tmp_path):
+@pytest.mark.long
+def test04_reconstructed_sphere_converges_to_the_sphere(device, tmp_path, long_run):
     """Prior: a sphere of radius 1.2 (a rough guess), SE l = 0.5, sigma s. Observations:
     200 points of the unit sphere scattered along their normals by 0.05 s, observed with
     that noise. The posterior mean does not depend on s (K and k both scale with s^2) and
     interpolates the unit sphere; its variance shrinks as s^2. So as s shrinks the render
     must agree with the unit sphere's (a GPIS with that mean and sigma 1e-3), while at
     large s the field away from the points (the background between sphere and proxy,
-    where the prior has f < 0 with sizable probability) differs measurably."""
-    spp = 32
+    where the prior has f < 0 with sizable probability) differs measurably. Short form 8
+    spp (the s = 0.6 blocks measured |z| 8.8 against a threshold of 4.3), long form 32."""
+    spp = 32 if long_run else 8
     ref = render_checked(sphere_scene(1.0, 1e-3, spp, seed=11), device).image
     z_max = {}
     for s in (0.6, 0.01):
@@ -247,7 +249,7 @@ def test04_reconstructed_sphere_converges_to_the_sphere(device, tmp_path):
             assert_agree(img.mean, img.stderr, ref.mean, ref.stderr, what="posterior s=0.01")
             assert_agree(img.mean, img.stderr, ref.mean, ref.stderr, block=4,
                          what="posterior s=0.01, 4x4 blocks")
-    print("max |z| of 4x4 blocks per sigma:", z_max)   # measured: 6.8 and 1.6
+    print("max |z| of 4x4 blocks per sigma:", z_max)   # measured at 32 spp: 6.8 and 1.6
     assert z_max[0.6] > z_threshold(a.size), z_max
 
 

@@ -62,10 +62,12 @@ ROOT_CASES = [(KERNELS[0], MEANS[0], 512), (KERNELS[1], MEANS[1], 256),
 
 
 @pytest.mark.parametrize("case", range(len(ROOT_CASES)))
-def test_first_roots_match_a_dense_scan(device, prg, case):
+@pytest.mark.long
+def test_first_roots_match_a_dense_scan(device, prg, long_run, case):
     """No crossing that a dense float64 scan finds is ever skipped, and every reported
     root is a genuine >= 0 -> < 0 crossing within tol of the scan's bracket."""
     kernel, mean, n = ROOT_CASES[case]
+    n = n if long_run else n // 4   # the dense scans are the cost
     rng = np.random.default_rng(7 + case)
     m, t0, t1 = 64, 0.0, 4.0
     tol = 1e-4 * kernel.length_scale
@@ -144,7 +146,8 @@ def test_crossing_rate_matches_rice(device, prg, case):
     assert z < z_threshold(len(RICE_CASES)), (rate, target, closed, z)
 
 
-def test_searches_leaving_a_root_decide_and_match_a_dense_scan(device, prg):
+@pytest.mark.long
+def test_searches_leaving_a_root_decide_and_match_a_dense_scan(device, prg, long_run):
     """Regression: bounce and shadow rays start exactly at a previous root (f < 0 within
     rounding of 0) and leave outwards, often grazing, where |f| stays within the bound's
     rounding floor for many tol; the search once shrank its step there below tol and hit
@@ -152,7 +155,7 @@ def test_searches_leaving_a_root_decide_and_match_a_dense_scan(device, prg):
     scan. Leaving the inside needs f above rounding noise (ws_first_root_counted), so a
     bump above zero no higher than the evaluation error may be stepped over."""
     kernel, mean = SquaredExponential(sigma=0.1, length_scale=0.1), Sphere(radius=1.0)
-    m, n = 64, 256
+    m, n = 64, (256 if long_run else 64)   # the dense scans are the cost
     rng = np.random.default_rng(17)
     tol, length = 1e-4 * kernel.length_scale, 2.5
     o = rng.normal(size=(n, 3))

@@ -262,14 +262,15 @@ def test04_bounds_contain_every_point_evaluation(device, prg, kind):
             assert np.all((lo <= val) & (val <= hi)), (r, np.min(val - lo), np.min(hi - val))
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("kind", ["se", "rq"])
-def test05_first_roots_match_a_dense_scan(device, prg, kind):
+def test05_first_roots_match_a_dense_scan(device, prg, long_run, kind):
     """The certified search on posterior realizations misses no crossing that a dense
     float64 scan of the same realization (device features and v) finds, and every root
     it reports is a genuine >= 0 -> < 0 crossing."""
     rng = np.random.default_rng(5)
     kernel, mean, post, args = setup(device, kind, rng)
-    n, m, t0, t1 = 192, 64, 0.0, 5.0
+    n, m, t0, t1 = (192 if long_run else 64), 64, 0.0, 5.0   # the dense scans are the cost
     tol = 1e-4 * kernel.length_scale
     # rays from a shell of radius 2.5 towards points near the sphere (most hit it)
     o = rng.normal(size=(n, 3))
@@ -333,19 +334,21 @@ def test06_scene_key_accepts_weight_space(tmp_path):
         load_scene(s)
 
 
-def test07_render_agrees_with_function_space(device, tmp_path):
+@pytest.mark.long
+def test07_render_agrees_with_function_space(device, tmp_path, long_run):
     """The reconstructed sphere of test_posterior_render.test04 (prior radius 1.2, sigma
     0.05, 100 noisy points of the unit sphere): weight space (M = 1024, pathwise) and
     function space (exact conditioning) render the same expected image, per pixel and in
     4x4 blocks; the weight-space prior alone differs measurably (the test has power).
-    Measured max |z|: 3.1 per pixel, 2.2 per block; the prior 6.1 and 5.4."""
-    sigma, spp = 0.05, 32
+    Measured max |z|: 3.1 per pixel, 2.2 per block; the prior 6.1 and 5.4. The short form
+    renders 12x12 pixels instead of 16x16 at the same spp (a pixel's power is unchanged)."""
+    sigma, spp, res = 0.05, 32, (16 if long_run else 12)
     pts = noisy_sphere_points(tmp_path / "pts.xyz", 100, 0.05 * sigma)
     obs = {"file": pts, "noise": 0.05 * sigma}
-    fs = render_checked(sphere_scene(1.2, sigma, spp, obs, seed=3), device).image
+    fs = render_checked(sphere_scene(1.2, sigma, spp, obs, seed=3, res=res), device).image
     images = {}
     for name, o in (("posterior", obs), ("prior", None)):
-        s = sphere_scene(1.2, sigma, spp, o, seed=4)
+        s = sphere_scene(1.2, sigma, spp, o, seed=4, res=res)
         s["shapes"][0]["sampler"] = {"type": "weight_space", "features": 1024}
         images[name] = render_checked(s, device).image
     wsi = images["posterior"]
