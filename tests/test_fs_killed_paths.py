@@ -23,7 +23,8 @@ def test_rough_conductor_paths_are_never_killed(device, memory):
 def test_global_mirror_furnace_at_many_hits(device):
     """~3 10^4 GPIS hits under global memory (the old rate would kill ~3 paths): exactly
     1 per path, nothing killed."""
-    res = render_checked(gpis_scene(function_space_sampler("global"), "mirror", 1.0, ENV, spp=128), device)
+    scene = gpis_scene(function_space_sampler("global"), "mirror", 1.0, ENV, spp=128)
+    res = render_checked(scene, device)
     assert res.stats.killed_paths == 0, res.stats.summary()
     assert res.stats.rays > 1.8 * res.stats.paths
     np.testing.assert_allclose(res.image.mean, 1.0, rtol=1e-6)

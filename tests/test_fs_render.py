@@ -45,10 +45,13 @@ def test03_global_memory_agrees_with_weight_space(device):
     taken as correlated: stats.image_mean_se). Renewal and renewal_plus forget the path
     between vertices: their difference is printed (1-2% here, see issue 4's note)."""
     spp = 32
-    ws = render_checked(gpis_scene({"type": "weight_space", "features": 256}, "diffuse", 0.9, SUN_AND_SKY,
-                        spp, seed=7, max_depth=64, rr_start=8), device).image
-    imgs = {m: render_checked(gpis_scene(function_space_sampler(m, memory_cap=64), "diffuse", 0.9, SUN_AND_SKY, spp, seed=7,
-                              max_depth=64, rr_start=8), device).image
+
+    def image(sampler):
+        return render_checked(gpis_scene(sampler, "diffuse", 0.9, SUN_AND_SKY, spp, seed=7,
+                                         max_depth=64, rr_start=8), device).image
+
+    ws = image({"type": "weight_space", "features": 256})
+    imgs = {m: image(function_space_sampler(m, memory_cap=64))
             for m in ("global", "renewal_plus", "renewal")}
     g = imgs["global"]
     assert_agree(g.mean, g.stderr, ws.mean, ws.stderr, what="global vs weight space")
@@ -118,8 +121,8 @@ KERNELS = {"thin_plate": {"type": "thin_plate", "sigma": 0.04, "radius": 4.0},
 def test05_mirror_furnace_for_every_kernel(device, kernel, memory):
     """Anisotropic and product kernels take the general gradient conditional (no closed
     form), thin-plate the bisection step rule: still exactly 1 per path."""
-    scene = gpis_scene(function_space_sampler(memory), "mirror", 1.0, [{"type": "environment", "radiance": 1.0}],
-                       spp=4)
+    scene = gpis_scene(function_space_sampler(memory), "mirror", 1.0,
+                       [{"type": "environment", "radiance": 1.0}], spp=4)
     scene["shapes"][0]["kernel"] = KERNELS[kernel]
     res = render_checked(scene, device)
     assert res.stats.killed_paths == 0 and res.stats.rays > 1.2 * res.stats.paths
