@@ -11,7 +11,7 @@ The device axis: tests that take the `device` fixture run on
   that builds programs and has double precision.
 
 `--long`: tests marked `long` run at full size (by default their short form runs, still a
-check that can fail). The default `python -m pytest -q` takes about 4 minutes on 2 cores.
+check that can fail, so that the default run stays within a few minutes: README.md).
 `flight_prg`: the function-space sampler's free-flight wrappers (gpiscl/testing/flights.py),
 built once per device.
 """

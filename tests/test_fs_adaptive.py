@@ -206,17 +206,20 @@ def dense_se():
     return ts, np.linalg.cholesky(K)
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("tol, mu", [(1e-1, 0.0), (3e-2, 0.0), (1e-2, 0.0), (3e-2, 2.0)])
-def test07_missed_crossings_of_the_same_realizations_stay_below_the_tolerance(dense_se, tol,
-                                                                             mu):
+def test07_missed_crossings_of_the_same_realizations_stay_below_the_tolerance(dense_se, long_run,
+                                                                             tol, mu):
     """The rule (numpy twin of fs_march.h) marched along dense joint samples (spacing
     l / 100) that it reads where it samples: the down-crossings of the dense path that it
     skips, per length scale, stay below the tolerance (one-sided Poisson bound, Bonferroni
-    over the cases); the misses are counted, not inferred from a rate."""
+    over the cases); the misses are counted, not inferred from a rate. Short form: up to
+    150 realizations (the march's Python loop is the cost), long form up to 300."""
     ts, C = dense_se
+    keep = 300 if long_run else 150
     rng = np.random.default_rng(int(1000 * tol) + int(mu))
-    Z = C @ rng.standard_normal((len(ts), 500)) + mu
-    Z = Z[:, Z[0] >= 0.0][:, :300]
+    Z = C @ rng.standard_normal((len(ts), 5 * keep // 3)) + mu
+    Z = Z[:, Z[0] >= 0.0][:, :keep]
     missed = steps = 0
     for F in Z.T:
         idx, m, _ = FS.march_realization(SE, Constant(mu), (0, 0, 0), (1, 0, 0), ts, F, tol)

@@ -321,7 +321,7 @@ LEVELS = (0.0, 1.0, 2.0)
 def test05_rice_crossing_rate_with_renewal_plus(device, long_run, name):
     """Rays continued through every hit under renewal_plus count down-crossings of 0 over
     L; the mean agrees with the exact expectation (Rice's rate plus the start condition,
-    test_fs_adaptive.expected_crossings) at mu / sigma = 0, 1, 2 (z-test, Bonferroni).
+    oracles.expected_crossings) at mu / sigma = 0, 1, 2 (z-test, Bonferroni).
     renewal_plus is the exact state for 3/2; for 5/2 f'' is redrawn from its stationary
     law given (f, f'), which is its Palm law at a crossing, so the chain of crossing states
     stays stationary and the expected count is still exact. At mu = 0 the slopes at

@@ -6,7 +6,6 @@ there follow one dense joint sample along the ray, and on the device's own fligh
 point is the twin's function of values drawn before it and every value is whitened
 N(0, 1) by numpy's exact conditional (breaking checks: a choice that peeks at the value it
 is about to draw fails test05; dropping the ITP projection fails test02)."""
-import functools
 import math
 
 import numpy as np
@@ -17,10 +16,11 @@ from gpiscl.host.gp import Constant, SquaredExponential
 from gpiscl.host.gp import function_space as FS
 from gpiscl.host.layout import function_space_records as FL
 from gpiscl.host.layout import gp_records
-from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_source
+from gpiscl.host.render.program_sources import fs_sampler_options
 from gpiscl.testing.stats import z_threshold
 from gpiscl.testing.flights import flights
 from gpiscl.testing.stats import ks_two_sample
+from gpiscl.testing.wrappers import sampler_program
 
 WRAPPER = r"""
 /* per item: the point for bracket q[0..3] = (ta, tb, fa, fb), width q[4], index q[5],
@@ -60,11 +60,10 @@ __kernel void flight_rows(__global const GpKernel* kp, __global const MeanNode* 
 ROWS_OUT = 40
 
 
-@functools.lru_cache(maxsize=None)
 def _program(ctx):
     opts = fs_sampler_options(16, 64) + [f"-DROWS_OUT={ROWS_OUT}",
                                          f"-DFS_DEFAULT_TOL={FL.DEFAULT_MISS_TOLERANCE!r}"]
-    return cl.Program(ctx, fs_sampler_source(WRAPPER)).build(options=opts)
+    return sampler_program(ctx, WRAPPER, opts)
 
 
 def random_brackets(rng, n):
@@ -86,7 +85,7 @@ def test01_device_point_choice_is_the_twins(device):
     out = np.empty((len(q), 2))
     qb = cl.Buffer(device.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=q)
     ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
-    _program(device.ctx).root_point(device.queue, (len(q),), None, qb, ob)
+    _program(device.ctx)["root_point"](device.queue, (len(q),), None, qb, ob)
     cl.enqueue_copy(device.queue, out, ob)
     budget = np.array([FS.root_budget(b[1] - b[0], b[4]) for b in q])
     np.testing.assert_array_equal(out[:, 1], budget)
@@ -189,7 +188,7 @@ def test05_each_point_is_chosen_from_values_drawn_before_it(device):
     scratch = cl.Buffer(device.ctx, mf.READ_WRITE, 8 * FL.scratch_doubles(FL.max_rows(16, 64)) * n)
     out = np.empty((n, 3 + 2 * ROWS_OUT))
     ob = cl.Buffer(device.ctx, mf.WRITE_ONLY, out.nbytes)
-    _program(device.ctx).flight_rows(device.queue, (n,), None, kp, mb, np.int32(len(nodes)),
+    _program(device.ctx)["flight_rows"](device.queue, (n,), None, kp, mb, np.int32(len(nodes)),
                                      np.float64(6.0), np.uint32(17), scratch, ob)
     cl.enqueue_copy(device.queue, out, ob)
     assert np.all(out[:, 0] >= 0)

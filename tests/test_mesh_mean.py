@@ -20,7 +20,7 @@ from gpiscl.host.gp.means import (Box, Difference, GridMean, Sphere, Transform, 
 from gpiscl.host.compile import sdf_bake
 from gpiscl.host.errors import SceneError
 from gpiscl.testing.stats import assert_agree
-from gpiscl.testing.wrappers import GP_MEAN_WRAPPER
+from gpiscl.testing.wrappers import GP_MEAN_WRAPPER, program
 
 KERNELS = GP_MEAN_WRAPPER + r"""
 
@@ -44,8 +44,7 @@ ROT = np.array([[0.36, 0.48, -0.8], [-0.8, 0.6, 0.0], [0.48, 0.64, 0.6]])
 def prg(device):
     src = join_sources(
         (), ("ws_features.h", "ws_posterior.h", "ws_intersect.h")) + KERNELS
-    p = cl.Program(device.ctx, src).build(options=[f"-I{PYOPENCL_CL_DIR}"])
-    return {k.function_name: k for k in p.all_kernels()}
+    return program(device.ctx, src, [f"-I{PYOPENCL_CL_DIR}"])
 
 
 @pytest.fixture(autouse=True)

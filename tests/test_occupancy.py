@@ -17,7 +17,7 @@ from gpiscl.host.gp import means as M
 from gpiscl.host.layout.gp_records import pack_mean
 from gpiscl.host.gp.spectral import RandomFeatures
 from gpiscl.host.compile.gpis import build_kernel, occupancy_level
-from gpiscl.testing.wrappers import OCCUPANCY_CLIP_WRAPPER
+from gpiscl.testing.wrappers import OCCUPANCY_CLIP_WRAPPER, program
 from gpiscl.testing.stats import assert_agree, image_mean_se, z_threshold
 
 PHI = NormalDist().cdf
@@ -120,8 +120,7 @@ def sigma_at(kernel, x):
 @pytest.fixture(scope="module")
 def clip_prg(device):
     src = join_sources((), ("gpis_proxy.h",)) + OCCUPANCY_CLIP_WRAPPER
-    prg = cl.Program(device.ctx, src).build(options=[f"-I{PYOPENCL_CL_DIR}"])
-    return prg.occ_clip_k
+    return program(device.ctx, src, [f"-I{PYOPENCL_CL_DIR}"])["occ_clip_k"]
 
 
 def device_clip(device, kern, mean, level, o, d, clip_start=1, step=0.0):

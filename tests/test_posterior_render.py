@@ -14,13 +14,13 @@ from gpiscl.host.gp import SquaredExponential
 from gpiscl.host.layout import gp_records
 from gpiscl.host.gp.kernels import GridField, LinearField, NonStationary
 from gpiscl.host.layout import function_space_records as FL
-from gpiscl.host.render.program_sources import fs_sampler_source
 from gpiscl.host.gp.posterior import Posterior, surface_observations
 from gpiscl.host.compile import posterior as PC
 from gpiscl.host.scene import observations as OBS
 
 from gpiscl.testing.oracles import dense_reference
 from gpiscl.testing.scenes import fibonacci_sphere, noisy_sphere_points, render_checked, sphere_scene
+from gpiscl.testing.wrappers import buffer, sampler_program
 from gpiscl.testing.stats import assert_agree, block_means, z_threshold
 
 WRAPPERS = kernel_source("fs_posterior.h") + r"""
@@ -67,14 +67,7 @@ def defines(post_max=POST_MAX):
 @pytest.fixture(scope="module")
 def prg(device):
     opts = [f"-I{PYOPENCL_CL_DIR}"] + [f"-D{k}={v}" for k, v in sorted(defines().items())]
-    p = cl.Program(device.ctx, fs_sampler_source(WRAPPERS)).build(options=opts)
-    return {k.function_name: k for k in p.all_kernels()}
-
-
-def _buf(device, a, rw=False):
-    flags = cl.mem_flags.READ_WRITE if rw else cl.mem_flags.READ_ONLY
-    return cl.Buffer(device.ctx, flags | cl.mem_flags.COPY_HOST_PTR,
-                     hostbuf=np.ascontiguousarray(a))
+    return sampler_program(device.ctx, WRAPPERS, opts)
 
 
 def sphere_points(n, radius, rng):
@@ -103,10 +96,10 @@ def probe(device, prg, kp, nodes, first, count, x, u=None, kind=0):
                         8 * defines()["FS_SCRATCH_DOUBLES"] * n)
     out = np.zeros((n, 4))
     ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
-    prg["post_probe"](device.queue, (n,), None, _buf(device, kp),
-                      _buf(device, nodes), np.int32(first), np.int32(count),
-                      _buf(device, np.ascontiguousarray(x, np.float64)),
-                      _buf(device, np.ascontiguousarray(u, np.float64)), np.int32(kind),
+    prg["post_probe"](device.queue, (n,), None, buffer(device, kp),
+                      buffer(device, nodes), np.int32(first), np.int32(count),
+                      buffer(device, np.ascontiguousarray(x, np.float64)),
+                      buffer(device, np.ascontiguousarray(u, np.float64)), np.int32(kind),
                       scratch, ob)
     cl.enqueue_copy(device.queue, out, ob)
     return out
@@ -195,9 +188,9 @@ def test02_joint_posterior_covariance_of_a_segment(device, prg):
     out = np.zeros(1 + m + n)
     scratch = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, 8 * defines()["FS_SCRATCH_DOUBLES"])
     ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
-    prg["post_factor"](device.queue, (1,), None, _buf(device, kp),
-                       _buf(device, nodes), np.int32(first), np.int32(count),
-                       _buf(device, x), np.int32(n), scratch, ob)
+    prg["post_factor"](device.queue, (1,), None, buffer(device, kp),
+                       buffer(device, nodes), np.int32(first), np.int32(count),
+                       buffer(device, x), np.int32(n), scratch, ob)
     cl.enqueue_copy(device.queue, out, ob)
     assert out[0] == 0
     L = np.zeros((n, n))
@@ -275,7 +268,7 @@ def test05_observations_key_is_validated(tmp_path):
     (tmp_path / "text.xyz").write_text("1 2 three\n")
     x = fibonacci_sphere(OBS.MAX_ROWS // 4 + 1)
     np.save(tmp_path / "big.npy", np.concatenate([x, x], 1))
-    # (the weight_space sampler's own checks: test_ws_posterior.test06)
+    # (the weight_space sampler's own checks: tests/test_ws_posterior.py)
     cases = [
         ({"file": str(tmp_path / "bad.npy")}, None, "rows of 3"),
         ({"file": str(tmp_path / "nan.npy")}, None, "non-finite"),

@@ -336,7 +336,7 @@ def test06_scene_key_accepts_weight_space(tmp_path):
 
 @pytest.mark.long
 def test07_render_agrees_with_function_space(device, tmp_path, long_run):
-    """The reconstructed sphere of test_posterior_render.test04 (prior radius 1.2, sigma
+    """The reconstructed sphere of test_posterior_render.py (prior radius 1.2, sigma
     0.05, 100 noisy points of the unit sphere): weight space (M = 1024, pathwise) and
     function space (exact conditioning) render the same expected image, per pixel and in
     4x4 blocks; the weight-space prior alone differs measurably (the test has power).
