@@ -32,7 +32,7 @@ __kernel void mk_path(__global const GpKernel* kp, __global const double* dir,
     FsMarkov m = fs_markov_of(kp[0], vload3(0, dir));
     FsRng rng = {seed, (uint)i, 0u, 0u, 0u};
     double x[3] = {0.0, 0.0, 0.0}, A[3][3], Q[3][3];
-    x[0] = sqrt(m.s2) * fs_normal(rng, 0, 700);
+    x[0] = sqrt(m.s2) * fs_normal(rng, 0, FS_SLOT_TESTS);
     fs_mk_start(m, x, 0, rng);
     __global double* o = out + (size_t)3 * n * i;
     for (int k = 0; k < n; ++k) {

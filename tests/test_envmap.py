@@ -146,3 +146,70 @@ def test_hdr_and_exr_maps_render_alike(tmp_path, device):
         images.append(render_result(scene, device=device).image.mean)
     assert images[0].max() > 0
     np.testing.assert_array_equal(images[0], images[1])
+
+
+def _whole_map_tables(rgb):
+    """The tables as built before they were streamed by bands of rows: the whole map in
+    double at once (~80 bytes a texel at the peak). The streamed tables must equal these
+    bit for bit, or the images of the shipped sky would change."""
+    rgb = np.asarray(rgb, dtype=np.float64)
+    h = rgb.shape[0]
+    lum = np.maximum(np.nan_to_num(rgb[..., :3] @ np.array([0.2126, 0.7152, 0.0722]),
+                                   nan=0.0, posinf=0.0, neginf=0.0), 0.0)
+    if not lum.any():
+        lum = np.ones_like(lum)
+    weight = lum * np.sin(np.pi * (np.arange(h) + 0.5) / h)[:, None]
+    row_sum = weight.sum(axis=1)
+
+    def cdf(x):
+        c = np.cumsum(x, axis=-1)
+        out = np.zeros(x.shape[:-1] + (x.shape[-1] + 1,), np.float32)
+        out[..., 1:] = c / c[..., -1:]
+        out[..., -1] = 1.0
+        return out
+    return cdf(row_sum), cdf(np.where(row_sum[:, None] > 0, weight, 1.0))
+
+
+@pytest.mark.parametrize("band_texels", [1, 50, 1 << 18])
+def test_tables_built_by_bands_of_rows_equal_the_whole_map_ones(monkeypatch, band_texels):
+    import gpiscl.host.compile.envmap as envmap
+    from gpiscl.host.io.radiance_hdr import read_environment_rgb
+    from pathlib import Path
+    monkeypatch.setattr(envmap, "BAND_TEXELS", band_texels)
+    rng = np.random.default_rng(3)
+    wild = (rng.random((37, 61, 3)) ** 4 * 10.0 ** rng.uniform(-8, 8, (37, 61, 1)))
+    wild[2], wild[20, :30] = 0.0, 0.0
+    wild[3, 4, 1], wild[5, 6, 0], wild[7, 8, 2] = np.nan, np.inf, -3.0
+    sky = read_environment_rgb(Path(__file__).parents[1] / "scenes/assets/sky.exr")
+    for rgb in (sky, _test_map(), wild.astype(np.float32), np.zeros((5, 9, 3), np.float32),
+                np.ones((1, 1, 3), np.float32)):
+        marginal, conditional = _whole_map_tables(rgb)
+        t = envmap.build_envmap_tables(rgb)
+        assert t.marginal_cdf.tobytes() == marginal.tobytes()
+        assert t.conditional_cdf.tobytes() == conditional.tobytes()
+        # texels as the device holds them (float4) give the same tables
+        rgba = np.concatenate([rgb, np.zeros(rgb.shape[:2] + (1,), np.float32)], -1)
+        aligned = envmap.build_envmap_tables(rgba, aligned=True)
+        assert aligned.conditional_cdf.tobytes() == conditional.tobytes()
+        assert aligned.conditional_cdf.ctypes.data % 4096 == 0
+
+
+def test_compiled_map_is_float4_texels_the_device_uses_in_place(tmp_path):
+    from gpiscl.host.compile.envmap import compile_envmap
+    from gpiscl.host.io.images import write_exr
+    rgb = _test_map()
+    write_exr(tmp_path / "sky.exr", rgb)
+    env = compile_envmap(tmp_path / "sky.exr")
+    assert env.size == (W, H) and env.texels.shape == (H * W, 4)
+    np.testing.assert_array_equal(env.texels[:, :3], rgb.reshape(-1, 3))
+    assert not env.texels[:, 3].any()
+    assert env.texels.ctypes.data % 4096 == 0 and env.conditional.ctypes.data % 4096 == 0
+    t = build_envmap_tables(rgb)
+    assert env.conditional.tobytes() == t.conditional_cdf.tobytes()
+    assert env.marginal.tobytes() == t.marginal_cdf.tobytes()
+
+
+def test_an_empty_map_never_reaches_the_device():
+    for shape in ((0, 0, 3), (0, 4, 3), (4, 0, 3)):
+        with pytest.raises(ValueError, match="at least one pixel"):
+            build_envmap_tables(np.zeros(shape, np.float32))

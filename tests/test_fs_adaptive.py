@@ -12,44 +12,17 @@ import pyopencl as cl
 import pytest
 from scipy import special
 
-from gpiscl.host.compile.gpis import sampler_window
 from gpiscl.host.gp import Constant, RationalQuadratic, SquaredExponential
 from gpiscl.host.gp import function_space as FS
 from gpiscl.host.layout import function_space_records as FL
-from gpiscl.host.layout.records import GPIS_MEMORIES
 from gpiscl.testing.stats import z_threshold
-from gpiscl.testing.flights import flights, sampler_buffers
+from gpiscl.testing.flights import flights, run_crossings
 from gpiscl.testing.oracles import COV_1D, M32, M52, dense_se_paths, expected_crossings
 from gpiscl.testing.stats import ks_two_sample
-from gpiscl.testing.wrappers import buffer
 
 SE = SquaredExponential(sigma=1.0, length_scale=1.0)
 RQ = RationalQuadratic(sigma=1.0, length_scale=1.0, alpha=1.0)
 KERNELS = {"se": SE, "rq": RQ, "m32": M32, "m52": M52}
-
-
-def run_crossings(device, flight_prg, kernel, mu, n, L, memory="global", refine=6, c=0.0,
-                  tol=FL.DEFAULT_MISS_TOLERANCE, seed=1, cap=64, window=None):
-    """Per ray (out of n): hits, sum and sum of squares of slopes after the first hit,
-    GP samples, moment evaluations (crossings wrapper of test_fs_sampling). The window is
-    the one scenes compile for the kernel unless given."""
-    if window is None:
-        window = sampler_window({"type": kernel.kind})
-    q = device.queue
-    rb = buffer(device, np.array([0, 0, 0, 1, 0, 0, 0, L], np.float64))
-    chunk = max(1, min(n, 4096))
-    kp, mb, n_mean, scratch, rings = sampler_buffers(device, kernel, Constant(mu), cap, chunk)
-    out = np.zeros((n, 6))
-    for first in range(0, n, chunk):
-        m = min(chunk, n - first)
-        ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 48 * m)
-        flight_prg["crossings"](q, (m,), None, kp, mb, np.int32(n_mean), np.int32(window),
-                         np.int32(GPIS_MEMORIES[memory]), np.int32(cap), np.int32(refine),
-                         np.float64(c), np.float64(tol), rb, np.uint32(seed), np.int32(first),
-                         scratch, rings, ob)
-        cl.enqueue_copy(q, out[first:first + m], ob)
-    assert np.all(out[:, 5] == 0), f"solver status {np.unique(out[:, 5])}"
-    return out
 
 
 def test01_the_oracle_is_rice_plus_the_start():

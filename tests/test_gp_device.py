@@ -128,19 +128,3 @@ def test_csg_packing_keeps_the_stack_small():
     with pytest.raises(ValueError, match="stack"):
         gp_records.pack_mean(balanced(gp_records.MEAN_STACK_DEPTH))
     assert nodes.dtype == gp_records.MEAN_NODE.dtype
-
-
-@pytest.mark.parametrize("struct", gp_records.STRUCTS, ids=lambda s: s.name)
-def test_struct_offsets_match_device(device, struct):
-    fields = [f for _, f in struct.fields]
-    body = "\n".join(f"out[{i + 1}] = (int)((char*)&s.{f} - (char*)&s);"
-                      for i, f in enumerate(fields))
-    src = (gp_records.c_declarations() + f"__kernel void offsets(__global int* out) {{\n"
-           f"{struct.name} s; out[0] = sizeof({struct.name});\n{body}\n}}\n")
-    prg = cl.Program(device.ctx, src).build()
-    out = np.zeros(len(fields) + 1, np.int32)
-    buf = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
-    prg.offsets(device.queue, (1,), None, buf)
-    cl.enqueue_copy(device.queue, out, buf)
-    assert out[0] == struct.dtype.itemsize
-    assert list(out[1:]) == [struct.dtype.fields[f][1] for f in fields]

@@ -44,7 +44,7 @@ ROT = np.array([[0.36, 0.48, -0.8], [-0.8, 0.6, 0.0], [0.48, 0.64, 0.6]])
 def prg(device):
     src = join_sources(
         (), ("ws_features.h", "ws_posterior.h", "ws_intersect.h")) + KERNELS
-    return program(device.ctx, src, [f"-I{PYOPENCL_CL_DIR}"])
+    return program(device.ctx, src, [f"-I{PYOPENCL_CL_DIR}", "-DWS_LANES=8"])
 
 
 @pytest.fixture(autouse=True)

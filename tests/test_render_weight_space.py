@@ -16,6 +16,7 @@ from gpiscl.host.gp import weight_space as ws
 from gpiscl.host.layout.gp_records import pack_kernel, pack_mean
 from gpiscl.testing.reference.camera import pixel_rays
 from gpiscl.testing.stats import assert_agree, image_mean_se, z_threshold
+from gpiscl.testing.scenes import camera
 from gpiscl.testing.weight_space import build
 from gpiscl.testing.wrappers import buffer
 
@@ -27,11 +28,6 @@ KERNELS = {
     "matern32": {"sigma": 0.1, "length_scale": 0.2},
     "matern52": {"sigma": 0.1, "length_scale": 0.2},
 }
-
-
-def camera(res, position=(0, 0, 4), fov=36.0):
-    return {"position": list(position), "look_at": [0, 0, 0], "up": [0, 1, 0], "fov": fov,
-            "resolution": [res, res]}
 
 
 def gpis(kernel, bsdf, albedo, sigma=None, features=64, radius=1.0):

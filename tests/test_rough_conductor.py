@@ -1,4 +1,4 @@
-"""The rough conductor (bsdf.h): device against its numpy twin, Fresnel limits,
+"""The rough conductor (bsdf/rough_conductor.h): device against its numpy twin, Fresnel limits,
 reciprocity, sampling consistent with evaluation, and NEE+MIS against BSDF sampling in
 renders of a metal sphere and of a GPIS with the rough conductor as its micro-BSDF."""
 import math
@@ -9,7 +9,7 @@ import pytest
 
 from gpiscl import render_result
 from gpiscl.testing.reference import rough_conductor as RC
-from gpiscl.host.scene.conductors import CONDUCTORS
+from gpiscl.host.kinds.conductors import CONDUCTORS
 from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, join_sources
 from gpiscl.testing.wrappers import program
 from gpiscl.testing.stats import assert_agree, z_threshold
@@ -22,7 +22,7 @@ __kernel void rc_eval(__global const float* p, __global const float* n,
     int i = get_global_id(0);
     if (i >= count) return;
     float pdf;
-    float3 f = rough_conductor_eval(vload3(0, p), vload3(1, p), vload3(2, p), p[9],
+    float3 f = beckmann_conductor_eval(vload3(0, p), vload3(1, p), vload3(2, p), p[9],
                                     vload3(i, n), vload3(i, v), vload3(i, l), &pdf);
     vstore4((float4)(f, pdf), i, out);
 }
@@ -35,9 +35,9 @@ __kernel void rc_sample(__global const float* p, __global const float* n,
     if (i >= count) return;
     float3 l;
     float pdf, pdf_eval;
-    float3 w = rough_conductor_sample(vload3(0, p), vload3(1, p), vload3(2, p), p[9],
+    float3 w = beckmann_conductor_sample(vload3(0, p), vload3(1, p), vload3(2, p), p[9],
                                       vload3(i, n), vload3(i, v), vload2(i, u), &l, &pdf);
-    float3 f = rough_conductor_eval(vload3(0, p), vload3(1, p), vload3(2, p), p[9],
+    float3 f = beckmann_conductor_eval(vload3(0, p), vload3(1, p), vload3(2, p), p[9],
                                     vload3(i, n), vload3(i, v), l, &pdf_eval);
     __global float* o = out + 12 * i;
     vstore4((float4)(w, pdf), 0, o);

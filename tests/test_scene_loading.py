@@ -206,7 +206,7 @@ BAD = [
     ("unknown_shape_type", minimal(shapes=[{"type": "cube"}]), "shapes[0].type",
      'unknown shape type "cube" (expected one of: sphere, rectangle, box, disk, mesh, gpis)'),
     ("unknown_bsdf_type", minimal(shapes=[{"type": "sphere", "bsdf": {"type": "glass"}}]),
-     "shapes[0].bsdf.type", "expected one of: diffuse, mirror, rough_conductor, null"),
+     "shapes[0].bsdf.type", "expected one of: diffuse, mirror, null, rough_conductor"),
     ("vector_length", minimal(camera={"position": [0, 1]}), "camera.position",
      "expected a list of 3 numbers (got 2 items)"),
     ("nan", '{"lights": [{"type": "environment", "radiance": [1, NaN, 1]}]}',
@@ -315,7 +315,7 @@ def test_not_a_scene_argument():
 def test_new_kinds_are_declared_not_coded():
     """A later object kind needs only a declaration (here registered and then removed)."""
     from gpiscl.host.scene.records import SHAPES, shape
-    from gpiscl.host.scene.schema import Field, Number, Vector
+    from gpiscl.host.schema import Field, Number, Vector
     SHAPES.register("blob", shape({"center": Field(Vector(), [0, 0, 0]),
                                    "lengthscale": Field(Number(gt=0), 0.5)}))
     try:

@@ -251,7 +251,7 @@ def test_environment_rotation_looks_up_their_pixel(fixture_dir, turn):
     """Every direction finds the pixel their InfiniteSphere finds: theirs maps w to
     u = atan2(z, x) / 2 pi + 1/2, v = acos(-y) / pi of w in the map's frame (their
     transform's inverse), row (1 - v) h, column u w; ours turns w by env_to_map
-    (lights.h) with the converted rotation and reads envmap.direction_to_pixel."""
+    (lights/environment_map.h) with the converted rotation and reads envmap.direction_to_pixel."""
     from gpiscl.host.compile.envmap import direction_to_pixel
     from gpiscl.host.scene.tungsten import tungsten_rotation
     doc = {"primitives": [{"type": "infinite_sphere", "emission": "sky.hdr",

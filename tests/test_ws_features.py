@@ -117,7 +117,7 @@ def test_lanes_do_not_change_the_realization(device, prg):
                    out_shapes=[((len(x), 4), np.float32)])[0]
     v8 = values(prg)
     for lanes in (1, 16):
-        p = build(device, options=[f"-DWS_LANES={lanes}"])
+        p = build(device, lanes=lanes)
         for a, b in zip(dump(device, p, kernel, keys, m), ref):
             np.testing.assert_allclose(a, b, rtol=2 * EPS, atol=2 * EPS)
         # only the order of the M-term sums differs: gamma_M of the absolute terms

@@ -4,6 +4,8 @@ counts) and `flights`, which launches them in chunks and returns one row per ray
 import numpy as np
 import pyopencl as cl
 
+from gpiscl.host.compile.gpis import sampler_window
+from gpiscl.host.gp import Constant
 from gpiscl.host.layout import function_space_records as FL
 from gpiscl.host.layout import gp_records
 from gpiscl.host.layout.records import GPIS_MEMORIES
@@ -142,6 +144,30 @@ def flights(device, prg, kernel, mean, n, memory="global", window=0, cap=64, ref
                       np.float64(c), np.float64(tol), rb, np.uint32(seed), np.int32(first),
                       np.int32(restarts),
                       scratch, rings, ob)
+        cl.enqueue_copy(q, out[first:first + m], ob)
+    assert np.all(out[:, 5] == 0), f"solver status {np.unique(out[:, 5])}"
+    return out
+
+
+def run_crossings(device, prg, kernel, mu, n, L, memory="global", refine=6, c=0.0,
+                  tol=FL.DEFAULT_MISS_TOLERANCE, seed=1, cap=64, window=None):
+    """Per ray (out of n): hits, sum and sum of squares of slopes after the first hit,
+    GP samples, moment evaluations (the crossings wrapper above). The window is the one
+    scenes compile for the kernel unless given."""
+    if window is None:
+        window = sampler_window({"type": kernel.kind})
+    q = device.queue
+    rb = buffer(device, np.array([0, 0, 0, 1, 0, 0, 0, L], np.float64))
+    chunk = max(1, min(n, 4096))
+    kp, mb, n_mean, scratch, rings = sampler_buffers(device, kernel, Constant(mu), cap, chunk)
+    out = np.zeros((n, 6))
+    for first in range(0, n, chunk):
+        m = min(chunk, n - first)
+        ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 48 * m)
+        prg["crossings"](q, (m,), None, kp, mb, np.int32(n_mean), np.int32(window),
+                         np.int32(GPIS_MEMORIES[memory]), np.int32(cap), np.int32(refine),
+                         np.float64(c), np.float64(tol), rb, np.uint32(seed), np.int32(first),
+                         scratch, rings, ob)
         cl.enqueue_copy(q, out[first:first + m], ob)
     assert np.all(out[:, 5] == 0), f"solver status {np.unique(out[:, 5])}"
     return out

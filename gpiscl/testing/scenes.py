@@ -86,3 +86,9 @@ def slow_scene(resolution=(12, 12), spp=1_000_000):
         "lights": [{"type": "environment", "radiance": 0.6},
                    {"type": "directional", "direction": [0.3, 1, 0.4], "irradiance": 2.0}],
     }
+
+
+def camera(res, position=(0, 0, 4), fov=36.0):
+    """A square camera looking at the origin from `position`."""
+    return {"position": list(position), "look_at": [0, 0, 0], "up": [0, 1, 0], "fov": fov,
+            "resolution": [res, res]}

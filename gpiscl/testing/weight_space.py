@@ -85,12 +85,12 @@ __kernel void ws_lambda2_k(__global const GpKernel* kp, __global const float* d,
 """
 
 
-def build(device, extra="", options=()):
+def build(device, extra="", options=(), lanes=8):
     """The ws headers, WS_WRAPPERS and extra kernels as one program: name -> kernel
     (built once per device, source and options)."""
     src = join_sources(
         (), ("ws_features.h", "ws_posterior.h", "ws_intersect.h")) + WS_WRAPPERS + extra
-    return program(device.ctx, src, [f"-I{PYOPENCL_CL_DIR}", *options])
+    return program(device.ctx, src, [f"-I{PYOPENCL_CL_DIR}", f"-DWS_LANES={lanes}", *options])
 
 
 def run(device, kernel, n, *args, out_shapes):

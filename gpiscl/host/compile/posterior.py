@@ -29,13 +29,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..layout.constants import FS_POSTERIOR_KIND
 from ..layout.gp_records import MEAN_NODE
 from ..layout.function_space_records import FS_OBS, OBS_KINDS
 from ..gp.posterior import Posterior, surface_observations
 from ..io.points import load_points
 from ..scene.observations import MAX_ROWS
 
-POSTERIOR_KIND = 48          # FS_POSTERIOR_KIND in fs_posterior.h, WS_POSTERIOR_KIND
+POSTERIOR_KIND = FS_POSTERIOR_KIND   # the block header's MeanNode kind
 
 
 def build_posterior(o: dict, kernel, mean) -> Posterior:

@@ -1,23 +1,23 @@
 """Turns a resolved scene (scene.py) into the flat arrays the device traverses."""
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..kinds.lights import LIGHTS
+from ..kinds.materials import MATERIALS
 from ..layout import records as layouts
+from ..layout import stages
 from .bvh import build_bvh
 from .camera import compile_camera
-from ..scene.conductors import eta_k
-from .envmap import build_envmap_tables
+from .envmap import compile_envmap, no_envmap
 from .gpis import CompiledGpis, compile_gpis
 from ..scene.proxies import bounding_proxy
 from ..scene.transforms import mesh_triangles
-from ..io.radiance_hdr import read_environment_rgb
+from ..errors import SceneError
 
 PRIM = layouts.PRIM_KINDS
-LIGHT = layouts.LIGHT_KINDS
 
 
 @dataclass
@@ -37,6 +37,18 @@ class CompiledScene:
     def resolution(self) -> tuple:
         return int(self.camera["width"][0]), int(self.camera["height"][0])
 
+    def device_arrays(self) -> dict:
+        """The arrays the stage kernels read, by their parameter names (layout/stages.py):
+        the render uploads each once and launches take them by name."""
+        pairs = ((stages.CAMERA, self.camera), (stages.NODES, self.bvh_nodes),
+                 (stages.PRIMS, self.primitives), (stages.MATERIALS, self.materials),
+                 (stages.LIGHTS, self.lights), (stages.GPIS, self.gpis.objects),
+                 (stages.KERNELS, self.gpis.kernels), (stages.MEAN_NODES, self.gpis.mean_nodes),
+                 (stages.ORDER_TABLE, self.gpis.order_table),
+                 *zip(stages.ENV_MAP, (self.env_texels, self.env_marginal,
+                                       self.env_conditional)))
+        return {param.name: array for param, array in pairs}
+
 
 class _Builder:
     def __init__(self):
@@ -45,11 +57,8 @@ class _Builder:
 
     def material(self, bsdf: dict) -> int:
         m = layouts.MATERIAL.zeros(1)[0]
-        m["kind"] = layouts.MATERIAL_KINDS[bsdf["type"]]
-        m["albedo"][:3] = bsdf.get("albedo", [0.0, 0.0, 0.0])
-        if bsdf["type"] == "rough_conductor":
-            m["eta"][:3], m["k"][:3] = eta_k(bsdf)
-            m["roughness"] = bsdf["roughness"]
+        m["kind"] = MATERIALS.id(bsdf["type"])
+        _fill(m, MATERIALS[bsdf["type"]].host(bsdf))
         self.materials.append(m)
         return len(self.materials) - 1
 
@@ -63,11 +72,20 @@ class _Builder:
     def light(self, kind, radiance, p0=(0, 0, 0, 0), p1=(0, 0, 0, 0), p2=(0, 0, 0, 0),
               area=0.0, cos_max=1.0) -> int:
         rec = layouts.LIGHT.zeros(1)[0]
-        rec["kind"], rec["radiance"][:3] = LIGHT[kind], radiance
+        rec["kind"], rec["radiance"][:3] = LIGHTS.id(kind), radiance
         rec["p0"], rec["p1"], rec["p2"] = _vec4(p0), _vec4(p1), _vec4(p2)
         rec["area"], rec["cos_max"], rec["primitive"] = area, cos_max, -1
         self.lights.append(rec)
         return len(self.lights) - 1
+
+
+def _fill(record, fields: dict):
+    """A kind packer's fields into a record: vectors fill a float4's first components."""
+    for name, value in fields.items():
+        if record[name].shape:
+            record[name][:len(value)] = value
+        else:
+            record[name] = value
 
 
 def _vec4(v):
@@ -118,39 +136,13 @@ def _add_shape(b: _Builder, s: dict):
 
 
 def _add_light(b: _Builder, lt: dict, env: dict):
-    kind = lt["type"]
-    if kind == "environment":
-        b.light(kind, lt["radiance"])
-    elif kind == "environment_map":
-        rgb = read_environment_rgb(lt["file"]).astype(np.float32)
-        env["rgb"] = rgb
-        b.light(kind, [lt["scale"]] * 3, p0=(math.radians(lt["rotation"]),))
-    elif kind == "point":
-        b.light(kind, lt["intensity"], p0=lt["position"])
-    elif kind == "sphere":
-        li = b.light(kind, lt["radiance"], p0=(*lt["center"], lt["radius"]))
-        b.prim("sphere", b.black, (*lt["center"], lt["radius"]), light=li)
-    elif kind == "rectangle":
-        u, v = np.asarray(lt["u"], float), np.asarray(lt["v"], float)
-        corner = np.asarray(lt["center"]) - 0.5 * u - 0.5 * v
-        li = b.light(kind, lt["radiance"], p0=corner, p1=u,
-                     p2=(*v, 1.0 if lt["two_sided"] else 0.0),
-                     area=float(np.linalg.norm(np.cross(u, v))))
-        b.prim("rectangle", b.black, corner, u, v, light=li)
-    elif kind == "directional":
-        theta = math.radians(lt["angular_radius"])
-        E = np.asarray(lt["irradiance"], dtype=np.float64)
-        if theta == 0.0:
-            b.light(kind, E, p0=(*lt["direction"], 0.0), cos_max=1.0)
-        else:
-            # uniform radiance L over the cone delivers E = L * pi * sin^2(theta) on axis;
-            # the device samples the cone by 1 - cos(theta) (p0.w, lights.h), computed as
-            # 2 sin^2(theta / 2) so that float32 keeps its digits for a small sun
-            b.light(kind, E / (math.pi * math.sin(theta) ** 2),
-                    p0=(*lt["direction"], 2.0 * math.sin(theta / 2) ** 2),
-                    cos_max=math.cos(theta))
-    else:
-        raise AssertionError(kind)
+    packed = dict(LIGHTS[lt["type"]].host(lt))
+    if "environment_file" in packed:
+        env["file"] = packed.pop("environment_file")
+    carrier = packed.pop("primitive", None)
+    li = b.light(lt["type"], **packed)
+    if carrier is not None:  # a light rays can hit: a black primitive carries it
+        b.prim(carrier[0], b.black, *carrier[1:], light=li)
 
 
 def _bounds(prims: np.ndarray):
@@ -183,7 +175,7 @@ def scene_box(data: dict, prims: np.ndarray | None = None):
             if s["type"] != "gpis":
                 _add_shape(b, s)
         for lt in data["lights"]:
-            if lt["type"] in ("sphere", "rectangle"):
+            if LIGHTS[lt["type"]].traits["area"]:
                 _add_light(b, lt, {})
         prims = np.array(b.prims, dtype=layouts.PRIMITIVE.dtype)
     pts = [np.asarray(data["camera"]["position"], float)[None]]
@@ -196,8 +188,8 @@ def scene_box(data: dict, prims: np.ndarray | None = None):
                 pts.append(np.asarray([box["min"], box["max"]], float))
             else:
                 pts.append(np.asarray(box["center"], float) + box["radius"] * np.array([[-1.0], [1.0]]))
-    pts += [np.asarray(lt["position"], float)[None] for lt in data["lights"]
-            if lt["type"] == "point"]
+    pts += [np.asarray(LIGHTS[lt["type"]].host(lt)["p0"][:3], float)[None]
+            for lt in data["lights"] if LIGHTS[lt["type"]].traits["positioned"]]
     pts = np.concatenate(pts)
     lo, hi = pts.min(0), pts.max(0)
     grow = 0.01 * float(np.linalg.norm(hi - lo)) + 1e-3
@@ -237,19 +229,16 @@ def compile_scene(data: dict, source: str = "<scene>", bakes=None) -> CompiledSc
     # area lights need to know their primitive after the BVH reordering
     for pi in np.nonzero(prims["light"] >= 0)[0]:
         lights["primitive"][prims["light"][pi]] = pi
-    if "rgb" in env:
-        rgb = env["rgb"]
-        tables = build_envmap_tables(rgb)
-        h, w = rgb.shape[:2]
-        texels = np.zeros((h * w, 4), np.float32)
-        texels[:, :3] = rgb.reshape(-1, 3)
-        marginal, conditional = tables.marginal_cdf, tables.conditional_cdf.reshape(-1)
-    else:
-        w = h = 1
-        texels = np.zeros((1, 4), np.float32)
-        marginal = np.array([0.0, 1.0], np.float32)
-        conditional = np.array([0.0, 1.0], np.float32)
+    envmap = no_envmap()
+    if "file" in env:
+        try:
+            envmap = compile_envmap(env["file"])
+        except ValueError as exc:    # a Scene edited after its checks, or memory since
+            key = next(f"lights[{i}].file" for i, lt in enumerate(data["lights"])
+                       if lt["type"] == "environment_map")
+            raise SceneError(source, key, str(exc).removeprefix(f"{env['file']}: ")
+                             + f": {env['file']}") from None
     return CompiledScene(compile_camera(data["camera"]), prims,
                          np.array(b.materials, dtype=layouts.MATERIAL.dtype), lights, nodes,
-                         texels, marginal.astype(np.float32), conditional.astype(np.float32),
-                         (w, h), gpis)
+                         envmap.texels, envmap.marginal, envmap.conditional, envmap.size,
+                         gpis)

@@ -128,6 +128,13 @@ def bake_mesh(verts, faces, resolution: int = 128, margin: float | None = None,
     watertight = bool(mesh.is_watertight and mesh.is_winding_consistent)
     if watertight and mesh.volume < 0:      # wound inward: the pseudonormals would flip
         mesh.invert()
+    if not len(mesh.faces) or not np.ptp(mesh.vertices, axis=0).any():
+        # trimesh merges corners closer than tol.merge: a tiny (or tinily scaled) mesh
+        # collapses to a point, whose bake box would have no size
+        extent = float(np.max(np.ptp(np.asarray(verts, float), axis=0)))
+        raise ValueError(f"the mesh has no extent once corners closer than "
+                         f"{trimesh.tol.merge:g} are merged (its size after the transform "
+                         f"is {extent:g})")
     lo, hi = mesh.bounds
     if margin is None:
         margin = DEFAULT_MARGIN * float(np.max(hi - lo))
@@ -165,7 +172,10 @@ def mesh_mean(path, resolution: int = 128, margin: float | None = None,
     if object_to_world is not None:
         m = np.asarray(object_to_world, float)
         verts = verts @ m[:3, :3].T + m[:3, 3]
-    grid = bake_mesh(verts, faces, resolution, margin, band)
+    try:
+        grid = bake_mesh(verts, faces, resolution, margin, band)
+    except ValueError as exc:
+        raise ValueError(f"{exc}: {path}") from None
     # float32, as the device holds it: a render from the cache equals the first one
     grid = GridMean(np.asarray(grid.values, np.float32).astype(np.float64), grid.origin,
                     grid.voxel_size)

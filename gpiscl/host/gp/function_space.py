@@ -18,10 +18,10 @@ import math
 
 import numpy as np
 
+from ..layout import constants as C
 from .kernels import covariance_matrix
 
-JITTER = 1e-10
-MEMORIES = ("none", "renewal", "renewal_plus", "global")
+JITTER = C.FS_JITTER
 _SQRT2PI = math.sqrt(2.0 * math.pi)
 
 
@@ -144,17 +144,15 @@ def step_size(kernel, d, c):
 
 # --- the adaptive march (fs_march.h) ----------------------------------------------------
 
-H_MAX, H_MIN, ELL_CORR, WINDOW = 2.0, 1e-3, math.exp(-0.5), 16
-RULE_SAMPLES = 4   # the step rule conditions on the last 4-8 samples (fs_rule_build)
-# the step rule's quadrature on [0, 1] (fs_march.h FS_RULE_NODE*/FS_RULE_WEIGHT*): the
-# three-point Gauss-Radau rule with its fixed node at the step's start, where the rate is
-# 0; the free nodes (6 +- sqrt 6) / 10, the one nearer the end first (a try may stop
+H_MAX, H_MIN, ELL_CORR, WINDOW = C.FS_H_MAX, C.FS_H_MIN, C.FS_ELL_CORR, C.FS_WINDOW
+RULE_SAMPLES = C.FS_RULE_SAMPLES   # the step rule conditions on the last 4-8 samples
+# the step rule's quadrature on [0, 1]: the free nodes of a three-point Gauss-Radau rule
+# with its fixed node at the step's start, the one nearer the end first (a try may stop
 # there: a rate grows toward the end, where f is least pinned)
-RULE = (((6.0 + math.sqrt(6.0)) / 10.0, (16.0 - math.sqrt(6.0)) / 36.0),
-        ((6.0 - math.sqrt(6.0)) / 10.0, (16.0 + math.sqrt(6.0)) / 36.0))
-# the root search (fs_root_point): final bracket (l_d), the regula falsi point's offset
-# toward the midpoint (root widths) and the points allowed beyond bisection's worst case
-ROOT_WIDTH, ROOT_OFFSET, ROOT_SLACK = 1e-2, 0.45, 2
+RULE = C.FS_RULE
+# the root search (fs_root_point)
+ROOT_WIDTH, ROOT_OFFSET, ROOT_SLACK = C.FS_ROOT_WIDTH, C.FS_ROOT_OFFSET, C.FS_ROOT_SLACK
+root_budget = C.root_budget
 
 
 def return_rate(m, m1, s, r, g, outside):
@@ -221,11 +219,6 @@ def march_realization(kernel, mean, o, d, ts, F, tol):
         i += k
         idx.append(i)
     return np.array(idx), missed, evals
-
-
-def root_budget(w0, width):
-    """Points the root search may need from a bracket of width w0 (fs_root_budget)."""
-    return max(math.ceil(math.log2(w0 / width)), 0) + ROOT_SLACK
 
 
 def root_point(ta, tb, fa, fb, width, k, kmax):

@@ -13,12 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..layout.constants import WS_CALL_MAIN, WS_CALL_NOISE, WS_CALL_ORDERS, WS_PHILOX_KEY1
 from .kernels import Kernel
 from .spectral import RandomFeatures, periodic_order_weights
 
-WS_PHILOX_KEY1 = 0x3C6EF372
-CALL_MAIN, CALL_ORDERS = 0, 1
-CALL_NOISE = 26             # WS_CALL_NOISE: after the RQ gamma calls 2 .. 25
 _PHILOX_M = (0xD2511F53, 0xCD9E8D57)
 _PHILOX_W = (0x9E3779B9, 0xBB67AE85)
 _MASK = np.uint64(0xFFFFFFFF)
@@ -94,7 +92,7 @@ def regenerate_features(kernel: Kernel, key, obj: int, m: int, order_cdf=None):
     i = np.arange(m, dtype=np.uint64)
     ctr = np.stack(np.broadcast_arrays(np.uint64(key[0]), np.uint64(key[1]),
                                        np.uint64(obj), i), -1)
-    r = philox4x32(ctr, CALL_MAIN)
+    r = philox4x32(ctr, WS_CALL_MAIN)
     g0, g1 = _normal2(r[:, 0], r[:, 1])
     g2, w = _normal2(r[:, 2], r[:, 3])
     low = ((r[:, 0] & 255) | ((r[:, 1] & 255) << 8) | ((r[:, 2] & 255) << 16)
@@ -107,7 +105,7 @@ def regenerate_features(kernel: Kernel, key, obj: int, m: int, order_cdf=None):
     if kernel.kind not in ("periodic", "locally_periodic"):
         raise ValueError(f"no numpy twin of the {kernel.kind} stream; dump it from the device")
     cdf = periodic_order_cdf(kernel.length_scale) if order_cdf is None else order_cdf
-    q = philox4x32(ctr, CALL_ORDERS)
+    q = philox4x32(ctr, WS_CALL_ORDERS)
     n = np.stack([np.searchsorted(cdf, _u01(q[:, j]).astype(np.float32), side="right")
                   for j in range(3)], -1).astype(float)
     n *= np.where((q[:, 3:4] >> np.arange(3, dtype=np.uint32)) & 1, -1.0, 1.0)
@@ -164,7 +162,7 @@ def noise_normals(key, obj: int, n: int) -> np.ndarray:
     i = np.arange(n, dtype=np.uint64)
     ctr = np.stack(np.broadcast_arrays(np.uint64(key[0]), np.uint64(key[1]),
                                        np.uint64(obj), i), -1)
-    r = philox4x32(ctr, CALL_NOISE)
+    r = philox4x32(ctr, WS_CALL_NOISE)
     return _normal2(r[:, 0], r[:, 1])[0]
 
 

@@ -82,6 +82,19 @@ def read_exr_channel_names(path) -> set:
         return set(OpenEXR.File(str(path), separate_channels=True).channels())
 
 
+def read_exr_size(path):
+    """(width, height) of an EXR file from its header alone, or None where this binding
+    reads no header alone (before OpenEXR 3.3) or the header is damaged."""
+    import OpenEXR
+    try:
+        with _library_output_muted():
+            header = OpenEXR.File(str(path), header_only=True).header()
+        (x0, y0), (x1, y1) = header["dataWindow"]
+    except Exception:  # TypeError: no header_only; damage: several types, read reports it
+        return None
+    return int(x1) - int(x0) + 1, int(y1) - int(y0) + 1
+
+
 def read_exr(path) -> dict:
     """All channels of an EXR file as {name: (H,W) float32} (half channels are widened)."""
     import OpenEXR

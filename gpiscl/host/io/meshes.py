@@ -79,7 +79,7 @@ def mesh_problem(path):
         return problem
     plain = read_plain_obj(path)
     if plain is not None:
-        return array_problem(plain[0], "mesh")
+        return array_problem(plain[0], "mesh") or extent_problem(*plain)
     import trimesh
     try:
         # process=False: processing drops the faces of NaN vertices without a word
@@ -89,7 +89,19 @@ def mesh_problem(path):
         return f"cannot read mesh ({type(exc).__name__})"
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         return "mesh has no triangles"
-    return array_problem(mesh.vertices, "mesh")
+    return array_problem(mesh.vertices, "mesh") or extent_problem(mesh.vertices, mesh.faces)
+
+
+def extent_problem(vertices, faces):
+    """None, or why a mesh has nothing to show, bound or bake: every corner of its
+    triangles at one point (a mesh mean's bake box would have no size)."""
+    faces = np.asarray(faces, np.int64).reshape(-1)
+    vertices = np.asarray(vertices, np.float64)
+    if not len(faces) or faces.min() < 0 or faces.max() >= len(vertices):
+        return None     # no triangles or bad indices: the readers say so
+    if not np.ptp(vertices[faces], axis=0).any():
+        return "the mesh has no extent (all vertices at one point)"
+    return None
 
 
 def obj_index_problem(path):

@@ -17,7 +17,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from ..errors import SceneError
+from ..errors import SceneError, argument_source
 
 FORMATS = {".exr": ("exr", "png", "scene"), ".png": ("png", "scene")}
 
@@ -28,7 +28,7 @@ def plan(path, option: str = "--output", formats=FORMATS) -> dict:
     ext = p.suffix.lower()
     if ext not in formats or not p.stem:
         known = " or ".join(formats)
-        raise SceneError("<command line>", option,
+        raise SceneError(argument_source(option), option,
                          f"cannot tell the image format of {str(p)!r} from its extension "
                          f"(use {known})")
     wanted = formats[ext]
@@ -38,26 +38,50 @@ def plan(path, option: str = "--output", formats=FORMATS) -> dict:
             "scene": base.with_name(base.name + ".scene.json") if "scene" in wanted else None}
 
 
-def check_writable(paths, option: str = "--output", inputs=()) -> None:
-    """SceneError unless every path can be written: its folder exists or can be made, and
-    is writable; an existing file there is a plain file; no path is one of the inputs."""
-    inputs = [Path(i).resolve() for i in inputs if i]
+def check_writable(paths, option: str = "--output", inputs=(), source=None) -> None:
+    """SceneError (source, option, reason) unless every path can be written: its folder
+    exists or can be made, and is writable; an existing file there is a plain file (a
+    rename over /dev/full would replace the device); its name leaves room for the
+    temporary name; no path is one of the inputs (also through a link). source defaults
+    to the command line or the API, as the option is spelled."""
+    source = source or argument_source(option)
+    inputs = [Path(i) for i in inputs if i]
     for path in (Path(p) for p in paths if p is not None):
         where = path.absolute()
-        if where.resolve() in inputs:
-            raise SceneError("<command line>", option,
+        if len(_temporary(path).name.encode()) > _NAME_MAX:
+            raise SceneError(source, option, f"the file name {path.name[:40]}... is too "
+                             f"long ({len(path.name.encode())} bytes)")
+        if any(where.resolve() == i.resolve() or _same_file(where, i) for i in inputs):
+            raise SceneError(source, option,
                              f"{path} is an input of this render; it would be overwritten")
         if where.is_dir():
-            raise SceneError("<command line>", option, f"{path} is a folder")
+            raise SceneError(source, option, f"{path} is a folder")
+        if where.exists() and not where.is_file():
+            raise SceneError(source, option, f"{path} is not a regular file")
         folder = where.parent
         while not folder.exists():
             folder = folder.parent
         if not folder.is_dir():
-            raise SceneError("<command line>", option,
+            raise SceneError(source, option,
                              f"cannot create {where.parent}: {folder} is a file")
         if not os.access(folder, os.W_OK | os.X_OK):
-            raise SceneError("<command line>", option,
+            raise SceneError(source, option,
                              f"cannot write to {folder} (permission denied)")
+
+
+_NAME_MAX = 255   # bytes in one file name on Linux file systems (ext4, tmpfs, xfs)
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _temporary(path: Path) -> Path:
+    # the extension kept last: numpy's savez appends .npz to a name without it
+    return path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
 
 
 def scene_inputs(scene) -> list:
@@ -83,8 +107,7 @@ def write_atomically(path, write) -> None:
     no temporary file, and is a SceneError naming path and the reason."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    # the extension kept last: numpy's savez appends .npz to a name without it
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+    tmp = _temporary(path)
     try:
         write(tmp)
         os.replace(tmp, path)

@@ -16,7 +16,7 @@ fs_linalg.h). `scratch_doubles` sizes the slice.
 """
 from __future__ import annotations
 
-from ..gp import function_space as FS_TWIN
+from . import constants as C
 from .struct import Struct
 
 FS_OBS = Struct("FsObs", (
@@ -41,17 +41,16 @@ OBS_KINDS = {"value": 0, "deriv": 1}
 STATUS = {"ok": 0, "not_pd": 1, "nan": 2, "rows": 3, "steps": 4}
 STRUCTS = (FS_OBS, FS_VERTEX)
 
-DEFAULT_WINDOW = 16       # samples conditioned on besides the memory (fs_march.h)
+DEFAULT_WINDOW = C.FS_WINDOW   # samples conditioned on besides the memory (fs_march.h)
 DEFAULT_MISS_TOLERANCE = 2e-6   # expected missed crossings per along-ray length scale: fs_march.h
 DEFAULT_REFINE = 0        # root-search points forced in a crossing bracket besides those
                           # that narrow it to the root width (fs_march.h, "Hit")
 DEFAULT_GLOBAL_CAP = 64   # observations the global model keeps
 HIT_ROWS = 4              # f(x_h), d_d f, d_T f, d_B f appended at a hit
-# rows reserved for the root search: its worst case from a 2 l_d step (fs_root_budget)
-MIN_BISECT = FS_TWIN.root_budget(FS_TWIN.H_MAX, FS_TWIN.ROOT_WIDTH)
+MIN_BISECT = C.FS_MIN_BISECT   # rows reserved for the root search
 RULE_MEMORY = 4           # the step rule's own small system (fs_march.h): memory rows,
-RULE_SAMPLES = FS_TWIN.RULE_SAMPLES   # the ray's latest samples (the numpy twin's),
-RULE_ROWS = RULE_MEMORY + 2 * RULE_SAMPLES + 2   # and one (value, slope) pair
+RULE_ROWS = RULE_MEMORY + 2 * C.FS_RULE_SAMPLES + 2   # its latest samples and one
+                                                      # (value, slope) pair
 
 
 def c_declarations() -> str:
@@ -61,12 +60,7 @@ def c_declarations() -> str:
     lines += [f"#define FS_OBS_{k.upper()} {v}" for k, v in OBS_KINDS.items()]
     lines += [f"#define FS_STATUS_{k.upper()} {v}" for k, v in STATUS.items()]
     lines.append(f"#define FS_HIT_ROWS {HIT_ROWS}")
-    lines.append(f"#define FS_MIN_BISECT {MIN_BISECT}")
-    lines.append(f"#define FS_ROOT_WIDTH {FS_TWIN.ROOT_WIDTH!r}")
-    lines.append(f"#define FS_ROOT_OFFSET {FS_TWIN.ROOT_OFFSET!r}")
-    lines.append(f"#define FS_ROOT_SLACK {FS_TWIN.ROOT_SLACK}")
     lines.append(f"#define FS_RULE_MEMORY {RULE_MEMORY}")
-    lines.append(f"#define FS_RULE_SAMPLES {RULE_SAMPLES}")
     lines.append(f"#define FS_RULE_ROWS {RULE_ROWS}")
     return "\n".join(lines) + "\n" + "\n".join(s.c_declaration() for s in STRUCTS)
 

@@ -7,6 +7,10 @@ drift apart; tests/test_layouts.py checks the offsets on the device itself.
 from __future__ import annotations
 
 
+from ..kinds import lights, materials
+from . import constants, random_slots
+from . import function_space_records, gp_records
+from ..kinds.memory_models import MEMORY_MODELS
 from .gp_records import c_declarations as gp_declarations
 from .struct import Queue, Struct
 
@@ -42,7 +46,7 @@ MATERIAL = Struct("Material", (
     ("float", "roughness"),  # rough_conductor: Beckmann alpha
 ))
 
-# Lights: the meaning of the vectors depends on kind (see lights.h).
+# Lights: the meaning of the vectors depends on kind (see lib/lights/<kind>.h).
 LIGHT = Struct("Light", (
     ("float4", "radiance"),  # radiance, intensity (point) or in-cone radiance (sun)
     ("float4", "p0"),
@@ -169,9 +173,6 @@ SHADOW_QUEUE = Queue("shadow", (
 # --- enumerations shared with the device (emitted as #defines) ----------------------
 
 PRIM_KINDS = {"sphere": 0, "rectangle": 1, "disk": 2, "triangle": 3}
-MATERIAL_KINDS = {"diffuse": 0, "mirror": 1, "null": 2, "rough_conductor": 3}
-LIGHT_KINDS = {"environment": 0, "environment_map": 1, "point": 2, "sphere": 3,
-               "rectangle": 4, "directional": 5}
 # Device-side counters, int32. The host reads them after every bounce; the first four are
 # the bounce's queue sizes, the rest counts of failures and work.
 COUNTERS = {"rays_out": 0, "hits": 1, "escaped": 2, "shadow": 3, "nan_paths": 4,
@@ -185,30 +186,32 @@ NUM_COUNTERS = len(COUNTERS)
 BOUNCE_SUMMED = ("fs_flights", "fs_samples", "fs_evals")
 GPIS_PROXIES = {"box": 0, "sphere": 1, "mesh": 2}
 GPIS_SAMPLERS = {"weight_space": 0, "function_space": 1}
-GPIS_MEMORIES = {"none": 0, "renewal": 1, "renewal_plus": 2, "global": 3}
+GPIS_MEMORIES = {name: MEMORY_MODELS.id(name) for name in MEMORY_MODELS.names}
 GPIS_HIT_BASE = -2
 
 
 def _defines() -> str:
     lines = []
-    for prefix, table in (("PRIM", PRIM_KINDS), ("MATERIAL", MATERIAL_KINDS),
-                          ("LIGHT", LIGHT_KINDS), ("COUNT", COUNTERS),
-                          ("GPIS_PROXY", GPIS_PROXIES), ("GPIS_SAMPLER", GPIS_SAMPLERS),
-                          ("GPIS_MEMORY", GPIS_MEMORIES)):
+    for prefix, table in (("PRIM", PRIM_KINDS), ("COUNT", COUNTERS),
+                          ("GPIS_PROXY", GPIS_PROXIES), ("GPIS_SAMPLER", GPIS_SAMPLERS)):
         lines += [f"#define {prefix}_{k.upper()} {v}" for k, v in table.items()]
+    lines += MEMORY_MODELS.c_enum() + MEMORY_MODELS.c_traits()
+    # the kind tables' ids and traits, read at each call: a test's temporary kind shows
+    lines += materials.c_declarations() + lights.c_declarations()
     lines.append(f"#define NUM_COUNTERS {NUM_COUNTERS}")
     lines.append(f"#define GPIS_HIT_BASE ({GPIS_HIT_BASE})")
     return "\n".join(lines) + "\n"
 
 
 STRUCTS = (CAMERA, PRIMITIVE, MATERIAL, LIGHT, BVH_NODE, GPIS_OBJECT, RENDER_PARAMS)
-QUEUES = (PATH_STATE, RAY_QUEUE, INDEX_QUEUE, SHADOW_QUEUE)
+# every struct host and device share (tests/test_layouts.py measures each on the device)
+ALL_STRUCTS = STRUCTS + gp_records.STRUCTS + function_space_records.STRUCTS
 
 
 def c_header() -> str:
     """The device-side declarations of every shared layout."""
-    parts = ["/* Generated from gpiscl/host/layout/records.py: do not edit. */\n", _defines()]
+    parts = ["/* Generated from gpiscl/host/layout/records.py: do not edit. */\n", _defines(),
+             constants.c_defines(), random_slots.c_defines()]
     parts += [s.c_declaration() for s in STRUCTS]
     parts.append(gp_declarations())
-    parts += [q.c_declaration() for q in QUEUES]
     return "\n".join(parts)

@@ -61,19 +61,11 @@ class Struct:
 
 @dataclass(frozen=True)
 class Queue:
-    """A structure-of-arrays work queue: one device buffer per field.
-
-    The C side gets a macro listing the kernel parameters in a fixed order, so kernels
-    and the host's argument lists come from this one description.
-    """
+    """A structure-of-arrays work queue: one device buffer per field (kernels take them
+    as a group of parameters, layout/stages.py queue)."""
 
     name: str
     fields: tuple  # (C type, field name)
-
-    def c_declaration(self) -> str:
-        params = ", ".join(f"__global {ctype}* restrict P##_{fname}"
-                           for ctype, fname in self.fields)
-        return f"#define {self.name.upper()}_PARAMS(P) {params}\n"
 
     def numpy_dtype(self, fname: str) -> np.dtype:
         ctype = dict((f, c) for c, f in self.fields)[fname]

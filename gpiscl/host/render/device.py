@@ -1,10 +1,13 @@
 """OpenCL device selection, the one program builder, and named, timed launches."""
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
+import sys
 import tempfile
 import time
+import warnings
 from collections import defaultdict
 from dataclasses import dataclass, field
 
@@ -126,6 +129,44 @@ WORK_GROUP = 64
 _BUILT: dict = {}
 
 
+def build_quietly(device: Device, source: str, opts) -> cl.Program:
+    """Builds source; a non-empty build log (clang's notes on vector types a CPU lacks, say)
+    is not printed: pyopencl would warn (CompilerWarning) on every run. With
+    GPISCL_BUILD_LOG=1 the log goes to a temporary file named on stderr."""
+    with warnings.catch_warnings(), tempfile.TemporaryFile("w+") as driver_says:
+        warnings.simplefilter("ignore", cl.CompilerWarning)
+        with _stderr_into(driver_says):
+            prg = cl.Program(device.ctx, source).build(options=opts)
+        driver_says.seek(0)
+        said = driver_says.read().strip()
+    log = prg.get_build_info(device.device, cl.program_build_info.LOG).strip()
+    if (log or said) and os.environ.get("GPISCL_BUILD_LOG"):
+        _save_build_log("\n".join(filter(None, (log, said))))
+    return prg
+
+
+@contextlib.contextmanager
+def _stderr_into(file):
+    """PoCL's clang writes its summary ("47 warnings generated.") to file descriptor 2
+    itself, past Python's sys.stderr: point the descriptor at `file` meanwhile."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    os.dup2(file.fileno(), 2)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+def _save_build_log(log: str):
+    fd, path = tempfile.mkstemp(prefix="gpiscl-build-", suffix=".log")
+    with os.fdopen(fd, "w") as f:
+        f.write(log + "\n")
+    print(f"gpiscl: OpenCL build log ({len(log.splitlines())} lines) in {path}",
+          file=sys.stderr)
+
+
 class Program:
     """Builds one program once and hands out its kernels, each launch named and timed."""
 
@@ -144,7 +185,7 @@ class Program:
 
     def _build(self, device: Device, opts) -> dict:
         try:
-            prg = cl.Program(device.ctx, self.source).build(options=opts)
+            prg = build_quietly(device, self.source, opts)
         except cl.Error as exc:
             fd, path = tempfile.mkstemp(prefix="gpiscl-build-", suffix=".cl")
             with os.fdopen(fd, "w") as f:
@@ -162,8 +203,12 @@ class Program:
                               "another --device" + _drivers_limited())
         return kernels
 
-    def launch(self, name: str, global_size: int, *args):
-        """Enqueue kernel `name` over global_size items; returns the event."""
+    def enqueue(self, name: str, global_size: int, args, local: int | None = None,
+                max_items: int | None = None):
+        """Enqueue kernel `name` over global_size items (timed under its name) with the
+        arguments in kernel order (render/launch.py orders and checks them); returns the
+        event. max_items: launch at most this many work items (a multiple of local), for
+        kernels whose items stride over the rest."""
         if global_size <= 0:
             return None
         kernel = self.kernels[name]
@@ -171,8 +216,10 @@ class Program:
         # One fixed work-group size: PoCL compiles a work-group function per local size,
         # so letting it pick one per global size recompiles big kernels every bounce
         # (seconds each). Kernels bound-check their index, so padding is harmless.
-        local = min(WORK_GROUP, self.device.device.max_work_group_size)
+        local = local or min(WORK_GROUP, self.device.device.max_work_group_size)
         padded = -(-int(global_size) // local) * local
+        if max_items is not None:
+            padded = min(padded, max_items)
         event = cl.enqueue_nd_range_kernel(self.device.queue, kernel, (padded,), (local,))
         self.timings.record(name, int(global_size), event)
         return event

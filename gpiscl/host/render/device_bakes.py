@@ -14,10 +14,13 @@ import pyopencl as cl
 
 from ..gp import knob, means
 from ..gp.means import GridMean
+from ..layout.constants import KNOB_FUNCTIONS
+from ..layout import stages
 from .device import Device, Program, to_device
+from .launch import launch
 from .program_sources import BAKE_FILES, BAKE_HEADERS
 
-FUNCTIONS = {"knob": 0, "knob_inner": 1, "knob_outer": 2}   # KNOB_FUNCTION_* of knob_sdf.h
+FUNCTIONS = KNOB_FUNCTIONS   # KNOB_FUNCTION_* ids
 
 
 def _hex(x: float) -> str:
@@ -62,8 +65,9 @@ class DeviceBakes:
         out = cl.Buffer(self.device.ctx, cl.mem_flags.WRITE_ONLY, values.nbytes)
         # held until the copy has waited for the kernel (the buffers use the arrays' memory)
         inputs = [to_device(self.device, a) for a in axes]
-        self.program.launch("bake_procedural", total, np.int32(FUNCTIONS[function]),
-                            *(np.int32(c) for c in n), *inputs, out)
+        nx, ny, nz = (np.int32(c) for c in n)
+        launch(self.program, stages.BAKE_PROCEDURAL, total, which=np.int32(FUNCTIONS[function]),
+               nx=nx, ny=ny, nz=nz, ax=inputs[0], ay=inputs[1], az=inputs[2], values=out)
         cl.enqueue_copy(self.device.queue, values, out)   # blocking
         return GridMean(values, tuple(lo), voxel)
 
@@ -76,7 +80,8 @@ class DeviceBakes:
         c2 = np.empty(tuple(nb), np.float64)
         out = cl.Buffer(self.device.ctx, cl.mem_flags.WRITE_ONLY, c2.nbytes)
         samples = to_device(self.device, v)   # held until the blocking copy below
-        self.program.launch("bake_grid_slopes", c2.size, *(np.int32(s) for s in v.shape),
-                            np.int32(brick), samples, out)
+        nx, ny, nz = (np.int32(s) for s in v.shape)
+        launch(self.program, stages.BAKE_GRID_SLOPES, c2.size, nx=nx, ny=ny, nz=nz,
+               brick=np.int32(brick), v=samples, brick_c2=out)
         cl.enqueue_copy(self.device.queue, c2, out)
         return np.sqrt(c2) / h, means.grid_slope_bound(values, h, float(c2.max()))

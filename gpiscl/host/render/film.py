@@ -37,8 +37,9 @@ class Film:
                              hostbuf=np.zeros(12 * n if aov else 1, np.float64))
 
     @property
-    def args(self) -> list:
-        return [self.sum, self.sum_sq, self.count, self.aov]
+    def arguments(self) -> dict:
+        """The accumulate kernel's film group (layout/stages.py FILM)."""
+        return {"sum": self.sum, "sum_sq": self.sum_sq, "count": self.count, "aov": self.aov}
 
     def read(self) -> FilmImage:
         h, w = self.height, self.width

@@ -11,9 +11,12 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
+from ..kinds.memory_models import MEMORY_MODELS
 from ..layout import records as layouts
+from ..layout import stages
 from .program_sources import FS_HEADERS, FS_STAGE_FILES
 from .device import Device, KernelTimings, Program
+from .launch import launch
 from ..layout import function_space_records as FL
 
 # Bytes of global-model rings per batch (cap the batch). On a CPU the device's memory is
@@ -39,10 +42,12 @@ def _fs_objects(objects: np.ndarray) -> np.ndarray:
 
 
 def ring_stride(objects: np.ndarray) -> int:
-    """Observations per path ring: the largest cap of a global-memory object, else 1."""
+    """Observations per path ring: the largest cap of an object whose memory model keeps
+    a ring, else 1."""
     fs = _fs_objects(objects)
-    glob = fs[fs["memory"] == layouts.GPIS_MEMORIES["global"]]
-    return int(glob["memory_cap"].max()) if len(glob) else 1
+    ids = [MEMORY_MODELS.id(name) for name in MEMORY_MODELS.with_trait("ring")]
+    ring = fs[np.isin(fs["memory"], ids)]
+    return int(ring["memory_cap"].max()) if len(ring) else 1
 
 
 def budget(device: Device) -> int:
@@ -143,32 +148,24 @@ class FunctionSpaceStages:
             buf.release()
         self.work = None
 
-    def _args(self) -> tuple:
+    def _work_arguments(self) -> dict:
         vertex, vertex_object, rings, scratch = self._work()
-        return vertex, vertex_object, rings, np.int32(self.stride), scratch
+        return {"vertex": vertex, "vertex_object": vertex_object, "rings": rings,
+                "ring_stride": np.int32(self.stride), "scratch": scratch}
 
-    def _launch(self, name, n, head, tail):
+    def _launch(self, stage: stages.Stage, n: int, named: dict):
         """One launch of at most self.items work items striding over [0, n), with a fixed
         local size: PoCL compiles a kernel once per work-group size, and these kernels
         take seconds to compile."""
-        if n <= 0:
-            return
-        kernel = self.program.kernels[name]
-        kernel.set_args(*head, np.int32(n), *tail)
-        items = min(self.items, -(-n // self.local) * self.local)
-        event = cl.enqueue_nd_range_kernel(self.device.queue, kernel, (items,), (self.local,))
-        self.program.timings.record(name, n, event)
+        self._check_posterior(named["mean_nodes"])
+        launch(self.program, stage, n, local=self.local, max_items=self.items,
+               num_rays=np.int32(n), **self._work_arguments(), **named)
 
-    def free_flight(self, params, paths, rays, n, gpis_objects, kernels, means, counters):
-        """Rays [0, n) of `rays`: hits moved to function-space crossings, vertices recorded."""
-        self._check_posterior(means)
-        self._launch("gpis_function_space", n, (params,),
-                     (*paths.args, *rays.args, gpis_objects, kernels, means, *self._args(),
-                      counters))
+    def gpis_function_space(self, n, **named):
+        """Rays [0, n) of the `in` queue: hits moved to function-space crossings, vertices
+        recorded; named: the stage's other arguments (layout/stages.py)."""
+        self._launch(stages.GPIS_FUNCTION_SPACE, n, named)
 
-    def shadow(self, params, paths, shadow, n, gpis_objects, kernels, means, counters):
+    def gpis_shadow_function_space(self, n, **named):
         """Shadow rays (at most n: one per hit) blocked by function-space crossings."""
-        self._check_posterior(means)
-        self._launch("gpis_shadow_function_space", n, (params,),
-                     (*paths.args, *shadow.args, gpis_objects, kernels, means, *self._args(),
-                      counters))
+        self._launch(stages.GPIS_SHADOW_FUNCTION_SPACE, n, named)

@@ -1,4 +1,5 @@
-"""The wavefront path tracer: one host method per stage, one named kernel per stage.
+"""The wavefront path tracer: one host method per stage, one named kernel per stage
+(layout/stages.py declares each kernel's parameters; launches pass them by name).
 
 The host reads one counter per bounce (how many rays continue), both to stop and to
 size the next launches; all other counts stay on the device.
@@ -12,29 +13,28 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyopencl as cl
 
-from . import function_space_stages as gpis_function_space
+from . import function_space_stages
 from . import kriging_cache, memory
 from ..layout import records as layouts
+from ..layout.constants import WS_MAX_LANES
+from ..layout import stages
 from .batching import BatchSizer
 from .device import Device, Program, to_device
 from .film import Film, FilmImage
+from .launch import launch
 from .program_sources import GPIS_HEADERS, STAGE_FILES
 from .queues import DeviceQueue
 from ..compile.scene import CompiledScene
 
 # The most paths in flight unless asked otherwise (queue memory, ~440 bytes a path, ~560
 # with function space's vertex records). On a CPU the queues are the process's own memory
-# and every page a batch touches stays resident, while 2^15 paths already kept its cores as
-# busy as 2^18 (wedge_volume, 4 spp, same run: paths per CPU second x1.00, per wall second
-# x0.98), and 2^14 as busy as 2^15 (2026-12-03, 8 spp, alternating in one run, paths per CPU
-# second: fs_sphere_se x1.10 / x1.02 / x0.98, wedge_volume x1.05 / x1.05, knob_no_csg x1.01
-# / x1.05, csg_two_spheres x1.01, fs_mirror_ball_sun x1.04, ws_sphere_rq x0.99), touching
-# 5-7 MB less at the peak (knob_no_csg 167 -> 161 MB, fs_sphere_se 151 -> 145).
+# and every touched page stays resident, so the cap is the smallest batch that keeps the
+# cores as busy as larger ones (docs/design/batches.md has the measurements).
 DEFAULT_BATCH, CPU_DEFAULT_BATCH = 1 << 18, 1 << 14
 
 
 # PATH_STATE's first-hit fields (aov.py): one element each when no AOV is asked for, as
-# every kernel's access is guarded by params->aov (16384 paths: 0.8 MB)
+# every kernel's access is guarded by params->aov
 AOV_FIELDS = ("aov_position", "aov_normal", "aov_albedo")
 
 
@@ -45,8 +45,8 @@ def default_batch(device: Device) -> int:
 def ws_defines(device: Device) -> dict:
     """Weight-space features run WS_LANES per work-item in vector types: what makes the
     feature loop SIMD on CPU runtimes; GPUs vectorise across work-items instead."""
-    # the native float width measured 1.3-1.6x faster than 8 lanes on a 16-wide CPU
-    lanes = min(16, max(1, device.device.native_vector_width_float))
+    # the native float width: faster than 8 lanes on a 16-wide CPU (docs/design/batches.md)
+    lanes = min(WS_MAX_LANES, max(1, device.device.native_vector_width_float))
     return {"WS_LANES": lanes if device.is_cpu else 1}
 
 
@@ -122,26 +122,18 @@ class WavefrontIntegrator:
         self.batch = memory.plan(device, self.num_pixels, self.batch, max_memory, source,
                                  aov=aov)
         self.program = stage_program(device)
-        # scene buffers
-        self.camera = to_device(device, scene.camera)
-        self.nodes = to_device(device, scene.bvh_nodes)
-        self.prims = to_device(device, scene.primitives)
-        self.materials = to_device(device, scene.materials)
-        self.lights = to_device(device, scene.lights)
-        self.env = [to_device(device, scene.env_texels), to_device(device, scene.env_marginal),
-                    to_device(device, scene.env_conditional)]
+        # the scene's buffers, by the kernels' parameter names
+        self.scene_buffers = {name: to_device(device, array)
+                              for name, array in scene.device_arrays().items()}
         gpis = scene.gpis
-        self.gpis_objects = to_device(device, gpis.objects)
-        self.gpis_model = [to_device(device, gpis.kernels), to_device(device, gpis.mean_nodes),
-                           to_device(device, gpis.order_table)]
         self.weight_space = gpis.uses("weight_space")
         if self.weight_space:   # a posterior's kept weights fit their budget
             self.batch = min(self.batch, kriging_cache.max_batch(gpis.objects,
                                                                  gpis.mean_nodes, device))
         self.function_space = None
         if gpis.uses("function_space"):
-            self.batch = min(self.batch, gpis_function_space.max_batch(gpis.objects, device))
-            self.function_space = gpis_function_space.FunctionSpaceStages(
+            self.batch = min(self.batch, function_space_stages.max_batch(gpis.objects, device))
+            self.function_space = function_space_stages.FunctionSpaceStages(
                 device, gpis.objects, self.batch, self.program.timings,
                 mean_nodes=gpis.mean_nodes)   # sizes a posterior's program up front
         self.paths = None     # the work queues: _allocate_work, release_work
@@ -156,6 +148,10 @@ class WavefrontIntegrator:
         self.params_host = layouts.RENDER_PARAMS.zeros(1)
         self.params = cl.Buffer(ctx, cl.mem_flags.READ_ONLY, self.params_host.nbytes)
         self.film = Film(ctx, device.queue, self.width, self.height, aov=aov)
+        # what every launch may take besides its queues (_launch picks what a stage names)
+        self.render_arguments = {**self.scene_buffers, "params": self.params,
+                                 "counters": self.counters, "post": self.kriging.arguments,
+                                 "film": self.film.arguments}
         rr = settings["russian_roulette"]
         p = self.params_host[0]
         p["seed"], p["max_depth"] = settings["seed"], settings["max_depth"]
@@ -208,65 +204,64 @@ class WavefrontIntegrator:
             self.params_host[0][k] = v
         cl.enqueue_copy(self.device.queue, self.params, self.params_host)
 
+    def _stage_arguments(self, stage: stages.Stage) -> dict:
+        """The render-wide arguments `stage` takes (params, counters, scene buffers ...)."""
+        return {k: v for k, v in self.render_arguments.items() if k in stage.host_names}
+
+    def _launch(self, stage: stages.Stage, n: int, **queues):
+        launch(self.program, stage, n, **self._stage_arguments(stage), **queues)
+
     def generate_camera_rays(self, n):
-        self.program.launch("generate_camera_rays", n, self.params, self.camera,
-                            *self.paths.args, *self.rays[0].args)
+        self._launch(stages.GENERATE_CAMERA_RAYS, n, path=self.paths, out=self.rays[0])
 
     def intersect(self, rays, n):
-        self.program.launch("intersect", n, self.params, np.int32(n), *rays.args,
-                            self.nodes, self.prims, self.materials)
+        self._launch(stages.INTERSECT, n, num_rays=np.int32(n), in_=rays)
 
-    def gpis_free_flight(self, rays, n):
-        """Moves hits to the first GPIS crossing before them (the path's realization)."""
-        if self.weight_space:
-            self.program.launch("gpis_weight_space", n, self.params, np.int32(n),
-                                *self.paths.args, *rays.args, self.gpis_objects,
-                                *self.gpis_model, self.counters, *self.kriging.args)
-        if self.function_space:
-            self.function_space.free_flight(self.params, self.paths, rays, n, self.gpis_objects,
-                                            *self.gpis_model[:2], self.counters)
+    def gpis_weight_space(self, rays, n):
+        """Moves hits to the first weight-space GPIS crossing before them (the path's
+        realization)."""
+        self._launch(stages.GPIS_WEIGHT_SPACE, n, num_rays=np.int32(n), path=self.paths,
+                     in_=rays)
 
-    def gpis_shadow(self, n):
-        """Blocks shadow rays that cross a GPIS object of the path's realization."""
-        if self.weight_space:
-            self.program.launch("gpis_shadow_weight_space", n, self.params, *self.paths.args,
-                                *self.shadow.args, self.gpis_objects, *self.gpis_model,
-                                self.counters, *self.kriging.args)
-        if self.function_space:
-            self.function_space.shadow(self.params, self.paths, self.shadow, n, self.gpis_objects,
-                                       *self.gpis_model[:2], self.counters)
+    def gpis_function_space(self, rays, n):
+        """Moves hits to the first function-space GPIS crossing before them."""
+        self.function_space.gpis_function_space(
+            n, **self._stage_arguments(stages.GPIS_FUNCTION_SPACE), path=self.paths, in_=rays)
 
     def queue_hits(self, rays, n):
-        self.program.launch("queue_hits", n, np.int32(n), *rays.args, *self.hits.args,
-                            *self.escaped.args, self.counters)
+        self._launch(stages.QUEUE_HITS, n, num_rays=np.int32(n), in_=rays, hits=self.hits,
+                     escaped=self.escaped)
 
     def escaped_rays(self, rays, n):
-        self.program.launch("escaped_rays", n, self.params, *self.paths.args, *rays.args,
-                            *self.escaped.args, self.counters, self.lights, *self.env)
+        self._launch(stages.ESCAPED_RAYS, n, path=self.paths, in_=rays, escaped=self.escaped)
 
     def emission(self, rays, n):
-        self.program.launch("emission", n, self.params, *self.paths.args, *rays.args,
-                            *self.hits.args, self.counters, self.prims, self.lights,
-                            self.gpis_objects, self.gpis_model[1])
+        self._launch(stages.EMISSION, n, path=self.paths, in_=rays, hits=self.hits)
 
     def scatter(self, rays, out, n):
-        self.program.launch("scatter", n, self.params, *self.paths.args, *rays.args,
-                            *out.args, *self.hits.args, *self.shadow.args, self.counters,
-                            self.prims, self.materials, self.lights, *self.env, self.gpis_objects,
-                            self.gpis_model[1])
+        self._launch(stages.SCATTER, n, path=self.paths, in_=rays, out=out, hits=self.hits,
+                     shadow=self.shadow)
+
+    def gpis_shadow_weight_space(self, n):
+        """Blocks shadow rays that cross a weight-space GPIS object of the path's
+        realization."""
+        self._launch(stages.GPIS_SHADOW_WEIGHT_SPACE, n, path=self.paths, shadow=self.shadow)
+
+    def gpis_shadow_function_space(self, n):
+        """Blocks shadow rays that cross a function-space GPIS object."""
+        self.function_space.gpis_shadow_function_space(
+            n, **self._stage_arguments(stages.GPIS_SHADOW_FUNCTION_SPACE), path=self.paths,
+            shadow=self.shadow)
 
     def shadow_rays(self, n):
-        self.program.launch("shadow_rays", n, self.params, *self.paths.args,
-                            *self.shadow.args, self.counters, self.nodes, self.prims,
-                            self.materials)
+        self._launch(stages.SHADOW_RAYS, n, path=self.paths, shadow=self.shadow)
 
     def accumulate(self):
-        self.program.launch("accumulate", self.num_pixels, self.params, *self.paths.args,
-                            self.counters, *self.film.args)
+        self._launch(stages.ACCUMULATE, self.num_pixels, path=self.paths)
 
     def batch_radiance(self, n: int) -> np.ndarray:
         """(n, 4) float32: the radiance of the last batch's first n paths, as accumulate
-        reads it (what a cluster worker sends back: commands/cluster.py)."""
+        reads it (what a cluster worker sends back: distributed/cluster.py)."""
         out = np.empty((n, 4), np.float32)
         cl.enqueue_copy(self.device.queue, out, self.paths.buffers["radiance"])
         return out
@@ -301,12 +296,18 @@ class WavefrontIntegrator:
             cl.enqueue_fill_buffer(queue, self.counters, np.int32(0), 0, 16)  # queue sizes
             self._upload_params(bounce=bounce)
             self.intersect(cur, n)
-            self.gpis_free_flight(cur, n)
+            if self.weight_space:
+                self.gpis_weight_space(cur, n)
+            if self.function_space:
+                self.gpis_function_space(cur, n)
             self.queue_hits(cur, n)
             self.escaped_rays(cur, n)
             self.emission(cur, n)
             self.scatter(cur, nxt, n)
-            self.gpis_shadow(n)
+            if self.weight_space:
+                self.gpis_shadow_weight_space(n)
+            if self.function_space:
+                self.gpis_shadow_function_space(n)
             self.shadow_rays(n)
             cl.enqueue_copy(queue, self.counters_host, self.counters)
             self._sum_bounce_counters()

@@ -77,7 +77,8 @@ class KrigingCache:
         self.values = cl.Buffer(ctx, mf.READ_WRITE, 8 * max(1, self.doubles_per_path * batch))
 
     @property
-    def args(self) -> tuple:
-        """The kernels' WS_POST_CACHE_PARAMS (ws_objects.h)."""
-        return (self.tags, self.values, self.table, np.int32(self.tags_per_path),
-                np.int32(self.doubles_per_path))
+    def arguments(self) -> dict:
+        """The weight-space stages' post group (layout/stages.py WS_POST_CACHE)."""
+        return {"tags": self.tags, "values": self.values, "table": self.table,
+                "tags_per_path": np.int32(self.tags_per_path),
+                "doubles_per_path": np.int32(self.doubles_per_path)}

@@ -8,38 +8,23 @@ MemoryError tracebacks (or a segfault in the OpenCL runtime) minutes into a run.
   queues  the per-path queues of one batch (layout/records.py), sized to the batch cap
 The batch cap shrinks until the queues take at most a quarter of the memory left (a smaller
 batch is only slower); the film cannot shrink, so a film that does not fit is an error
-naming the resolution, with --max-memory to override the estimate of what is available.
+naming the resolution and the limit that binds, with --max-memory to override the estimate
+of what is available. What the host can give is io/memory_budget.py's tightest limit (free
+RAM, the process's rlimits, its cgroup's memory limit), not free RAM alone.
 """
 from __future__ import annotations
 
 import ctypes
-import os
-import re
 
-from ..layout import records as layouts
 from ..errors import SceneError
+from ..io.memory_budget import Budget, gib, memory_budget
+from ..layout import records as layouts
 
 FILM_BYTES_PER_PIXEL = 7 * 8          # film.py: 3 sums, 3 sums of squares, 1 count
 # film.read's float64 copies and results, the float32 mean/stderr, the EXR and PNG buffers
 HOST_BYTES_PER_PIXEL = 7 * 8 * 2 + 6 * 4 * 2 + 3 * 4 + 3
 AOV_BYTES_PER_PIXEL = 12 * 8         # aov.py: first-hit sums, in double
 QUEUE_SHARE = 0.25
-UNITS = {"": 1, "k": 1 << 10, "m": 1 << 20, "g": 1 << 30, "t": 1 << 40}
-
-
-def parse_size(text: str) -> int:
-    """'512M', '8G', '8GiB', '1.5g', '1000000' -> bytes."""
-    m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*([kmgt]?)(i?b)?\s*", str(text).lower())
-    if not m:
-        raise ValueError(f"expected a size like 8G, 512M or a number of bytes (got {text!r})")
-    size = int(float(m[1]) * UNITS[m[2]])
-    if size <= 0:
-        raise ValueError(f"expected a size > 0 (got {text!r})")
-    return size
-
-
-def gib(n: float) -> str:
-    return f"{n / (1 << 30):.3g} GiB"
 
 
 # the queues integrator.py allocates per batch slot: path state, two ray queues, the hit
@@ -53,53 +38,49 @@ def bytes_per_path() -> int:
     return sum(layout.numpy_dtype(f).itemsize for layout in QUEUES for _, f in layout.fields)
 
 
-def host_available() -> int:
-    """MemAvailable of /proc/meminfo (free RAM a new allocation can get), else all RAM."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):
-        return 1 << 62   # unknown: do not refuse
-
-
 def plan(device, num_pixels: int, batch: int, max_memory: int | None = None,
          source: str = "<scene>", key: str = "camera.resolution", aov: bool = False) -> int:
     """The batch cap that fits (<= batch); SceneError when the film itself does not fit.
 
-    max_memory: the bytes the render may use, instead of the estimate of what is free
-    (the device's global memory, and the host's available memory, whichever is smaller;
-    on a CPU device both are the same RAM, so their needs add up)."""
+    max_memory: the bytes the render may use, instead of the estimate of what is free.
+    The estimate: on a CPU device the device's memory is the host's, so the film's device
+    and host parts add up against the device's global memory and the host's budget,
+    whichever is smaller; on a GPU the device part is held against the device's memory
+    and the host part (the read-back) against the host's budget."""
+    if num_pixels < 1:   # OpenCL has no empty buffers (a Scene's data edited after checks)
+        raise SceneError(source, key, f"the film has no pixels ({num_pixels}): the camera's "
+                         "resolution must be at least 1 x 1")
     dev = device.device
-    is_cpu = device.is_cpu
     film_device = num_pixels * (FILM_BYTES_PER_PIXEL + (AOV_BYTES_PER_PIXEL if aov else 0))
     film_host = num_pixels * (HOST_BYTES_PER_PIXEL + (2 * AOV_BYTES_PER_PIXEL if aov else 0))
+    device_memory = Budget(int(dev.global_mem_size), "the device's global memory")
     if max_memory is not None:
-        available = max_memory
+        checks = [(film_device + film_host, Budget(max_memory, "--max-memory"))]
+    elif device.is_cpu:
+        checks = [(film_device + film_host, min(device_memory, memory_budget(),
+                                                key=lambda b: b.bytes))]
     else:
-        available = min(int(dev.global_mem_size), host_available())
+        checks = [(film_device, device_memory), (film_host, memory_budget())]
     per_buffer = int(dev.max_mem_alloc_size)
-    biggest_film_buffer = num_pixels * 3 * 8
-    film = film_device + film_host if is_cpu or max_memory is not None else film_device
-    if film > available or biggest_film_buffer > per_buffer:
-        limit = (f"{gib(available)} available" if film > available else
-                 f"the device allocates at most {gib(per_buffer)} at once")
-        raise SceneError(source, key, f"{num_pixels} pixels need about {gib(film)} for the "
-                         f"film; {limit} (render fewer pixels, or set --max-memory if the "
-                         "estimate is wrong)")
+    for need, budget in checks:
+        if need > budget.bytes:
+            raise SceneError(source, key, f"{num_pixels} pixels need about {gib(need)} for "
+                             f"the film; {gib(budget.bytes)} available, under {budget.limit} "
+                             "(render fewer pixels, or set --max-memory if the estimate is "
+                             "wrong)")
+    if num_pixels * 3 * 8 > per_buffer:      # the film's biggest buffer
+        raise SceneError(source, key, f"{num_pixels} pixels need about {gib(film_device)} "
+                         f"for the film; the device allocates at most {gib(per_buffer)} at "
+                         "once (render fewer pixels)")
+    film, budget = checks[0]    # the queues live where the film's first part does
     per_path = bytes_per_path()
-    room = max(available - film, 0) * QUEUE_SHARE
+    room = max(budget.bytes - film, 0) * QUEUE_SHARE
     fits = int(room // per_path)
     widest = max(layout.numpy_dtype(f).itemsize for layout in QUEUES for _, f in layout.fields)
     fits = min(fits, per_buffer // widest)   # each queue field is one buffer
     if fits < 1:
         raise SceneError(source, key, f"no memory left for even one path after the film "
-                         f"({gib(film)} of {gib(available)})")
+                         f"({gib(film)} of {gib(budget.bytes)})")
     return max(1, min(batch, fits))
 
 

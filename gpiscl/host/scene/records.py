@@ -4,76 +4,28 @@ A resolved scene (`Scene.data`) is plain JSON: every default filled in, every co
 three floats, every direction unit length, every file path absolute. Resolving is
 idempotent, so a written resolved scene loads back to the same data.
 
-To add an object kind, register a Record with SHAPES, LIGHTS or BSDFS (see below);
-the renderer then finds it in `data` under its "type".
+Shapes are registered with SHAPES below; BSDFs and lights are kinds, declared once in
+host/kinds/materials.py and host/kinds/lights.py (docs/extending.md), whose tables hold
+the BSDFS and LIGHTS schemas used here.
 """
 from __future__ import annotations
 
-import math
-
-from .conductors import CONDUCTORS
-from ..io.float_range import array_problem
 from ..io.images import TONEMAPS
 from ..io.meshes import mesh_problem
-from .schema import (Bool, Enum, Field, File, Int, ListOf, Nullable, String, Number, Record,
+from ..kinds.lights import LIGHTS as LIGHT_TABLE
+from ..kinds.materials import MATERIALS
+from ..kinds.values import DIRECTION, NONZERO, VEC3, parallel, rectangle_area
+from ..schema import (Bool, Enum, Field, File, Int, ListOf, Nullable, String, Number, Record,
                      Tagged, Vector, show)
 
-__all__ = ["SHAPES", "LIGHTS", "BSDFS", "ENVIRONMENT_TYPES", "SCENE"]
+__all__ = ["SHAPES", "LIGHTS", "BSDFS", "SCENE"]
 
 
 MAX_BATCH = 1 << 24       # paths: the queues' size at 16M paths is ~3 GiB already
 
 
-# ---- small vector helpers for the cross-field checks (plain Python: no numpy needed)
-
 def _sub(a, b):
     return [x - y for x, y in zip(a, b)]
-
-
-def _cross(a, b):
-    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-
-
-def _parallel(a, b) -> bool:
-    # relative test: |a x b| is |a||b| sin(angle)
-    return math.hypot(*_cross(a, b)) <= 1e-9 * math.hypot(*a) * math.hypot(*b)
-
-
-# ---- value kinds
-
-VEC3 = Vector()
-NONZERO = Vector(nonzero=True)
-DIRECTION = Vector(normalize=True)
-RGB = Vector(broadcast=True, item=Number(ge=0))
-ALBEDO = Vector(broadcast=True, item=Number(ge=0, le=1))
-
-
-def _exr_problem(path):
-    from ..io.images import read_exr_channel_names
-    try:
-        names = read_exr_channel_names(path)
-    except Exception:
-        return "cannot read as an OpenEXR image"
-    missing = [c for c in "RGB" if c not in names]
-    if missing:
-        return (f"EXR image lacks channel(s) {', '.join(missing)} "
-                f"(has: {', '.join(sorted(names)) or 'none'})")
-    # the pixels too: a truncated file has a good header, and radiance must be >= 0 like
-    # a light's radiance in the scene
-    try:
-        from ..io.images import read_exr_rgb
-        rgb = read_exr_rgb(path)
-    except Exception:  # OpenEXR reports damage as several types
-        return "cannot read the pixels of this OpenEXR image (damaged or truncated?)"
-    return array_problem(rgb, "environment map", nonnegative=True)
-
-
-def _envmap_problem(path):
-    """OpenEXR, or Radiance .hdr (the authors' scenes use it)."""
-    if path.lower().endswith(".hdr"):
-        from ..io.radiance_hdr import hdr_problem
-        return hdr_problem(path)
-    return _exr_problem(path)
 
 
 # ---- cross-field rules: each returns None or (key, reason)
@@ -82,14 +34,8 @@ def _camera_frame(c):
     forward = _sub(c["look_at"], c["position"])
     if not any(forward):
         return "look_at", f"must differ from position (both are {show(c['position'])})"
-    if _parallel(forward, c["up"]):
+    if parallel(forward, c["up"]):
         return "up", "must not be parallel to the view direction (look_at - position)"
-    return None
-
-
-def _rectangle_area(r):
-    if _parallel(r["u"], r["v"]):
-        return "v", "must not be parallel to u (the rectangle would have no area)"
     return None
 
 
@@ -128,29 +74,7 @@ RENDER = Record({
     }), {}),
 })
 
-def _eta_k_together(b):
-    if (b["eta"] is None) != (b["k"] is None):
-        return ("k" if b["k"] is None else "eta"), "give both eta and k, or neither"
-    return None
-
-
-# A metal with a rough surface: Beckmann microfacets, D ~ exp(-tan^2(theta_m) / alpha^2)
-# with alpha = `roughness` (the rms slope is alpha / sqrt(2) per axis), the exact unpolarised Fresnel term of the complex index eta + i k (a `material`
-# preset, conductors.py, or explicit RGB eta and k), height-correlated Smith masking;
-# `albedo` multiplies it. Single scattering: energy that would bounce between
-# microfacets is lost (a few percent at roughness 0.5, ~0.1% at 0.1).
-ROUGH_CONDUCTOR = Record({"material": Field(Enum(*CONDUCTORS), "Cu"),
-                          "eta": Field(Nullable(RGB), None),
-                          "k": Field(Nullable(RGB), None),
-                          "roughness": Field(Number(ge=1e-3, le=1.0), 0.1),
-                          "albedo": Field(ALBEDO, 1.0)}, [_eta_k_together])
-
-BSDFS = Tagged("bsdf", {
-    "diffuse": Record({"albedo": Field(ALBEDO, 0.8)}),
-    "mirror": Record({"albedo": Field(ALBEDO, 1.0)}),
-    "rough_conductor": ROUGH_CONDUCTOR,
-    "null": Record({}),  # pass-through, for bounding proxies
-})
+BSDFS = MATERIALS.schema
 DEFAULT_BSDF = {"type": "diffuse", "albedo": [0.8, 0.8, 0.8]}
 
 
@@ -170,7 +94,7 @@ SHAPES.register("sphere", shape({"center": Field(VEC3, [0, 0, 0]),
                                  "radius": Field(Number(gt=0), 1.0)}))
 SHAPES.register("rectangle", shape({"center": Field(VEC3, [0, 0, 0]),
                                     "u": Field(NONZERO, [1, 0, 0]),
-                                    "v": Field(NONZERO, [0, 0, -1])}, [_rectangle_area]))
+                                    "v": Field(NONZERO, [0, 0, -1])}, [rectangle_area]))
 SHAPES.register("box", shape({"min": Field(VEC3), "max": Field(VEC3)}, [box_extent]))
 SHAPES.register("disk", shape({"center": Field(VEC3, [0, 0, 0]),
                                "normal": Field(DIRECTION, [0, 1, 0]),
@@ -178,32 +102,12 @@ SHAPES.register("disk", shape({"center": Field(VEC3, [0, 0, 0]),
 SHAPES.register("mesh", shape({"file": Field(File((".obj", ".ply", ".stl"), mesh_problem)),
                                "transform": Field(TRANSFORM, {})}))
 
-LIGHTS = Tagged("light")
-LIGHTS.register("environment", Record({"radiance": Field(RGB, 1.0)}))
-LIGHTS.register("environment_map", Record({
-    "file": Field(File((".exr", ".hdr"), _envmap_problem)),
-    "scale": Field(Number(ge=0), 1.0),
-    "rotation": Field(Number(), 0.0),  # degrees about +y
-}))
-LIGHTS.register("point", Record({"position": Field(VEC3), "intensity": Field(RGB)}))
-LIGHTS.register("sphere", Record({"center": Field(VEC3), "radius": Field(Number(gt=0)),
-                                  "radiance": Field(RGB)}))
-LIGHTS.register("rectangle", Record({  # emits towards cross(u, v) unless two-sided
-    "center": Field(VEC3), "u": Field(NONZERO), "v": Field(NONZERO),
-    "radiance": Field(RGB), "two_sided": Field(Bool(), False),
-}, checks=[_rectangle_area]))
-LIGHTS.register("directional", Record({
-    "direction": Field(DIRECTION),  # towards the light
-    "irradiance": Field(RGB),
-    "angular_radius": Field(Number(ge=0, lt=90), 0.265),  # degrees; the sun's is 0.265
-}))
+LIGHTS = LIGHT_TABLE.schema
 
 # The renderer has one environment slot (rays that escape the scene look it up).
-ENVIRONMENT_TYPES = {"environment", "environment_map"}
-
-
 def _one_environment(scene):
-    found = [i for i, lt in enumerate(scene["lights"]) if lt["type"] in ENVIRONMENT_TYPES]
+    found = [i for i, lt in enumerate(scene["lights"])
+             if LIGHT_TABLE[lt["type"]].traits["environment"]]
     if len(found) > 1:
         return (f"lights[{found[1]}]", f"at most one environment light per scene "
                                        f"(lights[{found[0]}] is one already)")

@@ -72,7 +72,8 @@ Mapping (../shared/design/REFERENCE-ALGORITHMS.md section 8 describes their form
           "grids" list): read with an OpenVDB binding when
           one imports (vdb.py), else from FILE_STEM.DENSITY_NAME.npz next to the .vdb if
           present (made elsewhere with `python -m gpiscl convert-vdb`); written .npz files
-          go to `grid_dir` (default: next to the .vdb)
+          go to `grid_dir` (default: the scene file's folder; convert_file: the output's),
+          under plain names (a density_name with a / or a leading . is an error)
 
 Everything else (procedural scalar means `f`, a mean's `min` clamp, their radial periodic
 kernel, GGX microfacets, rotated cubes) is an error naming the key path and the reason,
@@ -83,12 +84,15 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import SceneError
-from .schema import kind_of
+from ..io.output_files import write_atomically
+from .loading import load_scene
+from ..schema import kind_of
 from .tungsten_keys import CAMERA, INTEGRATOR, MEDIUM, notes_for
 
 MEMORIES = {"elephant": "global", "goldfish": "renewal_plus", "dori": "renewal", "none": "none"}
@@ -136,15 +140,23 @@ def tungsten_rotation(degrees) -> np.ndarray:
     rx = np.array([[1, 0, 0], [0, c(ax), -s(ax)], [0, s(ax), c(ax)]])
     ry = np.array([[c(ay), 0, -s(ay)], [0, 1, 0], [s(ay), 0, c(ay)]])
     rz = np.array([[c(az), -s(az), 0], [s(az), c(az), 0], [0, 0, 1]])
-    return ry @ rx @ rz
+    m = ry @ rx @ rz
+    # cos(90 deg) is 6e-17, not 0: their [0, 90, 90] quad got a 7.5e-33 component that
+    # float32 cannot hold (an error in a scene the user never wrote); round-off of that
+    # size is zero
+    return np.where(np.abs(m) < 1e-12, 0.0, m)
 
 
 class _Converter:
     def __init__(self, doc: dict, source: str, environment=None, grid_dir=None):
         self.doc, self.source, self.environment = doc, source, environment
         self.base = Path(source).resolve().parent if source != "<dict>" else Path.cwd()
-        self.grid_dir = Path(grid_dir) if grid_dir is not None else None
+        # every derived file goes here, under a plain name (derived_path): a scene's
+        # names never choose a folder
+        self.grid_dir = Path(grid_dir) if grid_dir is not None else self.base
         self.notes: list[str] = []
+        # "shapes[3]" -> "primitives[1]": where in their file a converted entry came from
+        self.origin: dict[str, str] = {}
 
     def fail(self, key: str, reason: str):
         raise SceneError(self.source, key, reason)
@@ -223,7 +235,7 @@ class _Converter:
                   + (" as a micro-BSDF (diffuse or mirror only)" if micro else ""))
 
     def rough_conductor(self, b: dict, key: str) -> dict:
-        from .conductors import CONDUCTORS
+        from ..kinds.conductors import CONDUCTORS
         dist = b.get("distribution", "ggx")
         if dist != "beckmann":
             self.fail(f"{key}.distribution", f'"{dist}" microfacets are not supported '
@@ -370,8 +382,7 @@ class _Converter:
         if not isinstance(spec.get("file"), str):
             self.fail(f"{key}.file", "expected the .vdb file name")
         src = (self.base / spec["file"]).resolve()
-        name = spec.get("density_name", "density")
-        out_dir = self.grid_dir or src.parent
+        name = self.plain_name(spec.get("density_name", "density"), f"{key}.density_name")
         converted = src.parent / f"{src.stem}.{name}.npz"
         if not converted.is_file():
             if not src.is_file():
@@ -380,9 +391,10 @@ class _Converter:
                 self.fail(f"{key}.file", f"{vdb.HOW_TO_GET}; or convert it where one is "
                           f"available (python -m gpiscl convert-vdb {src.name} "
                           f"{converted.name} --grid {name}) and keep the .npz next to the .vdb")
-            converted = out_dir / f"{src.stem}.{name}.npz"
+            converted = self.derived_path(f"{src.stem}.{name}.npz")
             try:
-                vdb.convert_vdb(str(src), str(converted), name)
+                write_atomically(converted, lambda tmp: vdb.convert_vdb(str(src), str(tmp),
+                                                                        name))
             except SceneError as exc:
                 self.fail(f"{key}.density_name", exc.reason)
         if offset == 0.0 and scale == 1.0 and not volume:
@@ -394,9 +406,21 @@ class _Converter:
         values = np.asarray(g.values, np.float64)
         if volume:
             values = -np.log(np.maximum(values, 1e-4))
-        out = out_dir / f"{src.stem}.{name}.{kind}.npz"
-        save_grid(out, type(g)((values + offset) * scale, g.origin, g.voxel_size))
+        out = self.derived_path(f"{src.stem}.{name}.{kind}.npz")
+        mapped = type(g)((values + offset) * scale, g.origin, g.voxel_size)
+        write_atomically(out, lambda tmp: save_grid(tmp, mapped))
         return str(out), spec.get("transform", {})
+
+    def plain_name(self, value, key: str) -> str:
+        """A name that becomes part of a file name: one path component, no traversal."""
+        if not isinstance(value, str) or not value or value.startswith(".") \
+                or any(c in value for c in "/\\\0"):
+            self.fail(key, f"must be a plain name (no '/' or '..'; got {value!r})")
+        return value
+
+    def derived_path(self, name: str) -> Path:
+        """Where a file the conversion writes goes: grid_dir / name (name is plain)."""
+        return self.grid_dir / name
 
     def grid_ref(self, spec, key: str):
         """A grid object given inline or by name from the top-level "grids" list."""
@@ -442,8 +466,10 @@ class _Converter:
                 self.fail(f"{key}.{gkey}.transform", "only a translation of a sigma grid is "
                           "supported")
             g = load_grid(path)
-            path = str(Path(path).with_suffix("")) + ".moved.npz"
-            save_grid(path, type(g)(g.values, tuple(np.asarray(g.origin) + pos), g.voxel_size))
+            moved = type(g)(g.values, tuple(np.asarray(g.origin) + pos), g.voxel_size)
+            path = self.derived_path(Path(path).stem + ".moved.npz")
+            write_atomically(path, lambda tmp: save_grid(tmp, moved))
+            path = str(path)
         from ..io.grids import load_field_grid, problem_of
         problem = problem_of(load_field_grid)(path)
         if problem:
@@ -460,7 +486,9 @@ class _Converter:
                       "band clamps both signs)")
         if not isinstance(m.get("file"), str):
             self.fail(f"{key}.file", "expected the mesh file name")
-        path = (self.base / m["file"]).resolve()
+        # the name the scene gives is checked, and kept (a link stays a link): the
+        # loader checks the same name
+        path = Path(os.path.abspath(self.base / m["file"]))
         if path.suffix.lower() not in MESH_SUFFIXES:
             self.fail(f"{key}.file", f'mesh "{m["file"]}" is not one of '
                       f'{", ".join(MESH_SUFFIXES)}; convert it (e.g. Tungsten .wo3 to .obj)')
@@ -614,8 +642,10 @@ class _Converter:
                 self.fail(f"{pkey}.type", "only brdf phase functions (micro-BSDFs) are supported")
             bsdf = self.bsdf(phase.get("bsdf", {}), f"{pkey}.bsdf", micro=True)
             bsdf["albedo"] = [a * scatter for a in bsdf["albedo"]]
+            # their medium exists only inside its container, so their renderer always cuts
+            # the object at the container's boundary, which is the proxy here
             shapes.append({"type": "gpis", "proxy": proxy, "mean": mean, "kernel": kernel,
-                           "sampler": dict(sampler), "bsdf": bsdf})
+                           "sampler": dict(sampler), "bsdf": bsdf, "clip": True})
         return shapes
 
     def primitive(self, p: dict, key: str, render: dict, shapes: list, lights: list):
@@ -678,11 +708,14 @@ class _Converter:
         ekey = f"{key}.emission"
         if self.environment is not None:
             self.notes.append(f"{ekey}: replaced by the given environment")
+            if self.environment["type"] == "environment_map" and isinstance(emission, str):
+                # a map standing in for their map is turned as theirs is
+                return {**self.environment, "rotation": self.map_rotation(t, key)}
             return self.environment
         if not isinstance(emission, str):
             return {"type": "environment", "radiance": self.colour(emission, ekey)}
         from ..io.radiance_hdr import read_environment_rgb
-        path = (self.base / emission).resolve()
+        path = Path(os.path.abspath(self.base / emission))
         if path.suffix.lower() not in (".exr", ".hdr"):
             self.fail(ekey, f'environment map "{emission}" is neither .exr nor .hdr; convert '
                       "it or pass a substitute environment")
@@ -692,14 +725,18 @@ class _Converter:
             read_environment_rgb(path)
         except (OSError, ValueError) as exc:
             self.fail(ekey, f"{exc}; pass a substitute environment")
-        # their u = atan2(z, x) / 2 pi + 1/2 in the map's frame, whose rotation
-        # (Ry(-y)) turns it by y; ours is phi = atan2(z, x) turned by `rotation`
+        return {"type": "environment_map", "file": str(path),
+                "rotation": self.map_rotation(t, key)}
+
+    def map_rotation(self, t, key: str) -> float:
+        """Our environment map rotation (degrees about +y) for their transform: their
+        u = atan2(z, x) / 2 pi + 1/2 in the map's frame, whose rotation (Ry(-y)) turns it
+        by y; ours is phi = atan2(z, x) turned by `rotation`."""
         _, _, rot = self.transform(t, f"{key}.transform")
         spin = math.degrees(math.atan2(-rot[0, 2], rot[0, 0]))
         if not np.allclose(rot @ [0, 1, 0], [0, 1, 0], atol=1e-9):
             self.fail(f"{key}.transform.rotation", "an environment map turns about y only")
-        return {"type": "environment_map", "file": str(path),
-                "rotation": (spin + 180.0) % 360.0}
+        return (spin + 180.0) % 360.0
 
     def guarded(self, key: str, convert, *args):
         """convert(*args), with a malformed part of the input (a number where an object
@@ -726,7 +763,10 @@ class _Converter:
             self.fail("primitives", f"expected a list (got {kind_of(primitives)})")
         for i, p in enumerate(primitives):
             key = f"primitives[{i}]"
+            first = len(shapes), len(lights)
             self.guarded(key, self.primitive, self.table(p, key), key, render, shapes, lights)
+            self.origin.update({f"shapes[{j}]": key for j in range(first[0], len(shapes))})
+            self.origin.update({f"lights[{j}]": key for j in range(first[1], len(lights))})
         return {"description": f"converted from {Path(self.source).name}",
                 "camera": camera, "render": render, "shapes": shapes, "lights": lights}
 
@@ -734,7 +774,16 @@ class _Converter:
 def convert_tungsten(doc: dict, source: str = "<dict>", environment: dict | None = None,
                      grid_dir=None):
     """gpiscl scene dict and a list of notes on lossy mappings; SceneError if unsupported.
-    grid_dir: where .npz grids converted from VDB grids are written (default: beside
-    their .vdb)."""
+    grid_dir: where the .npz grids it derives from VDB grids are written (default: the
+    scene file's folder). tungsten_convert.convert_file is the whole conversion of a
+    file: checked outputs, nothing written on an error."""
     c = _Converter(doc, source, environment, grid_dir)
-    return c.convert(), c.notes
+    scene = c.convert()
+    try:
+        load_scene(scene)   # strict validation, and its problem said at their key
+    except SceneError as exc:
+        head = exc.key.split(".")[0]
+        origin = c.origin.get(head)
+        raise SceneError(source, origin or "", f"converts to an invalid scene at "
+                         f"{exc.key or 'its top level'}: {exc.reason}") from None
+    return scene, c.notes

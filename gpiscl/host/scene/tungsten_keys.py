@@ -52,3 +52,31 @@ def notes_for(table: dict, block: dict, key: str) -> list[str]:
         if name in block and block[name] != same:
             out.append(f"{key}.{name}: " + text.format(v=block[name]))
     return out
+
+
+# top-level keys of a Tungsten scene that no gpiscl scene has
+TUNGSTEN_TOP_KEYS = ("primitives", "media", "bsdfs", "integrator", "renderer")
+
+
+def tungsten_hint(doc) -> str | None:
+    """The reason to give when a document handed to the scene loader is a Tungsten scene
+    (two or more of their top-level keys and none of ours), else None: `media: unknown
+    key` did not tell a user that the file only needs converting."""
+    if not isinstance(doc, dict) or "shapes" in doc or "lights" in doc:
+        return None
+    found = [k for k in TUNGSTEN_TOP_KEYS if k in doc]
+    if len(found) < 2:
+        return None
+    return (f"this looks like a Tungsten scene (top-level {', '.join(found)}), not a gpiscl "
+            "scene; convert it first: gpiscl convert-tungsten SCENE.json OUT.json")
+
+
+def tungsten_hint_of_text(text: str) -> str | None:
+    """tungsten_hint of a text that is not strict JSON (their files may have trailing
+    commas and comments), read as their renderer reads it."""
+    from ..errors import SceneError
+    from ..io.lenient_json import parse_lenient_json
+    try:
+        return tungsten_hint(parse_lenient_json(text))
+    except SceneError:
+        return None

@@ -32,7 +32,7 @@ inline int trace_bvh(__global const BvhNode* nodes, __global const Primitive* pr
             for (int i = 0; i < node->count; ++i) {
                 int pi = node->left_or_first + i;
                 __global const Primitive* p = &prims[pi];
-                if (any_hit && materials[p->material].kind == MATERIAL_NULL) continue;
+                if (any_hit && MATERIAL_IS_PASS_THROUGH(materials[p->material].kind)) continue;
                 float t = intersect_primitive(p, o, d, tmin, *tmax);
                 if (t < *tmax) {
                     *tmax = t;

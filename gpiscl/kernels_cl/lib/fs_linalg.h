@@ -28,9 +28,6 @@
  * PSD on these points (thin-plate beyond R, a bad parameter) or the input is NaN: it is
  * returned as a status that the caller counts, never patched over.
  */
-#ifndef FS_JITTER
-#define FS_JITTER 1e-10
-#endif
 
 inline int fs_tri(int i) { return i * (i + 1) / 2; }
 

@@ -1,155 +1,40 @@
 /* Function-space free flight: online conditional sampling along a ray with an adaptive
- * step whose chance of skipping a crossing is bounded. Needs fs_sampling.h (the
- * conditioning rows, start conditions, memory models, random numbers and the normal at a
- * hit are defined there); gpiscl/host/gp/function_space.py is its numpy reference.
+ * step whose chance of skipping a crossing is bounded. Needs fs_sampling.h (conditioning
+ * rows, start conditions, memory models, random numbers, the normal at a hit).
+ * Derivations, measurements and rejected options: docs/design/function-space-march.md.
  *
- * Online sampling. Each new value f(t_{i+1}) is drawn from its law given the memory rows
- * (fs_begin: the vertex record or the start value) and the ray's previous samples: one
- * row is appended to the packed factor (fs_factor on one row: k(X, x), a forward solve,
- * the Schur complement, O(n^2)), then fs_sample_row. A window keeps the last FS_WINDOW
- * samples besides the memory rows: when it is full the older half is dropped and the
- * newer half refactored once (amortised O(n^2) per step, n = memory + window). Why 16
- * (so at least 8 kept): the next value's conditional variance given the last 8 samples
- * against 40 (numpy, tools/bench_adaptive_marching.py's docstring has the table): SE at
- * spacing 0.8 l (typical steps) +0.7%, at 1.2 l +3e-6; at 0.5 l +63% but of a variance
- * that is 0.7% of sigma^2 (given 16: +7%); RQ alpha = 1: +2% at 0.3 l, +4e-4 at 0.5 l.
- * Rice's crossing rate with it (tests/test_fs_adaptive.py --long): SE within 0.4% at
- * mu/sigma = 0, 1. The rational quadratic (correlation ~ 1/t^2) counted +0.45 +- 0.15%
- * at mu = sigma with 16, where the adaptive step packs samples near the level and 16
- * span too little ray; it takes 32 (compile/gpis.py sampler_window has the numbers):
- * FsParams.window per object, FS_WINDOW the default. All memory models condition
- * on the window inside a ray; they differ only at a vertex (fs_begin). Segments, their N
- * and the 256 cap are gone.
- *
- * Step rule. Given f(t) >= 0 (the ray is outside), a step to t + h misses a crossing
- * only if the path crosses down and back up inside it, so it needs an up-crossing:
- *   P(miss) <= E[# up-crossings in (t, t + h)] = int_t^{t+h} nu+(s) ds,
- * the expected number by Rice's formula for the non-stationary Gaussian process f given
- * the rows so far. With the conditional moments at s, m = E f, m1 = E f', v = Var f,
- * c = Cov(f, f'), w = Var f' (derivatives per unit length along the ray):
- *   nu+(s) = phi(m / sqrt v) / sqrt v * [g phi(b / g) + b Phi(b / g)],
- *   b = m1 - (c / v) m   (the slope's mean given f(s) = 0),
- *   g^2 = w - c^2 / v    (its variance given f(s) = 0).
- * Inside (after an up-crossing has been seen, or a ray starting inside) the missed event
- * is up-then-down, bounded by the down-crossings: the same with m, m1 -> -m, -m1. The
- * integral is the three-point Gauss-Radau rule with its fixed node at t, where nu(t) = 0
- * because f(t) is a row: h [w0 nu(t + u0 h) + w1 nu(t + u1 h)], u = (6 -+ sqrt 6) / 10,
- * exact for degree 4; the node nearer the end is evaluated first and a try stops as soon
- * as the sum exceeds the bound (2.8-2.9 evaluations a step in the numpy twin). Why two
- * nodes: nu is largest where f is least pinned, toward the step's end, and climbs there
- * steeply when the conditional mean heads for 0; the one-node Radau rule used before,
- * (3h/4) nu(t + 2h/3) (exact for quadratics, ~1.7 evaluations a step), underestimated
- * exactly those steps: on dense realizations at the default tolerance it skipped 2.3e-4
- * crossings per l at mu = 0 (100x the tolerance; 0.13% of the crossings) and 0.84% of
- * them at mu = 2.5 sigma, each inside a step whose end value landed near 0 with the dip
- * in the last third, and the device's Rice count was low by 0.17 +- 0.05% and 1.3 +-
- * 0.4% (the crossing-rate tests' tolerances could not see it). This rule skipped 1 of
- * 10356 at mu = 0 and none of 906 at 2.5 sigma; Simpson's (h/6)(4 nu(h/2) + nu(h)) 4 of
- * 10356, three-point Gauss-Legendre none at 5.6 evaluations a step (numpy twin,
- * tests/test_fs_adaptive.py). A step is
- * accepted when the bound is at most tol h / l_d, i.e. the mean miss rate over the step
- * is at most `miss_tolerance` expected misses per along-ray length scale l_d (SE: l /
- * sqrt(d'Ad); others: the lag of correlation e^-1/2, fs_step with an l(x) field's
- * smallest l on the ray). The first try grows the last step by 2, 1.5 or 1.1 as its
- * bound was below 5%, 30% or 100% of the tolerance (capped at FS_H_MAX l_d and at the
- * ray's end, and at fs_mean_step: the prior mean must not change faster than the node
- * can see; on the knob every step was that cap's, fs_mean_step has the numbers); a
- * rejected try halves (floor FS_H_MIN l_d). fs_markov.h's step predictor (each try aimed at
- * ratio 2^-3 from the first node's z, a and gam) was tried here in the numpy twin (SE,
- * dense paths, mu / sigma = 0, 1, 2, the default tolerance): 2.35-2.45 evaluations a step
- * instead of 2.83-2.87, but 7-13% more steps (it aims below the bound), so evaluations per
- * length fell only 7-10% and steps + evaluations / 2 per length stayed within 1%; targets
- * 2^-1..2^-5 the same; not ported. So a ray's expected misses are
- * at most tol * (its length / l_d), and the crossing rate's relative bias at most
- * tol / (l_d * Rice's rate) = 2 pi tol e^(mu^2 / 2 sigma^2) for SE: the default 2e-6
- * gives <= 0.11% for mu / sigma <= 3 (1e-5, the earlier default, allowed 0.57% there).
- * The bound is small where the mean heads down (a likely crossing is bracketed anyway)
- * and large where f hovers near 0 with an uncertain slope (grazing pairs), which is
- * exactly the event to control.
- * The rule's own system. The moments come from a small system R (fs_rule_build): the
- * FS_RULE_MEMORY memory rows nearest the ray ahead and the ray's last FS_RULE_SAMPLES
- * samples, each later sample appended as one row until R holds 2 FS_RULE_SAMPLES of them
- * (then rebuilt). The value at the accepted end is drawn from the full system (memory +
- * window), so only the step length, never the law of a value, depends on R. Why 4: in
- * the numpy twin (SE, dense realizations, tol 1e-5 and 1e-3, mu / sigma = 0, 1, 2) the
- * steps per length given the last 4 samples are within 1-7% of those given 16, with
- * the same misses (none), while an evaluation costs O(|R|^2) instead of O((memory +
- * window)^2). Cost per step: one row of the full system (the value) and ~2.9 evaluations
- * of R (each a (value, slope) pair: one kernel jet per row of R); steps are ~0.6-0.9 l_d,
- * against 0.46 l_d (c = 0.9) and 0.14 l_d (c = 0.99) for the uniform grid. A row's
- * prior mean, field multipliers and posterior solve are computed once, when it is
- * drawn (fs_row_prep), and travel with it into R, into the slid window and into the
- * next step's mean cap (fs_row_copy, fs_start_mean): before, each sample's mean
- * program and posterior solve ran up to four times (its row, R's append, R's rebuild,
- * the cap at the next step's start) and each slid row's once more.
- * A posteriori bridge check (the issue's second half): not done. A one-node bridge
- * bound (the midpoint given both ends, ends' rates 0) missed 8e-3 crossings per l at
- * tol 1e-3 in the numpy twin (the dip sits near an end where the midpoint cannot see
- * it), so it would need 2-3 nodes per step on top of the up-front rule's.
- * FsParams.step_corr > 0 replaces the rule by the fixed step of fs_step (correlation c
- * between neighbours, first step u dt, u uniform in (0, 1]): the old uniform grid, kept
- * as the benchmarks' baseline only (scenes cannot select it).
- *
- * Hit. The first sample f < 0 after f >= 0 brackets the crossing. The root search draws
- * points in the bracket, each conditioned on everything, until the bracket is below
- * FS_ROOT_WIDTH = 1e-2 l_d (and at least `refine` of them), so the linear root is off by
- * ~1e-5 sigma, the jitter's size, and every `refine` gives the same laws (refine only
- * adds points). Each point is chosen from values already drawn (fs_root_point: the
- * bracket's regula falsi point, moved FS_ROOT_OFFSET = 0.45 root widths toward the
- * midpoint, projected as ITP does so that no bracket needs more than bisection's count
- * plus FS_ROOT_SLACK = 2), and the value there is drawn from its exact conditional, so
- * the law of the values is the GP's at whatever points are chosen: the choice changes
- * the cost, not the law. Points per hit from a 0.45 l_d bracket (numpy twin, SE,
- * conditional draws): bisection 6.0, this 2.8 / 3.0 / 3.3 at mu / sigma = 0 / 1 / 2
- * (regula falsi without the offset stalls at one end; offset 0.25 / 0.6 widths, inverse
- * quadratic interpolation or ITP's own w^2 offset took 0.0-0.5 more). On the device
- * (tools/bench_free_flight.py, fresh rays, SE): 2.9 / 3.1 / 3.3 / 3.6 per hit at mu /
- * sigma = 0 / 1 / 2 / 3 after adaptive steps, 2.2 after the 0.14 l_d steps of the
- * uniform 0.99 grid, where bisection took 6 (the old default refine) or 5.5 (refine 0).
- * The slope along the ray at x_h is drawn from its exact law at a
- * down-crossing given all rows and f(x_h) = 0: s < 0 with density |s| N(s; b, g^2)
- * (Kac-Rice: crossings are met in proportion to |f'|), by inverting its CDF
- * (fs_downcrossing_slope). Negative by construction, so no normal faces away under any
- * memory model. Why the narrow bracket: at a wide one (refine 0-2 alone) the linear root
- * is off by O(width^2 f''), and conditioning the slope on f = 0 there biased it (E[-s]
- * +8-25% at refine 2, measured); sampling the root's location from the conditional
- * crossing density on a fixed grid of cells did worse where the density peaks at a
- * bracket end (f(ta) ~ 0). The old secant slope's jitter noise (tilted normals at
- * refine >= 12) is gone too: s is drawn from the jittered model's own conditional.
- * The tangential components follow given f(x_h) = 0 and s (fs_sampling.h's closed form
- * for isotropic kernels without a posterior or global memory, else two appended rows);
- * their law given s (mean and 2x2 factor, the appended rows' before they are drawn) is
- * returned with the hit (FsResult.law_*): the normal's density, fs_normal_pdf.h.
- * The global ring keeps this ray's rows: values, bisection points, f(x_h) = 0, s and the
- * tangential components.
- *
- * Random numbers: the step index takes fs_uniform2's segment field (16 bits, hence
- * FS_MAX_STEPS; a ray needing more is counted as failed): block 0 the value at the
- * step, the bisection and normal slots of fs_sampling.h at the hit's step, FS_U_SLOPE
- * its slope. */
-#ifndef FS_WINDOW
-#define FS_WINDOW 16
-#endif
+ * Contract of fs_free_flight:
+ *  - Values. Each sample f(t_i) is drawn from its exact law given the memory rows and the
+ *    ray's last FS_WINDOW (per object: FsParams.window) samples, so the law of every value
+ *    is the GP's at whatever points the march chooses.
+ *  - Step rule. A step from t to t + h is accepted when the expected number of crossings
+ *    it could skip, Rice's up- (outside) or down-crossing (inside) rate of the conditional
+ *    process integrated by the three-point Gauss-Radau rule (fixed node at t, nu(t) = 0),
+ *    is at most miss_tolerance * h / l_d. Hence a ray's expected misses are at most
+ *    tol * length / l_d. Steps grow by 2, 1.5 or 1.1, are capped at FS_H_MAX l_d, at the
+ *    ray's end and at fs_mean_step (the prior mean must not change faster than the nodes
+ *    see), and halve on rejection down to FS_H_MIN l_d. The rule's moments come from a
+ *    small system (FS_RULE_MEMORY memory rows, the last FS_RULE_SAMPLES samples): only
+ *    the step length, never a value's law, depends on it.
+ *  - Hit. The first sample below 0 after one at or above 0 brackets the crossing; points
+ *    drawn in the bracket from their exact conditionals (regula falsi moved toward the
+ *    midpoint, at most bisection's count + FS_ROOT_SLACK) narrow it below FS_ROOT_WIDTH
+ *    l_d and at least `refine` times; the slope along the ray is drawn from its Kac-Rice
+ *    down-crossing law (negative: no normal faces away), the tangential components from
+ *    their conditional law, returned with the hit for fs_normal_pdf.h.
+ *  - FsParams.step_corr > 0 replaces the rule by the uniform step of fs_step (the
+ *    benchmarks' baseline; scenes cannot select it).
+ *  - Random numbers: the step index is fs_uniform2's segment (16 bits, hence
+ *    FS_MAX_STEPS; a longer ray is counted as failed); fixed slots per draw. */
 #define FS_MAX_STEPS 65535
-#ifndef FS_H_MAX
-#define FS_H_MAX 2.0               /* l_d */
-#endif
 #ifndef FS_MEAN_KAPPA
 #define FS_MEAN_KAPPA 6.0          /* fs_mean_step */
 #endif
 #define FS_MEAN_Z 6.0
 #define FS_MEAN_HOPS 8             /* fs_mean_step */
-/* the three-point Gauss-Radau rule on [0, 1] with its fixed node at 0 (where nu = 0, so
- * its weight 1/9 drops out) and free nodes (6 -+ sqrt 6) / 10: exact for degree 4, two
- * evaluations per accepted try; the node nearer the end first, so that most rejected
- * tries stop after one (see "Step rule") */
-#define FS_RULE_NODE0 0.8449489742783178   /* (6 + sqrt 6) / 10 */
-#define FS_RULE_WEIGHT0 0.37640306270046727  /* (16 - sqrt 6) / 36 */
-#define FS_RULE_NODE1 0.3550510257216822   /* (6 - sqrt 6) / 10 */
-#define FS_RULE_WEIGHT1 0.5124858261884216   /* (16 + sqrt 6) / 36 */
-#define FS_H_MIN 1e-3              /* l_d: a floor for degenerate starts (f = 0 exactly) */
-#define FS_ELL_CORR 0.6065306597126334   /* e^-1/2: SE's lag is exactly l / sqrt(d'Ad) */
-#define FS_U_SLOPE 1100
+/* FS_WINDOW, FS_H_MAX, FS_H_MIN, FS_ELL_CORR and the step rule's Gauss-Radau quadrature
+ * FS_RULE_NODE* / FS_RULE_WEIGHT* (the node nearer the end first, so that most rejected
+ * tries stop after one, see "Step rule"): layout/constants.py */
 
 typedef struct { double m, m1, s, r, g; } FsMoments;   /* v = s^2, c = r s, g as above */
 
@@ -602,7 +487,7 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
     /* (q1, q2) = m + L z with the 2x2 lower factor L = [[l11, 0], [l21, l22]] of their
      * covariance given s: res.law_* keeps (m, L) for the normal's density */
     double q1, q2, m1, m2, l11, l21, l22;
-    if (fs_isotropic_radial(p) && !S.post.n && prm.memory != GPIS_MEMORY_GLOBAL) {
+    if (fs_isotropic_radial(p) && !S.post.n && fs_memory_markov_ok(prm)) {
         /* every row on the ray: d_T f(x_h) is independent of them (fs_sampling.h) */
         m1 = fs_prior_mean(mean, mc, x, T, FS_OBS_DERIV);
         m2 = fs_prior_mean(mean, mc, x, B, FS_OBS_DERIV);

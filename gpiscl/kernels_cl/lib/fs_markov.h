@@ -1,101 +1,27 @@
 /* Function-space free flight for Matern 3/2 and 5/2 by the exact state-space (Markov)
  * form of the process along the ray: O(1) work per sample, no Cholesky of ray rows, no
- * window. Needs fs_sampling.h (start conditions, random numbers, fs_frame) and fs_march.h
- * (fs_return_rate, fs_downcrossing_slope, FsMoments, the step-rule constants); its
- * entry fs_markov_free_flight returns what fs_free_flight returns, and fs_objects.h
- * dispatches to it where fs_markov_applies (below). Everything else (SE, RQ, ...,
- * sigma(x) or l(x) fields, posteriors, global memory, the uniform baseline step) keeps
- * the general conditional sampler of fs_march.h: global memory and posteriors condition
- * on rows off the ray, which breaks the ray's Markov property, and fields make the
- * process along the ray non-stationary.
+ * window. Needs fs_sampling.h and fs_march.h (fs_return_rate, fs_downcrossing_slope,
+ * FsMoments, the step-rule constants). fs_markov_free_flight returns what fs_free_flight
+ * returns; fs_objects.h dispatches to it where fs_markov_applies: stationary Matern
+ * priors without fields, posteriors or global memory (those condition on rows off the ray
+ * or make the process non-stationary, and keep fs_march.h's sampler).
+ * Derivation, costs and rejected options: docs/design/markov-sampler.md.
  *
- * Why it is exact. A stationary Matern-(p + 1/2) kernel k(r) = k1(sqrt(r'Ar)) restricted
- * to the line x + u dn (u world length, |dn| = 1) is the 1-D Matern k1 with
- * lambda = sqrt(2 nu) sqrt(dn'A dn) / l (anisotropy included), the stationary solution of
- * (D + lambda)^(p+1) Y = white noise of intensity q = sigma^2 (2 lambda)^(2p+1) (p!)^2 /
- * (2p)!. Its state x = (Y, Y', .., Y^(p)) (derivatives along dn per world length) is
- * Markov: given x(u), the state at u + h is N(A(h) x(u), Q(h)) with
- *   A(h) = e^(F h) = e^(-lambda h) (I + h N + h^2 N^2 / 2),  N = F + lambda I nilpotent
- *          (F: the companion matrix of (D + lambda)^(p+1)),
- *   Q(h) = q int_0^h g(s) g(s)' ds,  g(s) = e^(F s) e_p = e^(-lambda s) G(s),
- * G_0 = s^p / p!, G_{i+1} = G_i' - lambda G_i (the impulse response and its derivatives),
- * so Q_ij = q sum_k c_ijk k! / (2 lambda)^(k+1) P(k + 1, 2 lambda h) with P the
- * regularised incomplete gamma. P(2p + 1, x) is summed as e^-x sum_{j > 2p} x^j / j! below
- * x = 1 and the other P(k + 1, x) differ from it by closed-form terms (fs_mk_transition):
- * the textbook Q = P_inf - A P_inf A' cancels to O(h^(2p+1)) (5/2 at 1e-3 l_d: Q_00 ~
- * 1e-14 sigma^2, ~14 of 16 digits lost), the series has no cancellation (Q's leading
- * terms in h all have positive coefficients). Double throughout: Q(h)'s entries span
- * h^(2p+1)..h, and bridges at 1e-2 l_d invert them (condition ~h^-2p); the Cholesky
- * factors of these diagonally graded matrices keep their relative accuracy.
- * tests/test_fs_markov.py checks A and Q against the kernel's derivative covariances.
- * The residual Y = f - mu is this process exactly because the prior is stationary; the
- * prior mean mu(x) and its slope along dn are added back at every node (gp_mean_eval).
- *
- * Start (the same law as fs_begin, whose draws it uses): a fresh ray conditions on
- * f(x0) = v0 (truncated to >= 0), then draws the rest of the state from the stationary
- * law given Y(x0) (Y' independent of Y; 5/2: Y'' | Y ~ N(-lambda^2 Y / 3, 8/9 sigma^2
- * lambda^4)); renewal: f(x0) = 0 and fs_begin's truncated slope; renewal_plus: f(x0) = 0 and
- * the vertex gradient's slope, exact for 3/2, with Y'' drawn as above for 5/2 (cov(Y',
- * Y'') = 0 in P_inf, so Y'' depends on Y alone).
- *
- * Step rule: fs_march.h's, with the conditional moments of (f, f') at ta + h in closed
- * form, m = mu + (A x)_0, m1 = mu' + (A x)_1, (v, c, w) = Q_00, Q_01, Q_11: O(1) per
- * evaluation (fs_mk_rule_ratio: fs_return_rate's decision at ratio 1, erfc only near it).
- * Same acceptance (ratio <= 1, or h at FS_H_MIN), FS_H_MAX, FS_H_MIN, fs_mean_step's cap
- * (sd = sigma), l_d = the lag of correlation e^-1/2 (FS_MK_ELL: lambda l_d, closed form).
- * The proposals differ: fs_march.h grows the last step by 2, 1.5 or 1.1 and halves a
- * rejected try, which near a crossing (ratio ~ h^12 there) overshot after every halving
- * and was rejected again (2.06 tries a step). Here fs_mk_predict aims each try at ratio
- * 2^FS_MK_TARGET from the last try's X = z^2 + a^2 [a < 0] (log r ~ -X / 2) and the
- * state's value and slope (a rejected try: the same state; the next step: the new one),
- * in float with bit-read log2 / exp2 (its latency is on every step's chain). Laws are
- * unchanged (each accepted step has ratio <= 1, the same miss bound); the step sequence,
- * hence the random numbers' use, is not bit-identical to the fixed factors'. Counts per
- * 40 l ray (mean 0, renewal_plus, refine 0; tests/test_fs_markov.py), fixed
- * factors -> predictor: Matern 3/2 279 samples and 544 evaluations -> 251 and 350 (1.39
- * evaluations a sample, 43% of first tries rejected), 5/2 108 and 161 -> 103 and 110.
- * The floor of that (one-node) rule: the largest accepted step found by bisection at every
- * step (an oracle, its evaluations not counted) takes 199 / 87 samples, so 175 / 58 steps.
- * With the two-node Gauss-Radau rule (both nodes on every accepted try, so at least 2
- * evaluations a step; shorter steps, as the one-node rule undercounted the rate):
- * 303 samples and 723 evaluations (2.38 a sample), 5/2 120 and 241 (2.02).
- * Tried and dropped with the one-node rule (counts of evaluations + samples per ray, 3/2 /
- * 5/2; fixed factors 820 / 269, this 602 / 213): log-linear extrapolation with the secant's exponent (817 /
- * 286) or with the exact d log r / d log h (the derivative of every term, 790 / 289:
- * log r is far from linear in log h); z^2 alone instead of X (667 / 233); a leading-
- * order model of z and a separately (584 / 214, the same time); the next step from the
- * new state's conditional mean before its draw, to overlap the draw's latency (663 / 227,
- * no faster); growth up to 4 (608 / 228), targets 2^0..2^-4 (598-613 / 213-214); two
- * tries at once (h and 0.6 h, independent chains for the core to overlap: 791 / 267,
- * 13-18% slower a ray, so the evaluations are not latency alone).
- *
- * Cost (tools/bench_markov.py; Matern 3/2, mean 0, 40 l rays continued through every hit,
- * per ray: 12 flights, 11 hits, ~235 steps, 350 rule evaluations, ~17 root points at
- * refine 0; perf): the rule evaluations (the node's transition and the rate bracket) and
- * the steps' transitions ~30%, the predictor and the loop ~16%, state draws ~20%
- * (Box-Muller's log ~6%), the hits' bridges, slope laws and draws ~8%: latency-bound
- * scalar code, so the predictor's 35% fewer evaluations gave only -1..+11% (median ~5%)
- * more length a second (same-run medians under load; tools/bench_markov.py's docstring).
- *
- * Hit: between a state with f >= 0 and one with f < 0, bisection by exact bridge
- * sampling (the midpoint's state given both end states, fs_mk_bridge: precision
- * Q1^-1 + A2' Q2^-1 A2, a sum of positive definite terms, so no cancellation) down to
- * FS_ROOT_WIDTH l_d and at least `refine` times; the linear root x_h; the state at x_h
- * given both ends and f(x_h) = 0 gives the slope's Gaussian (b, g^2), and the slope is
- * drawn from its down-crossing law (fs_downcrossing_slope). Tangential components: in a
- * frame T, B with T'A dn = B'A dn = T'AB = 0 (orthonormal in the metric A), d_T f and d_B f
- * are uncorrelated with every value and derivative on the ray (cov(d_T f(x), f(x + u dn))
- * = -2 k'(s) u T'A dn = 0), and with each other, so they are N(d_T mu, -2k'(0) T'AT)
- * exactly, anisotropic kernels included; the gradient is the dual-basis combination of
- * (slope, d_T f, d_B f). Isotropic: T, B are fs_frame's scaled, the same draws as fs_march.h.
- * The vertex record is fs_vertex_at_hit's (position, gradient), which is what the
- * renewal / renewal_plus start above reads.
- *
- * Random numbers: fs_march.h's segments (the step index) and blocks: slots 0..p the
- * state noise of a step, FS_SLOT_REFINE + 2k + j (3/2) or 4k + j (5/2) bisection k (at
- * most 33 or 16: a 2 l_d step needs 8), FS_SLOT_NORMAL and
- * FS_U_SLOPE at the hit's step; the start's free components FS_MK_SLOT_START + j. */
-#define FS_MK_SLOT_START 600
+ * Contract:
+ *  - Exact. The kernel restricted to the ray is the 1-D Matern with lambda = sqrt(2 nu)
+ *    sqrt(dn'A dn) / l; its state (Y, Y', .., Y^(p)) is Markov with transition
+ *    N(A(h) x, Q(h)), A(h) = e^(Fh) in closed form and Q(h) summed as a series without
+ *    cancellation (fs_mk_transition), in double: Q's entries span h^(2p+1)..h and bridges
+ *    at 1e-2 l_d invert them. The prior mean and its slope are added back at every node.
+ *  - Start: the same law as fs_begin, from its draws.
+ *  - Step rule: fs_march.h's bound with the moments in closed form; each try is aimed at
+ *    ratio 2^FS_MK_TARGET by fs_mk_predict (laws unchanged: every accepted step has
+ *    ratio <= 1).
+ *  - Hit: bisection by exact bridge sampling down to FS_ROOT_WIDTH l_d (and `refine`
+ *    times), the slope from its down-crossing law, tangential components exact in the
+ *    metric-orthonormal frame (uncorrelated with everything on the ray).
+ *  - Random numbers: fs_march.h's segments; slots 0..p the state noise of a step, the
+ *    bisection, normal, slope and start slots of the slot plan (FS_SLOT_*). */
 #define FS_MK_ELL32 1.3576766739458992   /* (1 + x) e^-x = e^-1/2 */
 #define FS_MK_ELL52 1.9262524514893138   /* (1 + x + x^2 / 3) e^-x = e^-1/2 */
 #define FS_MK_ROOT_CLAMP 1e-9            /* the root's fraction of the bracket, see fs_mk_hit */
@@ -116,16 +42,15 @@ typedef struct {
 
 inline int fs_markov_applies(GpKernel p, FsParams prm, FsScratch S)
 {
-    return (p.kind == GP_KERNEL_MATERN32 || p.kind == GP_KERNEL_MATERN52)
+    return GP_KERNEL_MARKOV_ORDER(p.kind) > 0
         && !gp_kernel_nonstationary(p) && !S.post.n && !(prm.step_corr > 0.0)
-        && (prm.memory == GPIS_MEMORY_NONE || prm.memory == GPIS_MEMORY_RENEWAL
-            || prm.memory == GPIS_MEMORY_RENEWAL_PLUS);
+        && fs_memory_markov_ok(prm);
 }
 
 inline FsMarkov fs_markov_of(GpKernel p, double3 dn)
 {
     FsMarkov m;
-    int five = p.kind == GP_KERNEL_MATERN52;
+    int five = GP_KERNEL_MARKOV_ORDER(p.kind) == 2;
     m.n = five ? 3 : 2;
     m.lam = (five ? 2.23606797749979 : 1.7320508075688772) / (double)p.length_scale
           * sqrt(dot(gp_aniso(p) * dn, dn));
@@ -531,8 +456,7 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
     double fa, x[3], xb[3], mu1;
     int outside, n_old;
     fs_begin(p, mean, mc, prm, ray, v, 0, rng, S, &fa, &outside, &n_old);
-    int with_slope = v.valid && (prm.memory == GPIS_MEMORY_RENEWAL
-                                 || prm.memory == GPIS_MEMORY_RENEWAL_PLUS);
+    int with_slope = v.valid && GPIS_MEMORY_IS_RENEWS(prm.memory);
     double mu = fs_mk_mean(mean, mc, ray, dn, ray.t0, &mu1);
     x[0] = fa - mu;
     if (with_slope) x[1] = S.rows[1].value - mu1;
@@ -625,7 +549,7 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
     /* the root search (fs_march.h's fs_root_point: points chosen from values already
      * drawn) by bridge draws in (ta, tb]: x is the state at ta, xb at tb */
     /* an even number of slots per point (fs_mk_normals pairs them): 2 or 4 */
-    int stride = (m.n + 1) & ~1, kmax = (FS_SLOT_NORMAL - FS_SLOT_REFINE) / stride;
+    int stride = (m.n + 1) & ~1, kmax = FS_SLOT_REFINE_COUNT / stride;
     double width = FS_ROOT_WIDTH * ell;
     int budget = fs_root_budget(tb - ta, width);
     for (int k = 0; (k < prm.refine || tb - ta > width) && k < kmax; ++k) {

@@ -94,7 +94,7 @@ inline float3 fs_implied_gradient(FsNormalLaw L, float3 d, float3 h)
 /* --- Rough conductor at a function-space hit ------------------------------------------
  * The direct light at the vertex is the double integral over the GPIS normal n and the
  * light direction l of F(n, l) = p_Omega(n) fcos(n; v, l) Le(l) V(l | g(n)), with fcos the
- * Beckmann conductor of bsdf.h about n (Fresnel at the microfacet half vector
+ * Beckmann conductor of bsdf/rough_conductor.h about n (Fresnel at the microfacet half vector
  * m = normalize(v + l), not at n). The density of the whole direction, the convolution
  * of p_Omega with the conductor's lobe, has no closed form, so the strategies work on
  * pairs (n, l), where every density is closed:
@@ -124,7 +124,7 @@ inline float fs_lobe_normal_pdf(float3 n, float3 h, float alpha)
     return c > 0.0f ? beckmann_d(c, alpha) * c : 0.0f;
 }
 
-/* n ~ q(. | l) about h from two uniforms (the microfacet sampling of bsdf.h) */
+/* n ~ q(. | l) about h from two uniforms (the microfacet sampling of bsdf/rough_conductor.h) */
 inline float3 fs_lobe_normal_sample(float3 h, float alpha, float2 u)
 {
     float tan2 = -alpha * alpha * log(1.0f - u.x), phi = 2.0f * PI_F * u.y;

@@ -5,7 +5,6 @@
  * header: kind FS_POSTERIOR_KIND (no mean or field kind), flags = raw records before it,
  * p0.x = n. The record before a program without a posterior is the previous program's
  * last node (a mean kind), so the test below never misfires. */
-#define FS_POSTERIOR_KIND 48
 
 inline FsPost fs_posterior_of(__global const MeanNode* means, int mean_first)
 {

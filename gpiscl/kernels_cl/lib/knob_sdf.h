@@ -78,10 +78,7 @@ inline double knob0(double3 p, int outer)
     return fmin(knob_ssub(S, knob_base(p - (double3)(0.0, -0.775, 0.0)), 0.1), d);
 }
 
-/* knob.FUNCTIONS by index (KNOB_FUNCTION_* of the host's device_bakes.py) */
-#define KNOB_FUNCTION_KNOB 0
-#define KNOB_FUNCTION_KNOB_INNER 1
-#define KNOB_FUNCTION_KNOB_OUTER 2
+/* knob.FUNCTIONS by index: KNOB_FUNCTION_* of layout/constants.py */
 
 inline double knob_function(int which, double3 p)
 {

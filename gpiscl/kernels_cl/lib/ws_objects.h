@@ -11,9 +11,7 @@ typedef struct {
     int tags_per_path, doubles_per_path;
 } WsPostCache;
 
-/* The cache as stage kernel parameters, and the struct made of them */
-#define WS_POST_CACHE_PARAMS __global uint4* post_tags, __global double* post_values, \
-    __global const int2* post_table, int post_tags_per_path, int post_doubles_per_path
+/* The struct made of the cache's stage kernel parameters (layout/stages.py WS_POST_CACHE) */
 #define WS_POST_CACHE {post_tags, post_values, post_table, post_tags_per_path, \
     post_doubles_per_path}
 

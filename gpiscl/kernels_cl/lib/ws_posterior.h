@@ -46,11 +46,7 @@
  * intervals around roots, the cone long ones near observations.
  * Other kernels are rejected by the scene schema (scene/observations.observations_problem).
  */
-#define WS_POSTERIOR_KIND 48       /* FS_POSTERIOR_KIND, compile/posterior.POSTERIOR_KIND */
-#define WS_CALL_NOISE 26u          /* after the WS_GAMMA_CALLS calls from WS_CALL_GAMMA */
-#ifndef WS_POST_MAX
-#define WS_POST_MAX 512            /* scene/observations.WS_MAX_ROWS */
-#endif
+/* WS_POSTERIOR_KIND, WS_CALL_NOISE, WS_POST_MAX: layout/constants.py */
 
 typedef struct {
     __global const double* rows;

@@ -1,10 +1,7 @@
 /* From: the finished paths of a batch.  To: the film. One work-item per pixel adds its
  * paths in sample order, in double, so the image does not depend on batch size.
  * Non-finite path radiance is counted (COUNT_NAN_PATHS) and recorded as zero. */
-__kernel void accumulate(__constant RenderParams* params, PATH_PARAMS(path),
-                         __global int* counters, __global double* film_sum,
-                         __global double* film_sum_sq, __global double* film_count,
-                         __global double* film_aov)
+__kernel void accumulate(ACCUMULATE_PARAMS)
 {
     int pixel = get_global_id(0);
     if (pixel >= params->num_pixels) return;

@@ -8,8 +8,7 @@
  * the corner; summed x, y, z in double as numpy does). The host takes sqrt(.) / h, which
  * commutes with the maximum (both are monotone and correctly rounded), so the brick bounds
  * and the grid's largest equal numpy's bit for bit. */
-__kernel void bake_grid_slopes(int nx, int ny, int nz, int brick, __global const double* v,
-                               __global double* brick_c2)
+__kernel void bake_grid_slopes(BAKE_GRID_SLOPES_PARAMS)
 {
     int cx = nx - 1, cy = ny - 1, cz = nz - 1;
     int bx = (cx + brick - 1) / brick, by = (cy + brick - 1) / brick,

@@ -3,9 +3,7 @@
 #pragma OPENCL FP_CONTRACT OFF
 
 /* values[(i ny + j) nz + k] = function(ax[i], ay[j], az[k]) rounded to float32. */
-__kernel void bake_procedural(int which, int nx, int ny, int nz, __global const double* ax,
-                              __global const double* ay, __global const double* az,
-                              __global float* values)
+__kernel void bake_procedural(BAKE_PROCEDURAL_PARAMS)
 {
     int id = get_global_id(0);
     if (id >= nx * ny * nz) return;

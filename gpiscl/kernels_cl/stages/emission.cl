@@ -1,11 +1,8 @@
 /* From: hit queue.  To: radiance emitted by area lights that rays hit, weighted by MIS
  * against light sampling from the previous vertex (path_prev_pos.w: the BSDF sample's
- * density, 0 for a delta; a function-space mirror has one, fs_normal_pdf.h), and by GPIS
+ * density, 0 for a delta; a function-space mirror has one, fs_random_normal.h), and by GPIS
  * emission fields where rays meet a realization (never light-sampled, so with weight 1). */
-__kernel void emission(__constant RenderParams* params, PATH_PARAMS(path), RAY_PARAMS(in),
-                       INDEX_PARAMS(hits), __global int* counters,
-                       __global const Primitive* prims, __global const Light* lights,
-                       __global const GpisObject* gpis, __global const MeanNode* mean_nodes)
+__kernel void emission(EMISSION_PARAMS)
 {
     int i = get_global_id(0);
     if (i >= counters[COUNT_HITS]) return;
@@ -29,10 +26,10 @@ __kernel void emission(__constant RenderParams* params, PATH_PARAMS(path), RAY_P
     float3 x = o + in_hit_t[r] * d;
     float4 prev = path_prev_pos[p];
     float pdf_light;
-    float3 Le = area_light_radiance(&lights[prim->light], prev.xyz, x,
-                                    primitive_normal(prim, x), d, &pdf_light);
-    /* after a function-space rough conductor the light strategy's density is that of
-     * its (normal, light) pairs (fs_normal_pdf.h) */
+    float3 Le = light_area_radiance(lights[prim->light].kind, &lights[prim->light], prev.xyz,
+                                    x, primitive_normal(prim, x), d, &pdf_light);
+    /* after a random-normal pairs vertex (fs_random_normal.h) the light strategy's
+     * density is that of its (normal, light) pairs (fs_normal_pdf.h) */
     float w = (prev.w > 0.0f && params->nee)
                   ? power_heuristic(prev.w, fs_conductor_light_pdf(
                         pdf_light / params->num_lights, path_prev_n[p], path_prev_v[p], d))

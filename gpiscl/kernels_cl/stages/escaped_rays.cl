@@ -1,10 +1,6 @@
 /* From: escaped queue.  To: radiance of the lights at infinity added to each path,
  * weighted by MIS against light sampling. The path ends here. */
-__kernel void escaped_rays(__constant RenderParams* params, PATH_PARAMS(path),
-                           RAY_PARAMS(in), INDEX_PARAMS(escaped), __global int* counters,
-                           __global const Light* lights, __global const float4* env_texels,
-                           __global const float* env_marginal,
-                           __global const float* env_conditional)
+__kernel void escaped_rays(ESCAPED_RAYS_PARAMS)
 {
     int i = get_global_id(0);
     if (i >= counters[COUNT_ESCAPED]) return;
@@ -17,11 +13,11 @@ __kernel void escaped_rays(__constant RenderParams* params, PATH_PARAMS(path),
     float3 L = (float3)(0.0f);
     for (int k = 0; k < params->num_lights; ++k) {
         float pdf_light;
-        float3 Le = infinite_light_radiance(&lights[k], m, d, &pdf_light);
-        /* a function-space mirror leaves environments to BSDF sampling (scatter.cl); a
-         * function-space rough conductor's light strategy samples pairs (normal, light)
-         * (fs_normal_pdf.h) */
-        int env = lights[k].kind == LIGHT_ENVIRONMENT || lights[k].kind == LIGHT_ENVIRONMENT_MAP;
+        float3 Le = light_radiance(lights[k].kind, &lights[k], m, d, &pdf_light);
+        /* a vertex may leave environments to BSDF sampling (path_prev_env_nee,
+         * fs_random_normal.h); after a random-normal pairs vertex the light strategy
+         * samples pairs (normal, light) (fs_normal_pdf.h) */
+        int env = LIGHT_IS_ENVIRONMENT(lights[k].kind);
         float w = (pdf_bsdf > 0.0f && params->nee && (path_prev_env_nee[p] || !env))
                       ? power_heuristic(pdf_bsdf, fs_conductor_light_pdf(
                             pdf_light / params->num_lights, path_prev_n[p], path_prev_v[p], d))

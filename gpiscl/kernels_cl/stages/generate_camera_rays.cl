@@ -1,9 +1,7 @@
 /* From: a batch of path ids.  To: one camera ray per path in ray queue `out`,
  * fresh path state. Path id i of the batch is (sample, pixel) = divmod(path_base + i,
  * num_pixels) offset by sample_base. */
-__kernel void generate_camera_rays(__constant RenderParams* params,
-                                   __constant Camera* camera,
-                                   PATH_PARAMS(path), RAY_PARAMS(out))
+__kernel void generate_camera_rays(GENERATE_CAMERA_RAYS_PARAMS)
 {
     int i = get_global_id(0);
     if (i >= params->num_paths) return;

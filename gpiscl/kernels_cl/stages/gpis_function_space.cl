@@ -13,19 +13,12 @@
  * Scratch: two slices per work item, so that the winning object's rows survive while
  * later objects on the same ray are sampled (the global model copies them into the
  * ring). The host launches a fixed number of work items that stride over the rays
- * [0, n), so the scratch is sized to the items launched, not to the batch; random numbers
- * are keyed by pixel, sample, bounce and dimension, never by the item (rng.h). */
-__kernel void gpis_function_space(__constant RenderParams* params, int n,
-                                  PATH_PARAMS(path), RAY_PARAMS(in),
-                                  __global const GpisObject* gpis,
-                                  __global const GpKernel* kernels,
-                                  __global const MeanNode* means,
-                                  __global FsVertex* vertex, __global int* vertex_object,
-                                  __global FsObs* rings, int ring_stride,
-                                  __global double* scratch, __global int* counters)
+ * [0, num_rays), so the scratch is sized to the items launched, not to the batch; random
+ * numbers are keyed by pixel, sample, bounce and dimension, never by the item (rng.h). */
+__kernel void gpis_function_space(GPIS_FUNCTION_SPACE_PARAMS)
 {
     int item = get_global_id(0);
-    for (int i = item; i < n; i += get_global_size(0)) {
+    for (int i = item; i < num_rays; i += get_global_size(0)) {
         float4 o = in_o[i], d = in_d[i];
         int p = in_path[i];
         int vk = params->bounce == 0 ? -1 : vertex_object[p];
@@ -39,7 +32,7 @@ __kernel void gpis_function_space(__constant RenderParams* params, int n,
         for (int k = 0; k < params->num_gpis; ++k) {
             FsRay r;
             FsParams prm;
-            FsResult res = fs_object_flight(params, gpis, k, kernels, means, o, d, t_hit,
+            FsResult res = fs_object_flight(params, gpis, k, kernels, mean_nodes, o, d, t_hit,
                                             path_pixel[p], path_sample[p], 0u,
                                             vk == k ? prev : none, ring,
                                             fs_scratch(scratch, 2 * item + slot), counters, &r,

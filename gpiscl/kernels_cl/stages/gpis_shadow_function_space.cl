@@ -22,18 +22,9 @@
  * what a continuation ray along the same segment would see.
  *
  * A fixed number of work items stride over the shadow rays (one scratch slice each). */
-__kernel void gpis_shadow_function_space(__constant RenderParams* params, int n,
-                                         PATH_PARAMS(path),
-                                         SHADOW_PARAMS(shadow),
-                                         __global const GpisObject* gpis,
-                                         __global const GpKernel* kernels,
-                                         __global const MeanNode* means,
-                                         __global const FsVertex* vertex,
-                                         __global const int* vertex_object,
-                                         __global const FsObs* rings, int ring_stride,
-                                         __global double* scratch, __global int* counters)
+__kernel void gpis_shadow_function_space(GPIS_SHADOW_FUNCTION_SPACE_PARAMS)
 {
-    int item = get_global_id(0), end = min(n, counters[COUNT_SHADOW]);
+    int item = get_global_id(0), end = min(num_rays, counters[COUNT_SHADOW]);
     FsScratch S = fs_scratch(scratch, item);
     for (int i = item; i < end; i += get_global_size(0)) {
         if (max3(shadow_contribution[i].xyz) <= 0.0f) continue;   /* blocked already */
@@ -49,7 +40,7 @@ __kernel void gpis_shadow_function_space(__constant RenderParams* params, int n,
         for (int k = 0; k < params->num_gpis; ++k) {
             FsRay r;
             FsParams prm;
-            if (fs_object_flight(params, gpis, k, kernels, means, o, d, d.w, path_pixel[p],
+            if (fs_object_flight(params, gpis, k, kernels, mean_nodes, o, d, d.w, path_pixel[p],
                                  path_sample[p], 1u, vk == k ? prev : none, ring, S, counters,
                                  &r, &prm).hit) {
                 shadow_contribution[i] = (float4)(0.0f);

@@ -1,12 +1,7 @@
 /* From: shadow queue.  To: contributions zeroed where the path's weight-space
  * realization of a GPIS object crosses zero between the vertex and the light. A
  * posterior's weights come from, or go to, the path's kriging cache slot. */
-__kernel void gpis_shadow_weight_space(__constant RenderParams* params, PATH_PARAMS(path),
-                                       SHADOW_PARAMS(shadow), __global const GpisObject* gpis,
-                                       __global const GpKernel* kernels,
-                                       __global const MeanNode* means,
-                                       __global const float* order_table,
-                                       __global int* counters, WS_POST_CACHE_PARAMS)
+__kernel void gpis_shadow_weight_space(GPIS_SHADOW_WEIGHT_SPACE_PARAMS)
 {
     int i = get_global_id(0);
     if (i >= counters[COUNT_SHADOW]) return;
@@ -16,7 +11,7 @@ __kernel void gpis_shadow_weight_space(__constant RenderParams* params, PATH_PAR
     WsPostCache C = WS_POST_CACHE;
     for (int k = 0; k < params->num_gpis; ++k) {
         float3 n;
-        float t = ws_object_first_root(gpis, k, kernels, means, order_table, key,
+        float t = ws_object_first_root(gpis, k, kernels, mean_nodes, order_table, key,
                                        ws_post_slot(C, k, p), o.xyz, d.xyz, o.w, d.w, &n,
                                        counters);
         if (t < T_INFINITY) {

@@ -1,13 +1,7 @@
 /* From: ray queue `in` with surface hits.  To: hits moved to the first zero crossing of
  * the path's weight-space realization of any GPIS object, with its analytic normal. A
  * posterior's weights come from, or go to, the path's kriging cache slot. */
-__kernel void gpis_weight_space(__constant RenderParams* params, int num_rays,
-                                PATH_PARAMS(path), RAY_PARAMS(in),
-                                __global const GpisObject* gpis,
-                                __global const GpKernel* kernels,
-                                __global const MeanNode* means,
-                                __global const float* order_table,
-                                __global int* counters, WS_POST_CACHE_PARAMS)
+__kernel void gpis_weight_space(GPIS_WEIGHT_SPACE_PARAMS)
 {
     int i = get_global_id(0);
     if (i >= num_rays) return;
@@ -20,7 +14,7 @@ __kernel void gpis_weight_space(__constant RenderParams* params, int num_rays,
     WsPostCache C = WS_POST_CACHE;
     for (int k = 0; k < params->num_gpis; ++k) {
         float3 n;
-        float t = ws_object_first_root(gpis, k, kernels, means, order_table, key,
+        float t = ws_object_first_root(gpis, k, kernels, mean_nodes, order_table, key,
                                        ws_post_slot(C, k, p), o.xyz, d.xyz, o.w, t_hit, &n,
                                        counters);
         if (t < t_hit) {

@@ -1,8 +1,6 @@
 /* From: ray queue `in` (count known to the host).  To: each ray's closest surface hit
  * (hit_t, hit_prim; -1 when it escapes). GPIS stages may then move hits closer. */
-__kernel void intersect(__constant RenderParams* params, int num_rays, RAY_PARAMS(in),
-                        __global const BvhNode* nodes, __global const Primitive* prims,
-                        __global const Material* materials)
+__kernel void intersect(INTERSECT_PARAMS)
 {
     int i = get_global_id(0);
     if (i >= num_rays) return;

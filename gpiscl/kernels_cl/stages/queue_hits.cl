@@ -1,7 +1,6 @@
 /* From: ray queue `in` with final hits.  To: ray indices split into the hit queue
  * (surfaces and GPIS events) and the escaped queue. */
-__kernel void queue_hits(int num_rays, RAY_PARAMS(in), INDEX_PARAMS(hits),
-                         INDEX_PARAMS(escaped), __global int* counters)
+__kernel void queue_hits(QUEUE_HITS_PARAMS)
 {
     int i = get_global_id(0);
     if (i >= num_rays) return;

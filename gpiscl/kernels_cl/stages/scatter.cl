@@ -1,13 +1,7 @@
 /* From: hit queue.  To: for each surface hit, a shadow ray towards a sampled light
  * (next-event estimation, MIS-weighted) and a continuation ray in ray queue `out`.
  * Null (pass-through) surfaces forward the ray unchanged and switch the medium. */
-__kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PARAMS(in),
-                      RAY_PARAMS(out), INDEX_PARAMS(hits), SHADOW_PARAMS(shadow),
-                      __global int* counters, __global const Primitive* prims,
-                      __global const Material* materials, __global const Light* lights,
-                      __global const float4* env_texels, __global const float* env_marginal,
-                      __global const float* env_conditional, __global const GpisObject* gpis,
-                      __global const MeanNode* mean_nodes)
+__kernel void scatter(SCATTER_PARAMS)
 {
     int i = get_global_id(0);
     if (i >= counters[COUNT_HITS]) return;
@@ -42,7 +36,7 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
         }
     }
 
-    if (mat->kind == MATERIAL_NULL) {
+    if (MATERIAL_IS_PASS_THROUGH(mat->kind)) {
         if (prim && prim->medium >= 0) path_medium[p] = (dot(wo, ng) < 0.0f) ? prim->medium : -1;
         int k = atomic_inc(&counters[COUNT_RAYS_OUT]);
         out_o[k] = (float4)(x, eps);
@@ -72,111 +66,55 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
 
     float3 wi;
     float pdf_bsdf;
-    /* a function-space GPIS hit knows the law its normal was drawn from, so a mirror
-     * there is not a delta BSDF: its direction density is the normal's through the half
-     * vector (fs_normal_pdf.h), and it gets next-event estimation and MIS. Weight space
-     * has no such density (the realization fixes the normal): its mirror stays delta,
-     * and so does a function-space hit whose sampler reports no law (law_s = 0: a free
-     * flight that does not fill FsResult.law_*). */
+    /* a function-space GPIS hit knows the law its normal was drawn from, which the
+     * material's random_normal mode may use (fs_random_normal.h); a sampler that reports
+     * no law (law_s = 0: a free flight that does not fill FsResult.law_*) gives none */
     int fs_hit = hp < 0 && gpis[GPIS_HIT_BASE - hp].sampler == GPIS_SAMPLER_FUNCTION_SPACE
                  && params->fs_nee && in_hit_law_m[r].w < 0.0f;
-    int fs_mirror = fs_hit && mat->kind == MATERIAL_MIRROR;
-    /* a rough conductor there samples pairs (normal, light) with MIS (fs_normal_pdf.h) */
-    int fs_conductor = fs_hit && mat->kind == MATERIAL_ROUGH_CONDUCTOR;
-    float p_n0 = 0.0f;   /* fs_conductor: p_Omega of the sampled normal */
+    int rn = fs_random_normal_mode(mat->kind, fs_hit);
+    float p_n0 = 0.0f;   /* RANDOM_NORMAL_PAIRS: p_Omega of the sampled normal */
     FsNormalLaw law = fs_normal_law(in_hit_law_m[r], in_hit_law_a[r], in_hit_law_b[r]);
-    if (mat->kind == MATERIAL_DIFFUSE || mat->kind == MATERIAL_ROUGH_CONDUCTOR || fs_mirror) {
-        /* --- next-event estimation --- */
-        if (params->nee && params->num_lights > 0) {
-            float4 ul = rng4(params->seed, pixel, sample, bounce, DIM_LIGHT);
-            int li = min((int)(ul.x * params->num_lights), params->num_lights - 1);
-            EnvMap m = {env_texels, env_marginal, env_conditional, params->env_width,
-                        params->env_height};
-            float3 wl;
-            float dist, pdf_light;
-            float3 Le = sample_light(&lights[li], m, xo, ul.yz, &wl, &dist, &pdf_light);
-            /* a function-space mirror samples only lights of small extent, where BSDF
-             * sampling is poor: environments stay with BSDF sampling (escaped_rays.cl
-             * gives them weight 1 after such a vertex), which keeps the mirror's white
-             * furnace exactly 1 per path */
-            if (fs_mirror && (lights[li].kind == LIGHT_ENVIRONMENT
-                              || lights[li].kind == LIGHT_ENVIRONMENT_MAP))
-                Le = (float3)(0.0f);
-            float pdf_f;
-            float3 f;
-            float4 grad = (float4)(0.0f);   /* the shadow ray keeps the vertex's normal */
-            if (fs_mirror) {
-                /* the light sample picks the normal: the half vector h, whose gradient
-                 * the shadow ray conditions on */
-                float3 h;
-                pdf_f = fs_mirror_pdf(law, wo, wl, &h);
-                f = albedo * pdf_f;
-                if (pdf_f > 0.0f) grad = (float4)(fs_implied_gradient(law, wo, h), 1.0f);
-            } else {
-                f = bsdf_eval(mat, albedo, n, -wo, wl, &pdf_f);
-            }
-            /* the light strategy's density includes choosing light li (1 / num_lights),
-             * as the BSDF strategy's weight in emission.cl and escaped_rays.cl does:
-             * the two weights of one direction must sum to 1 */
-            float w = (pdf_light > 0.0f)
-                          ? power_heuristic(pdf_light / params->num_lights, pdf_f) : 1.0f;
-            float inv_pdf = (pdf_light > 0.0f) ? 1.0f / pdf_light : 1.0f;
-            if (fs_conductor && pdf_light > 0.0f) {
-                /* strategy A (the sampled normal) or B (a normal about the half
-                 * vector), each with probability 1/2; all densities relative to the
-                 * light's pdf_L, i.e. p_AB / p_L = (p_Omega(nn) + q(nn | l)) / 2 */
-                float3 v = -wo, h = normalize(v + wl), nn = n;
-                if (ul.w >= 0.5f) {
-                    nn = fs_lobe_normal_sample(h, mat->roughness,
-                                               rng4(params->seed, pixel, sample, bounce,
-                                                    DIM_BSDF).zw);
-                    if (dot(nn, wo) < 0.0f)
-                        grad = (float4)(fs_implied_gradient(law, wo, nn), 1.0f);
-                }
-                float p_nn = fs_normal_pdf(law, wo, nn);
-                f = rough_conductor_eval(albedo, mat->eta.xyz, mat->k.xyz, mat->roughness, nn,
-                                         v, wl, &pdf_f);
-                float p_ab = 0.5f * (p_nn + fs_lobe_normal_pdf(nn, h, mat->roughness));
-                /* F / p_AB w_AB with F = p_Omega(nn) fcos Le: w_AB from p_AB against
-                 * p_C = p_Omega(nn) p_c(l | nn), both in units of pdf_L */
-                float pl = pdf_light / params->num_lights;
-                w = (p_ab > 0.0f) ? power_heuristic(pl * p_ab, p_nn * pdf_f) : 0.0f;
-                f *= (p_ab > 0.0f) ? p_nn / p_ab : 0.0f;
-            }
-            float3 c = beta * f * Le * (w * inv_pdf * params->num_lights);
-            if (max3(c) > 0.0f) {
-                int k = atomic_inc(&counters[COUNT_SHADOW]);
-                shadow_o[k] = (float4)(xo, 0.0f);
-                shadow_d[k] = (float4)(wl, dist);
-                shadow_contribution[k] = (float4)(c, 0.0f);
-                shadow_path[k] = p;
-                shadow_grad[k] = grad;
-            }
+    float4 ub = rng4(params->seed, pixel, sample, bounce, DIM_BSDF);
+    /* --- next-event estimation --- */
+    if (fs_random_normal_has_density(mat->kind, rn) && params->nee && params->num_lights > 0) {
+        float4 ul = rng4(params->seed, pixel, sample, bounce, DIM_LIGHT);
+        int li = min((int)(ul.x * params->num_lights), params->num_lights - 1);
+        EnvMap m = {env_texels, env_marginal, env_conditional, params->env_width,
+                    params->env_height};
+        float3 wl;
+        float dist, pdf_light;
+        float3 Le = light_sample(lights[li].kind, &lights[li], m, xo, ul.yz, &wl, &dist,
+                                 &pdf_light);
+        /* environments stay with BSDF sampling where the mode says so (escaped_rays.cl
+         * gives them weight 1 after such a vertex) */
+        if (!fs_random_normal_env_nee(rn) && LIGHT_IS_ENVIRONMENT(lights[li].kind))
+            Le = (float3)(0.0f);
+        float pdf_f;
+        float4 grad = (float4)(0.0f);   /* the shadow ray keeps the vertex's normal */
+        float3 f = fs_random_normal_eval(rn, mat, law, albedo, n, wo, wl, &pdf_f, &grad);
+        /* the light strategy's density includes choosing light li (1 / num_lights),
+         * as the BSDF strategy's weight in emission.cl and escaped_rays.cl does:
+         * the two weights of one direction must sum to 1 */
+        float w = (pdf_light > 0.0f)
+                      ? power_heuristic(pdf_light / params->num_lights, pdf_f) : 1.0f;
+        float inv_pdf = (pdf_light > 0.0f) ? 1.0f / pdf_light : 1.0f;
+        if (rn == RANDOM_NORMAL_PAIRS && pdf_light > 0.0f)
+            f = fs_random_normal_pairs(mat, law, albedo, n, wo, wl,
+                                       pdf_light / params->num_lights, ul.w, ub.zw, &pdf_f,
+                                       &grad, &w);
+        float3 c = beta * f * Le * (w * inv_pdf * params->num_lights);
+        if (max3(c) > 0.0f) {
+            int k = atomic_inc(&counters[COUNT_SHADOW]);
+            shadow_o[k] = (float4)(xo, 0.0f);
+            shadow_d[k] = (float4)(wl, dist);
+            shadow_contribution[k] = (float4)(c, 0.0f);
+            shadow_path[k] = p;
+            shadow_grad[k] = grad;
         }
-        /* --- BSDF sampling --- */
-        float4 ub = rng4(params->seed, pixel, sample, bounce, DIM_BSDF);
-        if (mat->kind == MATERIAL_DIFFUSE) {   /* cosine-weighted: f cos / pdf = albedo */
-            wi = cosine_hemisphere(ub.xy, n, &pdf_bsdf);
-            beta *= albedo;
-        } else if (fs_mirror) {
-            /* the reflection about the sampled normal: weight albedo, and its density
-             * for MIS (FLT_MIN where it underflows: there light sampling takes it all) */
-            float3 h;
-            wi = wo - 2.0f * dot(wo, n) * n;
-            pdf_bsdf = fmax(fs_mirror_pdf(law, wo, wi, &h), FLT_MIN);
-            beta *= albedo;
-        } else {
-            beta *= rough_conductor_sample(albedo, mat->eta.xyz, mat->k.xyz, mat->roughness,
-                                           n, -wo, ub.xy, &wi, &pdf_bsdf);
-            if (!(max3(beta) > 0.0f)) return;   /* reflected below the surface */
-            /* C's MIS weight at a light needs p_Omega(n0) (fs_conductor_light_pdf) */
-            if (fs_conductor) p_n0 = fmax(fs_normal_pdf(law, wo, n), FLT_MIN);
-        }
-    } else {
-        wi = wo - 2.0f * dot(wo, n) * n;
-        pdf_bsdf = 0.0f;
-        beta *= albedo;
     }
+    /* --- BSDF sampling --- */
+    beta *= fs_random_normal_sample(rn, mat, law, albedo, n, wo, ub.xy, &wi, &pdf_bsdf, &p_n0);
+    if (!(max3(beta) > 0.0f)) return;   /* e.g. reflected below the surface */
 
     /* --- Russian roulette --- */
     depth += 1;
@@ -189,7 +127,7 @@ __kernel void scatter(__constant RenderParams* params, PATH_PARAMS(path), RAY_PA
     path_beta[p] = (float4)(beta, 0.0f);
     path_depth[p] = depth;
     path_prev_pos[p] = (float4)(x, pdf_bsdf);
-    path_prev_env_nee[p] = !fs_mirror;
+    path_prev_env_nee[p] = fs_random_normal_env_nee(rn);
     path_prev_n[p] = (float4)(n, p_n0);
     path_prev_v[p] = (float4)(-wo, mat->roughness);
     int k = atomic_inc(&counters[COUNT_RAYS_OUT]);

@@ -1,9 +1,6 @@
 /* From: shadow queue.  To: the light sample's contribution added to its path when
  * nothing opaque lies between the vertex and the light. */
-__kernel void shadow_rays(__constant RenderParams* params, PATH_PARAMS(path),
-                          SHADOW_PARAMS(shadow), __global int* counters,
-                          __global const BvhNode* nodes, __global const Primitive* prims,
-                          __global const Material* materials)
+__kernel void shadow_rays(SHADOW_RAYS_PARAMS)
 {
     int i = get_global_id(0);
     if (i >= counters[COUNT_SHADOW]) return;

@@ -1,5 +1,6 @@
-"""numpy twin of bsdf.h's rough conductor (Beckmann microfacets, exact conductor Fresnel,
-height-correlated Smith masking): the reference the tests hold the device to."""
+"""numpy twin of the rough conductor of kernels_cl/lib/bsdf/rough_conductor.h (Beckmann
+microfacets, exact conductor Fresnel, height-correlated Smith masking): the reference the
+tests hold the device to."""
 from __future__ import annotations
 
 import math

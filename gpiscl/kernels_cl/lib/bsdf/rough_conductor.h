@@ -1,26 +1,4 @@
-/* Surface BSDFs. Diffuse and mirror are two-sided: the shading normal is flipped to
- * the side the ray arrives from. The mirror is a delta BSDF (pdf 0 marks it), except at
- * function-space GPIS hits, whose random normal gives it a density (fs_normal_pdf.h). */
-
-inline float3 cosine_hemisphere(float2 u, float3 n, float* pdf)
-{
-    float r = sqrt(u.x), phi = 2.0f * PI_F * u.y;
-    float z = sqrt(fmax(0.0f, 1.0f - u.x));
-    float3 t, b;
-    make_frame(n, &t, &b);
-    *pdf = z * INV_PI_F;
-    return normalize(r * cos(phi) * t + r * sin(phi) * b + z * n);
-}
-
-/* f(wi) * |cos| for a diffuse surface with normal n on the side of wo. */
-inline float3 diffuse_eval(float3 albedo, float3 n, float3 wi, float* pdf)
-{
-    float c = dot(n, wi);
-    *pdf = fmax(c, 0.0f) * INV_PI_F;
-    return albedo * (fmax(c, 0.0f) * INV_PI_F);
-}
-
-/* --- Rough conductor (scene/records.py ROUGH_CONDUCTOR) -----------------------------------
+/* Rough conductor (kinds/materials.py rough_conductor; material interface: bsdf/diffuse.h).
  * Beckmann microfacets D(m) = exp(-tan^2 theta_m / a^2) / (pi a^2 cos^4 theta_m), the
  * exact unpolarised Fresnel term of eta + i k, height-correlated Smith masking
  * G2 = 1 / (1 + Lambda(v) + Lambda(l)) (Heitz 2014), with v = -wo towards the viewer and
@@ -62,8 +40,8 @@ inline float beckmann_d(float cm, float alpha)
 }
 
 /* f(v, l) cos(l) and the sampling pdf of l; 0 when l or the half vector is below n */
-inline float3 rough_conductor_eval(float3 albedo, float3 eta, float3 k, float alpha,
-                                   float3 n, float3 v, float3 l, float* pdf)
+inline float3 beckmann_conductor_eval(float3 albedo, float3 eta, float3 k, float alpha,
+                                      float3 n, float3 v, float3 l, float* pdf)
 {
     float cv = dot(n, v), cl = dot(n, l);
     *pdf = 0.0f;
@@ -78,8 +56,8 @@ inline float3 rough_conductor_eval(float3 albedo, float3 eta, float3 k, float al
 }
 
 /* l ~ pdf (returns f cos / pdf; 0 if the reflection leaves below the surface) */
-inline float3 rough_conductor_sample(float3 albedo, float3 eta, float3 k, float alpha,
-                                     float3 n, float3 v, float2 u, float3* l, float* pdf)
+inline float3 beckmann_conductor_sample(float3 albedo, float3 eta, float3 k, float alpha,
+                                        float3 n, float3 v, float2 u, float3* l, float* pdf)
 {
     float tan2 = -alpha * alpha * log(1.0f - u.x), phi = 2.0f * PI_F * u.y;
     float cm = 1.0f / sqrt(1.0f + tan2), sm = sqrt(fmax(1.0f - cm * cm, 0.0f));
@@ -96,13 +74,17 @@ inline float3 rough_conductor_sample(float3 albedo, float3 eta, float3 k, float 
     return albedo * fresnel_conductor(vm, eta, k) * (G * vm / (cv * cm));
 }
 
-/* A non-delta material's f cos and pdf at outgoing l (v = -wo): diffuse or rough
- * conductor; the scatter stage's next-event estimation and MIS go through it. */
-inline float3 bsdf_eval(__global const Material* mat, float3 albedo, float3 n, float3 v,
-                        float3 l, float* pdf)
+/* the material interface (v = -wo) */
+inline float3 rough_conductor_eval(__global const Material* mat, float3 albedo, float3 n,
+                                   float3 wo, float3 l, float* pdf)
 {
-    if (mat->kind == MATERIAL_ROUGH_CONDUCTOR)
-        return rough_conductor_eval(albedo, mat->eta.xyz, mat->k.xyz, mat->roughness, n, v,
-                                    l, pdf);
-    return diffuse_eval(albedo, n, l, pdf);
+    return beckmann_conductor_eval(albedo, mat->eta.xyz, mat->k.xyz, mat->roughness, n, -wo,
+                                   l, pdf);
+}
+
+inline float3 rough_conductor_sample(__global const Material* mat, float3 albedo, float3 n,
+                                     float3 wo, float2 u, float3* l, float* pdf)
+{
+    return beckmann_conductor_sample(albedo, mat->eta.xyz, mat->k.xyz, mat->roughness, n,
+                                     -wo, u, l, pdf);
 }

@@ -1,7 +1,11 @@
 """A small declarative schema: specs check a JSON value and return its resolved form.
 
-New scene object kinds are added by declaring them (`Tagged.register`), never by
-writing validation code; records.py and gpis.py hold the declarations.
+New scene object kinds are added by declaring them (`Tagged.register`, or a kind table in
+host/kinds/), never by writing validation code; scene/records.py and scene/gpis.py hold
+the declarations.
+
+May import: errors and io (float ranges); below kinds, layout and scene, which declare
+their records with it.
 """
 from __future__ import annotations
 
@@ -12,8 +16,8 @@ import numbers
 import operator
 import os
 
-from ..errors import SceneError
-from ..io.float_range import MAGNITUDE, TINY, WHY_MAGNITUDE
+from .errors import SceneError
+from .io.float_range import MAGNITUDE, TINY, WHY_MAGNITUDE
 
 
 class Context:

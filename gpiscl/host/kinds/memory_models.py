@@ -1,0 +1,22 @@
+"""Memory models of the function-space sampler: what a path remembers of the realization
+between its rays (scene key sampler.memory).
+
+Every model is three hooks in kernels_cl/lib/fs_memory.h, which asks these traits:
+  fs_memory_start_rows  the rows a ray starts from at a hit: the path's ring of every
+                        observation so far (ring), the hit's value and slope (renews), or
+                        nothing (a fresh value at the ray's start); renewal draws the
+                        slope afresh given the value (fresh_slope), renewal_plus keeps it
+  fs_memory_record      what a hit records for later rays: its ray's rows into the ring
+  fs_memory_markov_ok   whether fs_markov.h's exact Matern sampler may run: only when every
+                        row a ray conditions on lies on that ray (not ring)
+"""
+from __future__ import annotations
+
+from .table import Kind, KindTable
+
+MEMORY_MODELS = KindTable("memory model", "GPIS_MEMORY", [
+    Kind("none", traits={"ring": False, "renews": False, "fresh_slope": False}),
+    Kind("renewal", traits={"ring": False, "renews": True, "fresh_slope": True}),
+    Kind("renewal_plus", traits={"ring": False, "renews": True, "fresh_slope": False}),
+    Kind("global", traits={"ring": True, "renews": False, "fresh_slope": False}),
+], traits=("ring", "renews", "fresh_slope"))

@@ -1,0 +1,119 @@
+"""Every number the host and the device must agree on, written once: Python reads the
+names below, the device gets them as #defines at the top of every program (c_defines,
+through records.c_header). A header never restates one (tests/test_constants.py).
+
+Floats are emitted as Python's repr, which a C compiler reads back to the same double.
+Limits that depend on the scene (FS_MAX_ROWS, FS_SCRATCH_DOUBLES, FS_MAX_WINDOW,
+FS_POST_MAX, WS_LANES) are not here: the host passes them as build options
+(function_space_records.defines, render/integrator.ws_defines), and the headers stop
+with #error without them.
+
+Imports nothing from gpiscl: every layer may read it (tests/test_layering.py).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Const:
+    """One #define: `ctype` "int", "uint" (hex when `hex`) or "double"."""
+
+    name: str
+    value: int | float
+    doc: str
+    ctype: str = "int"
+    hex: bool = False
+
+    def c_literal(self) -> str:
+        if self.ctype == "double":
+            return repr(float(self.value))
+        text = f"0x{self.value:x}" if self.hex else str(self.value)
+        return text + ("u" if self.ctype == "uint" else "")
+
+    def c_define(self) -> str:
+        return f"#define {self.name} {self.c_literal()}   /* {self.doc} */"
+
+
+CONSTANTS: list = []
+
+
+def _const(name, value, doc, ctype="int", hex=False):
+    CONSTANTS.append(Const(name, value, doc, ctype, hex))
+    return value
+
+
+# --- GPIS posterior block (compile/posterior.py) --------------------------------------
+
+FS_POSTERIOR_KIND = _const("FS_POSTERIOR_KIND", 48, "MeanNode kind of a posterior block's header")
+WS_POSTERIOR_KIND = _const("WS_POSTERIOR_KIND", FS_POSTERIOR_KIND, "the same header, ws_posterior.h")
+# a ray's solve vector lives in private memory (8 bytes a row)
+WS_POST_MAX = _const("WS_POST_MAX", 512, "observation rows of a weight-space posterior")
+
+# --- procedural bakes (knob_sdf.h, render/device_bakes.py) ------------------------------
+
+KNOB_FUNCTIONS = {"knob": 0, "knob_inner": 1, "knob_outer": 2}
+for _name, _id in KNOB_FUNCTIONS.items():
+    _const(f"KNOB_FUNCTION_{_name.upper()}", _id, f"bake_procedural's function {_name}")
+
+# --- function-space step rule (fs_march.h) ------------------------------------------------
+
+FS_WINDOW = _const("FS_WINDOW", 16, "samples conditioned on besides the memory, by default")
+FS_H_MAX = _const("FS_H_MAX", 2.0, "largest step, in l_d", "double")
+FS_H_MIN = _const("FS_H_MIN", 1e-3, "smallest step, l_d: a floor for degenerate starts", "double")
+FS_ELL_CORR = _const("FS_ELL_CORR", math.exp(-0.5),
+                     "e^-1/2: SE's lag is exactly l / sqrt(d'Ad)", "double")
+FS_RULE_SAMPLES = _const("FS_RULE_SAMPLES", 4, "the step rule conditions on the last 4-8 samples")
+# The three-point Gauss-Radau rule on [0, 1] with its fixed node at 0 (where the rate is
+# 0, so its weight 1/9 drops out): exact for degree 4, two evaluations per accepted try;
+# the free node nearer the end first. The literals are
+# the device's since the rule was written (NODE1 is one ulp from (6 - sqrt 6) / 10 as
+# Python rounds it), kept so that images do not change.
+FS_RULE_NODE0 = _const("FS_RULE_NODE0", 0.8449489742783178, "(6 + sqrt 6) / 10", "double")
+FS_RULE_WEIGHT0 = _const("FS_RULE_WEIGHT0", 0.37640306270046727, "(16 - sqrt 6) / 36", "double")
+FS_RULE_NODE1 = _const("FS_RULE_NODE1", 0.3550510257216822, "(6 - sqrt 6) / 10", "double")
+FS_RULE_WEIGHT1 = _const("FS_RULE_WEIGHT1", 0.5124858261884216, "(16 + sqrt 6) / 36", "double")
+FS_RULE = ((FS_RULE_NODE0, FS_RULE_WEIGHT0), (FS_RULE_NODE1, FS_RULE_WEIGHT1))
+
+# --- function-space root search (fs_root_point) ----------------------------------------
+
+FS_ROOT_WIDTH = _const("FS_ROOT_WIDTH", 1e-2, "final bracket, l_d", "double")
+FS_ROOT_OFFSET = _const("FS_ROOT_OFFSET", 0.45,
+                        "regula falsi's point moved toward the midpoint, root widths", "double")
+FS_ROOT_SLACK = _const("FS_ROOT_SLACK", 2, "points allowed beyond bisection's worst case")
+
+
+def root_budget(w0: float, width: float) -> int:
+    """Points the root search may need from a bracket of width w0 (fs_root_budget)."""
+    return max(math.ceil(math.log2(w0 / width)), 0) + FS_ROOT_SLACK
+
+
+FS_MIN_BISECT = _const("FS_MIN_BISECT", root_budget(FS_H_MAX, FS_ROOT_WIDTH),
+                       "rows reserved for the root search: its worst case from an FS_H_MAX step")
+
+# --- function-space conditioning (fs_linalg.h) ----------------------------------------
+
+FS_JITTER = _const("FS_JITTER", 1e-10, "relative nugget: K_ii (1 + FS_JITTER)", "double")
+
+# --- Philox streams ---------------------------------------------------------------------
+
+# SHA-256 IV word 2 (rng.h's stream uses word 0)
+WS_PHILOX_KEY1 = _const("WS_PHILOX_KEY1", 0x3C6EF372, "weight-space key word", "uint", hex=True)
+FS_PHILOX_KEY = _const("FS_PHILOX_KEY", WS_PHILOX_KEY1, "function-space key word", "uint", hex=True)
+WS_CALL_MAIN = _const("WS_CALL_MAIN", 0, "3 normals (frequency), w, tau", "uint")
+WS_CALL_ORDERS = _const("WS_CALL_ORDERS", 1, "periodic orders and signs", "uint")
+WS_CALL_GAMMA = _const("WS_CALL_GAMMA", 2, "first RQ gamma call; two trials per lane per call",
+                       "uint")
+WS_GAMMA_CALLS = _const("WS_GAMMA_CALLS", 24, "P(48 trials all rejected) < 0.05^48")
+WS_CALL_NOISE = _const("WS_CALL_NOISE", WS_CALL_GAMMA + WS_GAMMA_CALLS,
+                       "a posterior's noise, after the gamma calls", "uint")
+
+# --- weight-space vector lanes (render/integrator.ws_defines) ---------------------------
+
+WS_MAX_LANES = 16   # ws_features.h's widest vector type (float16)
+
+
+def c_defines() -> str:
+    lines = ["/* Generated from gpiscl/host/layout/constants.py: do not edit. */"]
+    return "\n".join(lines + [c.c_define() for c in CONSTANTS]) + "\n"
