@@ -94,7 +94,7 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
     if aovs and cluster is not None:
         # cluster units ship each path's radiance only (distributed/cluster.py)
         raise SceneError(API_SOURCE, "aov", "not available with `cluster` yet")
-    distributed = _dask() if cluster is not None else None
+    distributed = _dask(cluster) if cluster is not None else None
     integrator, scene = prepare_render(scene, device=device, aov=bool(aovs), **checked)
     if on_compiled is not None:
         on_compiled(scene, _where(cluster, integrator.device))
@@ -173,10 +173,12 @@ def _device(device):
     return device if isinstance(device, Device) else shared_device(device)
 
 
-def _dask():
-    """The cluster backend, imported before any work: without Dask, a one-line error."""
-    from .host.distributed import cluster
-    return cluster
+def _dask(cluster):
+    """The cluster backend, imported and cluster's address checked before any work:
+    without Dask, or with too many local workers, a one-line error."""
+    from .host.distributed import cluster as backend
+    backend.local_workers(cluster, API_SOURCE, "cluster")
+    return backend
 
 
 def _where(cluster, device) -> str:
@@ -317,7 +319,7 @@ def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
         # ids are distinct only modulo 2^31
         raise SceneError(API_SOURCE, "realizations",
                          "`first` + `realizations` must be <= 2**31")
-    distributed = _dask() if cluster is not None else None
+    distributed = _dask(cluster) if cluster is not None else None
     scene = load_scene(scene)
     check_uq_scene(scene.data, scene.source)
     if output is not None:
@@ -371,14 +373,15 @@ def write_uq(output, run, exposure: float = 0.0) -> dict:
     resolved scene; with one, only NAME.uq.npz (it has no variance yet: merge it with
     other batches, uq_merge). Returns {name: path} of the files written."""
     from .host.io.output_files import write_atomically
-    from .host.uq.files import uq_output_paths, write_uq_outputs
+    from .host.uq.files import uq_output_paths, with_digest, write_uq_outputs
 
     exposure = arguments.check(exposure=exposure)["exposure"]
     if run.sums.n < 1:
         raise SceneError(API_SOURCE, "run", "no realization completed: nothing to write")
     if run.sums.n < 2:
         path = uq_output_paths(output)["sums"]
-        write_atomically(path, lambda tmp: run.sums.save(tmp, run.meta))
+        write_atomically(path, lambda tmp: run.sums.save(tmp, with_digest(run.sums,
+                                                                           run.meta)))
         return {"sums": path}
     return write_uq_outputs(run.sums, run.scene, output, exposure, run.meta)
 
