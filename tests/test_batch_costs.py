@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
 
-def slow_scene(features=65536, resolution=64, spp=1000000):
+def e10_scene(features=65536, resolution=64, spp=1000000):
     """E10's scene: sky above, a floor, and a GPIS of many features in the middle rows."""
     return {"camera": {"position": [0, 0.3, 4], "look_at": [0, 0, 0],
                        "resolution": [resolution, resolution]},
@@ -113,7 +113,7 @@ def test_a_slow_compile_says_so_once_and_a_fast_one_not(monkeypatch):
 # ---- on the device
 
 def test_probes_and_cost_sized_batches_leave_the_image_bit_identical(device, monkeypatch):
-    scene = slow_scene(features=256, resolution=24, spp=3)
+    scene = e10_scene(features=256, resolution=24, spp=3)
     plain = render_result(scene, device=device, batch_size=97)
     monkeypatch.setattr(integrator_module, "COSTS_AFTER_SECONDS", 0.0)   # always on
     probed = []
@@ -132,10 +132,10 @@ def test_probes_and_cost_sized_batches_leave_the_image_bit_identical(device, mon
            (b.paths, b.rays, b.shadow_rays, b.nan_paths, b.killed_paths)
 
 
-def test_a_slow_scene_keeps_its_time_limit_and_stops_within_a_second_or_two(device):
+def test_a_e10_scene_keeps_its_time_limit_and_stops_within_a_second_or_two(device):
     """E10: --time-limit 2 stopped after 12.6 s, and stop signals took up to 9 s."""
     batches = []
-    res = render_result(slow_scene(), device=device, time_limit=2.0,
+    res = render_result(e10_scene(), device=device, time_limit=2.0,
                         progress=lambda n: batches.append(time.perf_counter()))
     assert res.stats.time_limited and res.stats.seconds < 3.5, res.stats.summary()
     assert np.diff(batches).max() < 2.0, np.diff(batches)
@@ -149,7 +149,7 @@ def test_a_slow_scene_keeps_its_time_limit_and_stops_within_a_second_or_two(devi
     def progress(n):
         if n == 0:
             t_stop[0] = time.perf_counter() + 3.0    # 3 s after the clock starts
-    res = render_result(slow_scene(), device=device, stop=stop, progress=progress)
+    res = render_result(e10_scene(), device=device, stop=stop, progress=progress)
     assert res.stats.interrupted
     assert asked[-1] - t_stop[0] < 2.0, asked[-1] - t_stop[0]
 
@@ -157,7 +157,7 @@ def test_a_slow_scene_keeps_its_time_limit_and_stops_within_a_second_or_two(devi
 def test_the_command_line_prints_progress_lines_into_a_pipe(tmp_path):
     """Issue 30 item 7: outside a terminal a long render printed nothing until the end."""
     scene = tmp_path / "slow.json"
-    scene.write_text(json.dumps(slow_scene()))
+    scene.write_text(json.dumps(e10_scene()))
     r = subprocess.run([sys.executable, "-m", "gpiscl", "render", str(scene), "-o",
                         str(tmp_path / "out.exr"), "--time-limit", "11"],
                        capture_output=True, text=True, env=ENV, cwd=ROOT, timeout=300)

@@ -27,6 +27,7 @@ MAX_GROWTH = 2            # per batch: small batches are overhead-bound, so thei
 RATE_WINDOW = 8
 COST_CELLS = 1024         # runs of pixels whose cost PixelCosts keeps
 OVERHEAD_SHARE = 0.95     # of the cheapest one-path batch: launches, not the path's work
+GOLDEN = 0.6180339887498949
 
 
 class BatchSizer:
@@ -70,6 +71,7 @@ class PixelCosts:
         self.target = float(target)
         self.cost = [None] * self.cells        # seconds per path; None: never measured
         self.overhead = None                   # of a one-path batch: its launches
+        self.probes = 0
 
     def _cell(self, pixel: int) -> int:
         return pixel * self.cells // self.pixels
@@ -95,6 +97,13 @@ class PixelCosts:
         for c, _ in runs:
             self.cost[c] = (filled[c] * seconds / scale if scale > 0
                             else seconds / paths)
+
+    def probe_point(self, start: int, paths: int) -> int:
+        """The pixel of the next probe among paths start .. start+paths-1: golden-ratio
+        points, so that rows and columns both vary (batches are often whole rows, and
+        dyadic points would put every early probe in column 0, beside a centred object)."""
+        self.probes += 1
+        return (start + int((self.probes * GOLDEN) % 1.0 * paths)) % self.pixels
 
     def known(self, pixel: int) -> bool:
         return self.cost[self._cell(pixel % self.pixels)] is not None

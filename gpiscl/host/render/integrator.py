@@ -38,7 +38,6 @@ DEFAULT_BATCH, CPU_DEFAULT_BATCH = 1 << 18, 1 << 14
 # by what their pixels cost too (batching.PixelCosts; shorter ones, like most uq
 # realizations, are a few batches anyway), probing at most PROBES_PER_BATCH paths ahead
 COSTS_AFTER_SECONDS, PROBES_PER_BATCH, PATHS_PER_PROBE, PROBE_SHARE = 2.0, 32, 4, 0.1
-GOLDEN = 0.6180339887498949
 
 
 # PATH_STATE's first-hit fields (aov.py): one element each when no AOV is asked for, as
@@ -374,9 +373,9 @@ class WavefrontIntegrator:
         return seconds
 
     def _warm_up(self) -> None:
-        """A few paths traced and dropped before the clock starts: PoCL compiles each kernel
-        for its work-group size at its first launch (~12 s cold for the stage program),
-        which counted as rendering (a cold start reported 331 paths/s) and sat at 0 %."""
+        """A path traced and dropped before the clock starts: PoCL compiles each kernel for
+        its work-group size at its first launch (~8 s cold for the stage program), which
+        counted as rendering (a cold start reported 331 paths/s) and sat at 0 %."""
         with slow_compile_notice():
             self._dropped(lambda: self.render_batch(0, 0, 1, keep=False))
 
@@ -390,9 +389,7 @@ class WavefrontIntegrator:
         for k in range(PROBES_PER_BATCH):
             if k >= n // PATHS_PER_PROBE or spent >= PROBE_SHARE * costs.target:
                 break   # the probes take a small share of the batch's paths and time
-            # golden-ratio points: rows and columns both vary (batches are often whole rows)
-            self._probes = getattr(self, "_probes", 0) + 1
-            pixel = (start + int((self._probes * GOLDEN) % 1.0 * n)) % self.num_pixels
+            pixel = costs.probe_point(start, n)
             if costs.known(pixel):
                 continue
             seconds = self._dropped(lambda: self.render_batch(0, pixel, 1, keep=False))
