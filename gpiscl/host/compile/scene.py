@@ -12,6 +12,7 @@ from .bvh import build_bvh
 from .camera import compile_camera
 from .envmap import build_envmap_tables
 from .gpis import CompiledGpis, compile_gpis
+from .light_selection import light_choice
 from ..scene.proxies import bounding_proxy
 from ..scene.transforms import mesh_triangles
 
@@ -24,6 +25,7 @@ class CompiledScene:
     primitives: np.ndarray
     materials: np.ndarray
     lights: np.ndarray
+    light_choice: np.ndarray    # LIGHT_CHOICE: which light NEE picks (light_selection.py)
     bvh_nodes: np.ndarray
     env_texels: np.ndarray      # (H*W, 4) float32, a dummy texel when no map
     env_marginal: np.ndarray
@@ -39,6 +41,7 @@ class CompiledScene:
 class _Builder:
     def __init__(self):
         self.prims, self.materials, self.lights = [], [], []
+        self.light_fields = []   # each light's packed fields, for its power estimate
         self.black = self.material({"type": "diffuse", "albedo": [0.0, 0.0, 0.0]})
 
     def material(self, bsdf: dict) -> int:
@@ -123,6 +126,7 @@ def _add_shape(b: _Builder, s: dict):
 
 def _add_light(b: _Builder, lt: dict, env: dict):
     packed = dict(LIGHTS[lt["type"]].host(lt))
+    b.light_fields.append((lt["type"], dict(packed)))
     if "environment_rgb" in packed:
         env["rgb"] = packed.pop("environment_rgb")
     carrier = packed.pop("primitive", None)
@@ -212,6 +216,9 @@ def compile_scene(data: dict, source: str = "<scene>", bakes=None) -> CompiledSc
     else:
         nodes, _ = build_bvh(np.zeros((0, 3)), np.zeros((0, 3)))
     lights = np.array(b.lights, dtype=layouts.LIGHT.dtype)
+    lo, hi = scene_box(data, prims)
+    choice = light_choice([f for _, f in b.light_fields], [k for k, _ in b.light_fields],
+                          0.5 * float(np.linalg.norm(hi - lo)))
     # area lights need to know their primitive after the BVH reordering
     for pi in np.nonzero(prims["light"] >= 0)[0]:
         lights["primitive"][prims["light"][pi]] = pi
@@ -228,6 +235,7 @@ def compile_scene(data: dict, source: str = "<scene>", bakes=None) -> CompiledSc
         marginal = np.array([0.0, 1.0], np.float32)
         conditional = np.array([0.0, 1.0], np.float32)
     return CompiledScene(compile_camera(data["camera"]), prims,
-                         np.array(b.materials, dtype=layouts.MATERIAL.dtype), lights, nodes,
+                         np.array(b.materials, dtype=layouts.MATERIAL.dtype), lights, choice,
+                         nodes,
                          texels, marginal.astype(np.float32), conditional.astype(np.float32),
                          (w, h), gpis)

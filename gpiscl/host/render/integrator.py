@@ -128,6 +128,7 @@ class WavefrontIntegrator:
         self.prims = to_device(device, scene.primitives)
         self.materials = to_device(device, scene.materials)
         self.lights = to_device(device, scene.lights)
+        self.light_choice = to_device(device, scene.light_choice)
         self.env = [to_device(device, scene.env_texels), to_device(device, scene.env_marginal),
                     to_device(device, scene.env_conditional)]
         gpis = scene.gpis
@@ -242,18 +243,19 @@ class WavefrontIntegrator:
 
     def escaped_rays(self, rays, n):
         self.program.launch("escaped_rays", n, self.params, *self.paths.args, *rays.args,
-                            *self.escaped.args, self.counters, self.lights, *self.env)
+                            *self.escaped.args, self.counters, self.lights, *self.env,
+                            self.light_choice)
 
     def emission(self, rays, n):
         self.program.launch("emission", n, self.params, *self.paths.args, *rays.args,
                             *self.hits.args, self.counters, self.prims, self.lights,
-                            self.gpis_objects, self.gpis_model[1])
+                            self.gpis_objects, self.gpis_model[1], self.light_choice)
 
     def scatter(self, rays, out, n):
         self.program.launch("scatter", n, self.params, *self.paths.args, *rays.args,
                             *out.args, *self.hits.args, *self.shadow.args, self.counters,
                             self.prims, self.materials, self.lights, *self.env, self.gpis_objects,
-                            self.gpis_model[1])
+                            self.gpis_model[1], self.light_choice)
 
     def shadow_rays(self, n):
         self.program.launch("shadow_rays", n, self.params, *self.paths.args,
