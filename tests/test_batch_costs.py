@@ -20,7 +20,7 @@ import pytest
 from gpiscl.api import render_result
 from gpiscl.host.render import device as device_module
 from gpiscl.host.render import integrator as integrator_module
-from gpiscl.host.render.batching import PixelCosts
+from gpiscl.host.render.batching import TARGET_SECONDS, BatchSizer, PixelCosts
 from gpiscl.host.render.progress import ProgressLines, duration
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -57,7 +57,7 @@ def test_pixel_costs_shrink_a_batch_to_what_its_pixels_cost():
     n = costs.limit(100, 900)
     # cheap up to midway to the object's probe (nearer to it: its cost), then 4 of those
     assert n == 204, n
-    assert costs.limit(500, 100) == 4       # 0.5 s of 0.1005 s paths
+    assert costs.limit(500, 100) == 5       # 0.5 s of 0.1 s paths: the rest is launches
     # a batch over several passes of the image is bounded by a pass's cost
     assert costs.limit(0, 10**6) < 10**6
 
@@ -69,7 +69,8 @@ def test_a_batch_spreads_its_time_as_the_probes_found_the_costs():
     costs.record(0, 100, 1.0)               # the real batch took 1 s: the scale
     cells = costs.cells
     assert costs.cost[60 * cells // 100] > 50 * costs.cost[10 * cells // 100]
-    assert sum(costs.cost) == pytest.approx(1.0)
+    # less the launches every batch pays (the cheapest probe's 1 ms)
+    assert sum(costs.cost) == pytest.approx(1.0 - 0.001)
 
 
 def test_progress_lines_say_spp_eta_and_paths_per_second():
@@ -170,3 +171,25 @@ def test_the_command_line_prints_progress_lines_into_a_pipe(tmp_path):
                         r"[0-9.e+]+ paths/s", progress[0]), progress[0]
     summary = next(line for line in lines if line.startswith("paths: "))
     assert float(summary.split("time: ")[1].split(" s")[0]) < 12.5, summary
+
+
+def test_a_fixed_cost_per_batch_does_not_keep_batches_small():
+    """On a GPU every batch, a one-path probe too, costs its launches' latency whatever its
+    size (the H200 run of 2026-12-04: 1490 launches of ~100 paths, 3.5e3 paths/s): that
+    latency must not be taken for the paths' cost, in probes or in batches, or the first
+    pass never leaves small batches."""
+    latency, per_path, pixels = 0.03, 1e-7, 1 << 16
+    costs, sizer = PixelCosts(pixels), BatchSizer(1 << 18)
+    done = 0
+    for _ in range(30):
+        n = sizer.next(1000 * pixels - done)
+        for _ in range(2):      # probes ahead, as integrator._shrunk takes them
+            pixel = costs.probe_point(done, n)
+            if not costs.known(pixel):
+                costs.probed(pixel, latency + per_path)
+        n = costs.limit(done, n)
+        seconds = latency + n * per_path
+        sizer.record(n, seconds)
+        costs.record(done, n, seconds)
+        done += n
+    assert n >= 0.5 * min(1 << 18, (TARGET_SECONDS - latency) / per_path), n

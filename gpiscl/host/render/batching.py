@@ -26,7 +26,6 @@ FIRST_BATCH = 64          # paths: ~1 s on the slowest scenes measured (~60 path
 MAX_GROWTH = 2            # per batch: small batches are overhead-bound, so their rate is low
 RATE_WINDOW = 8
 COST_CELLS = 1024         # runs of pixels whose cost PixelCosts keeps
-OVERHEAD_SHARE = 0.95     # of the cheapest one-path batch: launches, not the path's work
 GOLDEN = 0.6180339887498949
 
 
@@ -92,6 +91,10 @@ class PixelCosts:
         scale becomes the real batches'."""
         if paths <= 0 or seconds <= 0:
             return
+        # what every batch pays whatever its size (the launches and their waits: ~ms a
+        # bounce on a GPU) is not the paths' cost: counted in, a small batch looks dear
+        # per path and the next one is sized smaller still
+        seconds = max(seconds - (self.overhead or 0.0), 0.1 * seconds)
         runs, filled = list(self._runs(start, paths)), self._filled()
         scale = sum(k * filled[c] for c, k in runs) * max(1, paths // self.pixels)
         for c, _ in runs:
@@ -110,12 +113,13 @@ class PixelCosts:
 
     def probed(self, pixel: int, seconds: float) -> None:
         """A one-path batch at pixel took seconds: its cell costs that, less the launches
-        every such batch pays (OVERHEAD_SHARE of the cheapest seen), which a real batch
-        shares among its paths."""
+        every such batch pays (the cheapest one-path batch seen), which a real batch shares
+        among its paths. A share of them left in the path's cost (a GPU's ~30 ms a batch)
+        would keep every first-pass batch at a few hundred paths."""
         self.overhead = seconds if self.overhead is None else min(self.overhead, seconds)
         c = self._cell(pixel % self.pixels)
         if self.cost[c] is None:
-            self.cost[c] = max(seconds - OVERHEAD_SHARE * self.overhead, 0.0)
+            self.cost[c] = max(seconds - self.overhead, 0.0)
 
     def _filled(self) -> list:
         """Every cell's cost: a cell never measured takes the cost of the nearest measured
