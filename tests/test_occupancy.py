@@ -82,13 +82,13 @@ def test02_union_of_independent_objects():
 
 CLIP_KERNEL = r"""
 __kernel void occ_clip_k(__global const GpisObject* g, __global const MeanNode* means,
-                         __global const float* o, __global const float* d, int clip_start,
-                         __global float4* out)
+                         __global const float4* planes, __global const float* o,
+                         __global const float* d, int clip_start, __global float4* out)
 {
     int r = get_global_id(0);
     float3 O = vload3(r, o), D = vload3(r, d);
     float t0 = 0.0f, t1 = 1e30f;
-    int in_proxy = gpis_proxy_clip(g, means, O, D, &t0, &t1);
+    int in_proxy = gpis_proxy_clip(g, planes, O, D, &t0, &t1);
     float p0 = t0, p1 = t1;
     int keep = in_proxy && gpis_occupancy_clip(g, means, O, D, &t0, &t1, clip_start);
     out[r] = (float4)(p0, p1, keep ? t0 : NAN, keep ? t1 : NAN);
@@ -148,7 +148,8 @@ def device_clip(device, kern, mean, level, o, d, clip_start=1, step=0.0):
     g["occupancy_step"] = step
     mf = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
     bufs = [cl.Buffer(device.ctx, mf, hostbuf=np.ascontiguousarray(a))
-            for a in (g, nodes, o.astype(np.float32), d.astype(np.float32))]
+            for a in (g, nodes, np.zeros((1, 4), np.float32), o.astype(np.float32),
+                      d.astype(np.float32))]
     out = np.empty((len(o), 4), np.float32)
     ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
     kern(device.queue, (len(o),), None, *bufs, np.int32(clip_start), ob)
