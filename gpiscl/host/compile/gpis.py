@@ -166,9 +166,9 @@ class ObjectShare:
     """One object's share of the scene's tables; offsets within the share."""
     kernel: K.Kernel
     records: list           # MeanNode record arrays: its mean program, then the grid
-                            # fields of its kernel and its colour and emission fields
+                            # fields of its kernel
     mean_count: int         # records of the mean program
-    fields: dict            # GpisObject colour slot -> its field's record in `records`
+    fields: dict            # GpisObject colour slot -> its field's records
     planes: np.ndarray      # mesh proxy: face planes (p, 4) float32; else empty
     posterior: tuple        # (FsObs rows, doubles), empty without observations
 
@@ -212,17 +212,13 @@ def compile_object(g: dict, o, kernel_record: np.ndarray, source: str, key: str,
     mean = None                     # its grids live on in records alone
     # the bound follows the prior mean, not the posterior's
     o["occupancy_level"] = 0.0 if len(posterior[0]) else occupancy_level(g, kernel)
-    count = at = sum(len(part) for part in records)
+    count = sum(len(part) for part in records)
     # grid fields of sigma(x) and l(x): the kernel holds their offsets from the object's
     # mean program (fs_sampling.h fs_fields)
-    for part in pack_kernel_grids(kernel, kernel_record, at):
-        records.append(part)
-        at += len(part)
-    fields = {}
-    for name, slot in (("color", "color_field"), ("emission", "emission_field")):
-        if g.get(name) is not None:
-            records.append(pack_field(g[name]))
-            fields[slot], at = at, at + len(records[-1])
+    records += pack_kernel_grids(kernel, kernel_record, count)
+    fields = {slot: pack_field(g[name])
+              for name, slot in (("color", "color_field"), ("emission", "emission_field"))
+              if g.get(name) is not None}
     planes = np.zeros((0, 4), np.float32)
     if g["proxy"]["type"] == "mesh":
         planes = np.asarray(analyse(g["proxy"])[0], np.float32).reshape(-1, 4)
@@ -233,8 +229,9 @@ def compile_object(g: dict, o, kernel_record: np.ndarray, source: str, key: str,
 class CompiledGpis:
     objects: np.ndarray     # GpisObject records
     kernels: np.ndarray     # GpKernel records, one per object
-    mean_nodes: np.ndarray  # MeanNode records: each object's mean program, its kernel's
-                            # grid fields and its colour fields, object after object
+    mean_nodes: np.ndarray  # MeanNode records: each object's mean program, then its
+                            # kernel's grid fields, object after object
+    field_nodes: np.ndarray  # colour and emission fields (MeanNode records); 0: none
     order_table: np.ndarray  # weight space: periodic-order CDFs of all objects (float32)
     proxy_planes: np.ndarray      # mesh proxies' face planes, (p, 4) float32
     posterior_obs: np.ndarray     # posteriors' observation rows (FsObs)
@@ -269,15 +266,18 @@ def compile_gpis(shapes: list, material_of, source: str = "<scene>",
     objects = layouts.GPIS_OBJECT.zeros(len(shapes))
     kernels = GP_KERNEL.zeros(len(shapes))
     records, planes, obs, doubles, built = [], [], [], [], []
-    at_record = at_plane = at_obs = at_double = 0
+    fields = [MEAN_NODE.zeros(1)]       # record 0: no field
+    at_record, at_field, at_plane, at_obs, at_double = 0, 1, 0, 0, 0
     for i, g in enumerate(shapes):
         o = objects[i]
         _object_fields(o, g, material_of)
         share = compile_object(g, o, kernels[i:i + 1], source, keys[i], bakes)
         built.append(share.kernel)
         o["mean_first"], o["mean_count"] = at_record, share.mean_count
-        for slot, at in share.fields.items():   # never 0: a mean program comes first
-            o[slot] = at_record + at
+        for slot, field in share.fields.items():
+            o[slot] = at_field
+            at_field += len(field)
+            fields.append(field)
         at_record += sum(len(part) for part in share.records)
         records += share.records
         share.records = None                    # the list holds them; _join frees them
@@ -293,7 +293,7 @@ def compile_gpis(shapes: list, material_of, source: str = "<scene>",
     table, t_first, t_count = pack_order_tables(built)
     objects["order_first"], objects["order_count"] = t_first, t_count
     fs = objects[objects["sampler"] == layouts.GPIS_SAMPLERS["function_space"]]
-    return CompiledGpis(objects, kernels, _join(records), table,
+    return CompiledGpis(objects, kernels, _join(records), _join(fields), table,
                         np.concatenate([np.zeros((0, 4), np.float32), *planes]),
                         np.concatenate([FSL.FS_OBS.zeros(0), *obs]),
                         np.concatenate([np.zeros(0), *doubles]),

@@ -84,8 +84,8 @@ GPIS_OBJECT = Struct("GpisObject", (
     ("int", "memory_cap"),     # function space, global memory: observations kept
     ("int", "refine"),         # function space: root-search points forced in a crossing bracket
     ("float", "step_corr"),    # function space: > 0 the uniform baseline step (benchmarks)
-    ("int", "color_field"),    # albedo multiplier: its MeanNode record, 0 = none (scene/colour_fields.py)
-    ("int", "emission_field"), # emitted radiance: its MeanNode record, 0 = none
+    ("int", "color_field"),    # albedo multiplier: its record in the field table, 0 = none
+    ("int", "emission_field"), # emitted radiance: the same (scene/colour_fields.py)
     ("float", "occupancy_level"),  # z sigma_max: mean above it = occupancy below the
                                    # object's epsilon (gpis_proxy.h); 0: bounds off
     ("float", "occupancy_step"),   # world length: the bound's marches stop below it

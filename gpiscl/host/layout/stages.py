@@ -115,6 +115,8 @@ ORDER_TABLE = Param("order_table", "__global const float*")
 GPIS_TABLES = (Param("proxy_planes", "__global const float4*"),
                Param("posterior_obs", "__global const FsObs*"),
                Param("posterior_doubles", "__global const double*"))
+# Colour and emission fields, which GpisObject's color_field / emission_field index (0: none)
+FIELD_NODES = Param("field_nodes", "__global const MeanNode*")
 # The batch's kept weight-space posterior weights (render/kriging_cache.py, ws_objects.h)
 WS_POST_CACHE = Group("post", (Param("tags", "__global uint4*"),
                                Param("values", "__global double*"),
@@ -155,11 +157,11 @@ ESCAPED_RAYS = Stage("escaped_rays", (
     COUNTERS, LIGHTS, *ENV_MAP))
 EMISSION = Stage("emission", (
     PARAMS, queue("path", PATH_STATE), queue("in", RAY_QUEUE), queue("hits", INDEX_QUEUE),
-    COUNTERS, PRIMS, LIGHTS, GPIS, MEAN_NODES))
+    COUNTERS, PRIMS, LIGHTS, GPIS, FIELD_NODES))
 SCATTER = Stage("scatter", (
     PARAMS, queue("path", PATH_STATE), queue("in", RAY_QUEUE), queue("out", RAY_QUEUE),
     queue("hits", INDEX_QUEUE), queue("shadow", SHADOW_QUEUE), COUNTERS, PRIMS, MATERIALS,
-    LIGHTS, *ENV_MAP, GPIS, MEAN_NODES))
+    LIGHTS, *ENV_MAP, GPIS, FIELD_NODES))
 GPIS_SHADOW_WEIGHT_SPACE = Stage("gpis_shadow_weight_space", (
     PARAMS, queue("path", PATH_STATE), queue("shadow", SHADOW_QUEUE), GPIS, KERNELS,
     MEAN_NODES, *GPIS_TABLES, ORDER_TABLE, COUNTERS, WS_POST_CACHE))
