@@ -128,9 +128,8 @@ inline WsPostRows ws_post_rows(__global const FsObs* rows, const double* v, int 
     for (int l = 0; l < WS_POST_LANES; ++l) {
         int j = min(j0 + l, n - 1);
         __global const FsObs* row = rows + j;
-        double3 x = ws_post_x(row), u = ws_post_u(row);
-        t[0][l] = x.x; t[1][l] = x.y; t[2][l] = x.z;
-        t[3][l] = u.x; t[4][l] = u.y; t[5][l] = u.z;
+        t[0][l] = row->px; t[1][l] = row->py; t[2][l] = row->pz;
+        t[3][l] = row->ux; t[4][l] = row->uy; t[5][l] = row->uz;
         dv[l] = ws_post_is_deriv(row) ? -1 : 0;
         vv[l] = j0 + l < n ? v[j] : 0.0;
     }
