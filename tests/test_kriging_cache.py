@@ -68,10 +68,10 @@ def same_image(a, b) -> bool:
 def test01_layout_gives_each_posterior_object_its_own_slot(device, tmp_path):
     compiled, _ = two_posteriors(tmp_path)
     gpis = compiled.gpis
-    table, tags, doubles = KC.layout(gpis.objects, gpis.mean_nodes)
+    table, tags, doubles = KC.layout(gpis.objects)
     assert table.tolist() == [[-1, -1], [0, 0], [1, 61]]
     assert (tags, doubles) == (2, 61 + 26)
-    assert KC.max_batch(gpis.objects, gpis.mean_nodes, device) \
+    assert KC.max_batch(gpis.objects, device) \
         == KC.budget(device) // (8 * 87 + 2 * KC.TAG_BYTES)
 
 

@@ -10,9 +10,7 @@ import trimesh
 from gpiscl import load_scene, render_result
 from gpiscl.host.layout import records as layouts
 from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, join_sources
-from gpiscl.host.layout.gp_records import MEAN_NODE
 from gpiscl.host.scene.proxies import analyse
-from gpiscl.host.compile.gpis import pack_planes
 from gpiscl.host.errors import SceneError
 from gpiscl.host.scene.transforms import euler_matrix
 from gpiscl.testing.stats import assert_agree
@@ -46,7 +44,6 @@ def test_device_clip_is_the_slab_interval_of_the_rotated_box(device, tmp_path):
     proxy = box_mesh(tmp_path)
     planes = analyse(proxy)[0]
     assert len(planes) == 6
-    nodes = pack_planes(planes, MEAN_NODE.dtype)
     g = layouts.GPIS_OBJECT.zeros(1)
     g["proxy_kind"] = layouts.GPIS_PROXIES["mesh"]
     g["proxy_first"], g["proxy_count"] = 0, len(planes)
@@ -60,7 +57,8 @@ def test_device_clip_is_the_slab_interval_of_the_rotated_box(device, tmp_path):
     kern = program(device.ctx, src, [f"-I{PYOPENCL_CL_DIR}"])["occ_clip_k"]
     mf = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
     bufs = [cl.Buffer(device.ctx, mf, hostbuf=np.ascontiguousarray(a))
-            for a in (g, nodes, o.astype(np.float32), d.astype(np.float32))]
+            for a in (g, np.zeros(1, np.float32), planes.astype(np.float32),
+                      o.astype(np.float32), d.astype(np.float32))]
     out = np.empty((n, 4), np.float32)
     ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
     kern(device.queue, (n,), None, *bufs, np.int32(1), ob)

@@ -132,7 +132,8 @@ def device_clip(device, kern, mean, level, o, d, clip_start=1, step=0.0):
     g["occupancy_step"] = step
     mf = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
     bufs = [cl.Buffer(device.ctx, mf, hostbuf=np.ascontiguousarray(a))
-            for a in (g, nodes, o.astype(np.float32), d.astype(np.float32))]
+            for a in (g, nodes, np.zeros((1, 4), np.float32), o.astype(np.float32),
+                      d.astype(np.float32))]
     out = np.empty((len(o), 4), np.float32)
     ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
     kern(device.queue, (len(o),), None, *bufs, np.int32(clip_start), ob)

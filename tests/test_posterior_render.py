@@ -3,6 +3,8 @@ and joint covariance that fs_sampling.h uses against gpiscl/host/gp/posterior.py
 dense numpy regression, the scene key, and renders of a sphere reconstructed from noisy
 points."""
 
+from pathlib import Path
+
 import numpy as np
 import pyopencl as cl
 import pytest
@@ -15,24 +17,25 @@ from gpiscl.host.layout import gp_records
 from gpiscl.host.gp.kernels import GridField, LinearField, NonStationary
 from gpiscl.host.layout import function_space_records as FL
 from gpiscl.host.gp.posterior import Posterior, surface_observations
-from gpiscl.host.compile import posterior as PC
 from gpiscl.host.scene import observations as OBS
 
 from gpiscl.testing.oracles import dense_reference
-from gpiscl.testing.scenes import fibonacci_sphere, noisy_sphere_points, render_checked, sphere_scene
+from gpiscl.testing.scenes import (fibonacci_sphere, noisy_sphere_points, posterior_tables,
+                                   render_checked, sphere_scene)
 from gpiscl.testing.wrappers import buffer, sampler_program
 from gpiscl.testing.stats import assert_agree, block_means, z_threshold
 
 WRAPPERS = kernel_source("fs_posterior.h") + r"""
 /* per probe: posterior mean, variance, prior mean, and n seen by the lookup */
 __kernel void post_probe(__global const GpKernel* kp, __global const MeanNode* means,
-                         int mean_first, int mc, __global const double* x,
-                         __global const double* u, int kind, __global double* scratch,
-                         __global double* out)
+                         int mean_first, int mc, __global const GpisObject* g,
+                         __global const FsObs* obs, __global const double* doubles,
+                         __global const double* x, __global const double* u, int kind,
+                         __global double* scratch, __global double* out)
 {
     int i = get_global_id(0);
     FsScratch S = fs_scratch(scratch, i);
-    S.post = fs_posterior_of(means, mean_first);
+    S.post = fs_posterior_of(g, obs, doubles);
     double3 xi = vload3(i, x), ui = vload3(i, u);
     double var;
     double m = fs_mean_var(kp[0], means + mean_first, mc, S, xi, ui, kind, 0, &var);
@@ -44,11 +47,13 @@ __kernel void post_probe(__global const GpKernel* kp, __global const MeanNode* m
 
 /* one work item: value rows at x, factored; out = the packed factor */
 __kernel void post_factor(__global const GpKernel* kp, __global const MeanNode* means,
-                          int mean_first, int mc, __global const double* x, int n,
-                          __global double* scratch, __global double* out)
+                          int mean_first, int mc, __global const GpisObject* g,
+                          __global const FsObs* obs, __global const double* doubles,
+                          __global const double* x, int n, __global double* scratch,
+                          __global double* out)
 {
     FsScratch S = fs_scratch(scratch, 0);
-    S.post = fs_posterior_of(means, mean_first);
+    S.post = fs_posterior_of(g, obs, doubles);
     for (int i = 0; i < n; ++i)
         S.rows[i] = fs_obs(vload3(i, x), (double3)(1.0, 0.0, 0.0), FS_OBS_VALUE, 0.0);
     out[0] = fs_factor(kp[0], means + mean_first, mc, S, 0, n);
@@ -77,19 +82,18 @@ def sphere_points(n, radius, rng):
 
 
 def packed(post, mean):
-    """A mean-node buffer with a posterior-free program first (so the lookup must skip
-    it) and the posterior object second, its kernel's grid fields last, as the scene
-    compiler lays them out; returns nodes, mean_first, mean_count, the packed kernel."""
+    """A mean-node buffer with another program first and the posterior object's second,
+    its kernel's grid fields after it, as the scene compiler lays them out; returns
+    nodes, mean_first, mean_count, the packed kernel and the posterior tables."""
     other = gp_records.pack_mean(Sphere(radius=0.5))
-    block = PC.pack_posterior(post)
     prog = gp_records.pack_mean(mean)
     kp = gp_records.pack_kernel(post.kernel)
     grids = gp_records.pack_kernel_grids(post.kernel, kp, len(prog))
-    nodes = np.concatenate([other, block, prog, *grids])
-    return nodes, len(other) + len(block), len(prog), kp
+    nodes = np.concatenate([other, prog, *grids])
+    return nodes, len(other), len(prog), kp, posterior_tables(post)
 
 
-def probe(device, prg, kp, nodes, first, count, x, u=None, kind=0):
+def probe(device, prg, kp, nodes, first, count, tables, x, u=None, kind=0):
     n = len(x)
     u = np.zeros_like(x) if u is None else np.broadcast_to(u, x.shape)
     scratch = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE,
@@ -98,6 +102,7 @@ def probe(device, prg, kp, nodes, first, count, x, u=None, kind=0):
     ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
     prg["post_probe"](device.queue, (n,), None, buffer(device, kp),
                       buffer(device, nodes), np.int32(first), np.int32(count),
+                      *(buffer(device, a) for a in tables),
                       buffer(device, np.ascontiguousarray(x, np.float64)),
                       buffer(device, np.ascontiguousarray(u, np.float64)), np.int32(kind),
                       scratch, ob)
@@ -147,9 +152,9 @@ def test01_device_posterior_mean_and_variance_match_host(device, prg, name):
     rng = np.random.default_rng(1)
     kernel, mean, post = case_posterior(name, rng)
     assert len(post.obs) <= POST_MAX
-    nodes, first, count, kp = packed(post, mean)
+    nodes, first, count, kp, tables = packed(post, mean)
     x = rng.uniform(-1.6, 1.6, (300, 3))
-    out = probe(device, prg, kp, nodes, first, count, x)
+    out = probe(device, prg, kp, nodes, first, count, tables, x)
     assert np.all(out[:, 3] == len(post.obs))
     # the correction k(x, X) alpha is all double: tight; the prior mean is float on the
     # device (gp_mean.h), so the total carries its rounding. Grid fields are float32 on
@@ -172,7 +177,7 @@ def test01_device_posterior_mean_and_variance_match_host(device, prg, name):
     # directional derivatives (the rows at a hit and the renewal slopes)
     for axis in range(3):
         e = np.eye(3)[axis]
-        g = probe(device, prg, kp, nodes, first, count, x[:100], e, kind=1)
+        g = probe(device, prg, kp, nodes, first, count, tables, x[:100], e, kind=1)
         np.testing.assert_allclose(g[:, 0], post.mean_gradient(x[:100])[:, axis],
                                    rtol=1e-6, atol=1e-6)
 
@@ -181,7 +186,7 @@ def test02_joint_posterior_covariance_of_a_segment(device, prg):
     """fs_factor's entries are k - v_a . v_b: L L^T must be the posterior covariance."""
     rng = np.random.default_rng(2)
     kernel, mean, post = case_posterior("se_values", rng)
-    nodes, first, count, kp = packed(post, mean)
+    nodes, first, count, kp, tables = packed(post, mean)
     n = 20
     x = np.linspace([-1.5, 0.1, 0.2], [1.5, 0.3, -0.1], n)
     m = n * (n + 1) // 2
@@ -190,7 +195,8 @@ def test02_joint_posterior_covariance_of_a_segment(device, prg):
     ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
     prg["post_factor"](device.queue, (1,), None, buffer(device, kp),
                        buffer(device, nodes), np.int32(first), np.int32(count),
-                       buffer(device, x), np.int32(n), scratch, ob)
+                       *(buffer(device, a) for a in tables), buffer(device, x), np.int32(n),
+                       scratch, ob)
     cl.enqueue_copy(device.queue, out, ob)
     assert out[0] == 0
     L = np.zeros((n, n))
@@ -210,7 +216,7 @@ def test03_objects_without_observations_see_the_prior(device, prg):
     x = rng.uniform(-1, 1, (50, 3))
     for first in (0, len(prog)):
         out = probe(device, prg, gp_records.pack_kernel(kernel), nodes, first, len(prog),
-                    x)
+                    posterior_tables(), x)
         assert np.all(out[:, 3] == 0)
         np.testing.assert_allclose(out[:, 1], kernel.variance, rtol=1e-12)
         np.testing.assert_allclose(out[:, 0], mean.value(x), rtol=1e-6, atol=1e-6)
@@ -238,8 +244,12 @@ def test04_reconstructed_sphere_converges_to_the_sphere(device, tmp_path, long_r
         b, se_b = block_means(ref.mean, ref.stderr, 4)
         z = np.abs(a - b) / np.sqrt(se_a**2 + se_b**2 + 1e-30)
         z_max[s] = float(z.max())
-        if s == 0.01:   # per pixel and per block
-            assert_agree(img.mean, img.stderr, ref.mean, ref.stderr, what="posterior s=0.01")
+        if s == 0.01:   # per block, and per pixel where a pixel's error estimate is
+            # near normal: from 8 samples it follows Student's t with 7 degrees of freedom,
+            # whose tails the normal thresholds understate
+            if long_run:
+                assert_agree(img.mean, img.stderr, ref.mean, ref.stderr,
+                             what="posterior s=0.01")
             assert_agree(img.mean, img.stderr, ref.mean, ref.stderr, block=4,
                          what="posterior s=0.01, 4x4 blocks")
     print("max |z| of 4x4 blocks per sigma:", z_max)   # measured at 32 spp: 6.8 and 1.6
@@ -287,19 +297,23 @@ def test05_observations_key_is_validated(tmp_path):
 
 
 def test06_compiled_scene_carries_the_posterior(tmp_path):
-    """The block precedes the object's program; normals add three rows per point."""
+    """The posterior tables hold the object's rows (normals add three per point) and its
+    alpha, factor and noise deviations; its mean program is the prior's alone."""
     from gpiscl.host.scene.loading import load_scene
     from gpiscl.host.compile.scene import compile_scene
     x = fibonacci_sphere(25)
     np.savetxt(tmp_path / "pn.xyz", np.concatenate([x, x], 1))
     gp = compile_scene(load_scene(_scene_with({"file": str(tmp_path / "pn.xyz"),
                                                 "normals": True})).data).gpis
-    assert list(PC.posterior_rows(gp.mean_nodes, gp.objects)) == [100]
+    assert list(gp.posterior_rows) == [100]
+    n = 100
+    assert (len(gp.posterior_obs), len(gp.posterior_doubles)) == (n, n + n * (n + 1) // 2 + n)
+    assert list(gp.posterior_obs["kind"]).count(FL.OBS_KINDS["deriv"]) == 75
     o = gp.objects[0]
+    assert (o["posterior_first"], o["posterior_doubles"]) == (0, 0)
     prog = gp.mean_nodes[o["mean_first"]:o["mean_first"] + o["mean_count"]]
-    assert prog["kind"][0] == gp_records.MEAN_KINDS["sphere"]
-    if "occupancy_level" in gp.objects.dtype.names:
-        assert o["occupancy_level"] == 0.0
+    assert list(prog["kind"]) == [gp_records.MEAN_KINDS["sphere"]]
+    assert o["occupancy_level"] == 0.0
 
 
 @pytest.mark.parametrize("memory", ["none", "renewal", "renewal_plus", "global"])
@@ -315,3 +329,49 @@ def test07_white_furnace_under_every_memory_model(device, tmp_path, memory):
     s["render"]["max_depth"] = 256
     img = render_checked(s, device).image
     np.testing.assert_allclose(img.mean, 1.0, rtol=1e-6)
+
+
+# --- stored renders ----------------------------------------------------------------------
+
+def _stored_scenes(folder):
+    """(name, scene, batch size): a function-space posterior with derivative rows under the
+    global memory model, and a weight-space rational quadratic posterior."""
+    x = fibonacci_sphere(25)
+    np.savetxt(folder / "pn.xyz", np.concatenate([x, x], 1))
+    fs = sphere_scene(1.2, 0.3, 4, {"file": str(folder / "pn.xyz"), "normals": True}, res=12)
+    fs["shapes"][0]["sampler"].update(memory="global", memory_cap=32)
+    np.savetxt(folder / "rq.xyz", 0.6 * fibonacci_sphere(40))
+    sigma = 0.06
+    ws = sphere_scene(1.2, 0.3, 4)
+    ws["shapes"] = [{
+        "type": "gpis", "proxy": {"type": "sphere", "center": [0.0] * 3, "radius": 0.9},
+        "mean": {"type": "sphere", "center": [0.0] * 3, "radius": 0.66},
+        "kernel": {"type": "rational_quadratic", "sigma": sigma, "length_scale": 0.15,
+                   "alpha": 1.5},
+        "sampler": {"type": "weight_space"},
+        "observations": {"file": str(folder / "rq.xyz"), "noise": 0.05 * sigma},
+        "bsdf": {"type": "diffuse", "albedo": 0.8}}]
+    return (("fs_normals_global", fs, None), ("ws_rq", ws, 96))
+
+
+def test08_posterior_renders_match_the_stored_images(device, tmp_path):
+    """Bit for bit the images stored in tests/data/posterior_images.npz (rendered before the
+    posterior moved from the mean-node array to its own tables, and again with the light
+    choice of issue 31 by the code before that move): no example scene has a posterior, so
+    tests/test_images_unchanged.py does not see this path."""
+    from gpiscl import render_result
+    from gpiscl.host.compile.scene import compile_scene
+    from gpiscl.host.render.integrator import WavefrontIntegrator
+    from gpiscl.host.scene.loading import load_scene
+    stored = np.load(Path(__file__).parent / "data" / "posterior_images.npz")
+    for name, scene, batch in _stored_scenes(tmp_path):
+        if batch is None:       # as they were stored
+            image = render_result(scene, device=device).image
+        else:
+            data = load_scene(scene).data
+            integ = WavefrontIntegrator(device, compile_scene(data), data["render"],
+                                        batch_size=batch)
+            image = integ.render(int(data["render"]["spp"])).image
+        for field in ("mean", "stderr", "count"):
+            assert np.array_equal(getattr(image, field), stored[f"{name}.{field}"]), \
+                (name, field)

@@ -26,8 +26,7 @@ def _programs(device) -> dict:
     """Every program the renderer builds: the stages, the function-space stages (built
     from a scene that uses them) and the bakes."""
     fs_scene = compile_scene(load_scene(ROOT / "scenes" / "fs_sphere_se.json").data)
-    fs = FunctionSpaceStages(device, fs_scene.gpis.objects, 64,
-                             mean_nodes=fs_scene.gpis.mean_nodes)
+    fs = FunctionSpaceStages(device, fs_scene.gpis, 64)
     return {"stages": stage_program(device), "function space": fs.program,
             "bakes": DeviceBakes(device).program}
 

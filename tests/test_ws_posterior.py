@@ -4,14 +4,14 @@ search, and function-space renders of the same posterior."""
 import numpy as np
 import pytest
 
-from gpiscl.host.compile import posterior as PC
 from gpiscl.host.scene import observations as OBS
 from gpiscl.host.gp import RationalQuadratic, Sphere, SquaredExponential
 from gpiscl.host.gp import weight_space as ws
 from gpiscl.host.layout.gp_records import pack_kernel, pack_mean
 from gpiscl.host.gp.posterior import Posterior, solve_triangular, surface_observations
 from gpiscl.testing.stats import assert_agree, z_threshold
-from gpiscl.testing.scenes import fibonacci_sphere, noisy_sphere_points, render_checked, sphere_scene
+from gpiscl.testing.scenes import (fibonacci_sphere, noisy_sphere_points, posterior_tables,
+                                   render_checked, sphere_scene)
 from gpiscl.testing.weight_space import build, dump, eval_tolerance, keys_for
 from gpiscl.testing.wrappers import buffer
 
@@ -31,13 +31,15 @@ def launch(device, kernel, n, *args, out_shapes):
 EXTRA = r"""
 /* per item: key keys[i / per_key], probe x[i]: f_post and its gradient; v of each key */
 __kernel void post_probe(__global const GpKernel* kp, __global const MeanNode* means,
-                         int first, int mc, __global const float* cdf, int nc, int M,
+                         int first, int mc, __global const GpisObject* obj,
+                         __global const FsObs* obs, __global const double* doubles,
+                         __global const float* cdf, int nc, int M,
                          __global const uint2* keys, int per_key, __global const float* x,
                          __global float4* out, __global double* v_out)
 {
     int i = get_global_id(0);
     uint2 key = keys[i / per_key];
-    WsPostBlock B = ws_posterior_block(means, first);
+    WsPostBlock B = ws_posterior_block(obj, obs, doubles);
     double v[WS_POST_MAX];
     double rho = ws_post_prepare(0, kp[0], means + first, mc, cdf, nc, M, key, 0, B, v);
     WsPost P = {B.rows, v, B.n, rho};
@@ -50,13 +52,15 @@ __kernel void post_probe(__global const GpKernel* kp, __global const MeanNode* m
 }
 
 __kernel void post_tents(__global const GpKernel* kp, __global const MeanNode* means,
-                         int first, int mc, __global const float* cdf, int nc, int M,
+                         int first, int mc, __global const GpisObject* obj,
+                         __global const FsObs* obs, __global const double* doubles,
+                         __global const float* cdf, int nc, int M,
                          __global const uint2* keys, __global const float* o,
                          __global const float* d, __global const float2* ab, int npts,
                          __global float* tents, __global float2* vals)
 {
     int r = get_global_id(0);
-    WsPostBlock B = ws_posterior_block(means, first);
+    WsPostBlock B = ws_posterior_block(obj, obs, doubles);
     double v[WS_POST_MAX];
     double rho = ws_post_prepare(0, kp[0], means + first, mc, cdf, nc, M, keys[r], 0, B, v);
     WsPost P = {B.rows, v, B.n, rho};
@@ -74,7 +78,9 @@ __kernel void post_tents(__global const GpKernel* kp, __global const MeanNode* m
 }
 
 __kernel void post_roots(__global const GpKernel* kp, __global const MeanNode* means,
-                         int first, int mc, __global const float* cdf, int nc, int M,
+                         int first, int mc, __global const GpisObject* obj,
+                         __global const FsObs* obs, __global const double* doubles,
+                         __global const float* cdf, int nc, int M,
                          __global const uint2* keys, __global const float* o,
                          __global const float* d, float t0, float t1, float tol,
                          __global float4* hit, __global int2* st)
@@ -82,7 +88,7 @@ __kernel void post_roots(__global const GpKernel* kp, __global const MeanNode* m
     int r = get_global_id(0), status, evals;
     float3 n;
     WsPostSlot solve_here = {0, 0};   /* no kept weights: this ray solves for its own */
-    float t = ws_first_root_post(ws_posterior_block(means, first), solve_here, kp[0],
+    float t = ws_first_root_post(ws_posterior_block(obj, obs, doubles), solve_here, kp[0],
                                  means + first, mc, cdf, nc, M, keys[r], 0, vload3(r, o),
                                  vload3(r, d), t0, t1, tol, &n, &status, &evals);
     hit[r] = (float4)(n, t);
@@ -114,14 +120,15 @@ def case(kind, rng, n_points=None):
 
 
 def device_args(device, kernel, mean, post):
-    """(kernel, means, first, count, cdf, ncdf): a posterior-free program first, so the
-    lookup must skip it, then the posterior block and the object's program."""
+    """(kernel, means, first, count, object, rows, doubles, cdf, ncdf): another program
+    first, then the object's, and its posterior after another's in the tables."""
     other = pack_mean(Sphere(radius=0.5))
     prog = pack_mean(mean)
-    nodes = np.concatenate([other, PC.pack_posterior(post), prog])
+    nodes = np.concatenate([other, prog])
     cdf = ws.order_table(kernel)
     return (buffer(device, pack_kernel(kernel)), buffer(device, nodes),
-            np.int32(len(nodes) - len(prog)), np.int32(len(prog)), buffer(device, cdf),
+            np.int32(len(other)), np.int32(len(prog)),
+            *(buffer(device, a) for a in posterior_tables(post)), buffer(device, cdf),
             np.int32(len(cdf)))
 
 

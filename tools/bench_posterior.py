@@ -42,12 +42,13 @@ from gpiscl.host.gp.spectral import RandomFeatures  # noqa: E402
 
 FLIGHT = r"""
 __kernel void flight(__global const GpKernel* kp, __global const MeanNode* means, int first,
-                     int mc, __global const double* dirs, __global double* scratch,
-                     __global int* out)
+                     int mc, __global const GpisObject* g, __global const FsObs* obs,
+                     __global const double* doubles, __global const double* dirs,
+                     __global double* scratch, __global int* out)
 {
     int i = get_global_id(0);
     FsScratch S = fs_scratch(scratch, i);
-    S.post = fs_posterior_of(means, first);
+    S.post = fs_posterior_of(g, obs, doubles);
     FsParams prm = {16, GPIS_MEMORY_RENEWAL_PLUS, 8, 6, 0.0, 1e-5};
     double3 d = vload3(i, dirs);
     FsRay r = {-2.0 * d, d, 0.0, 4.0};
@@ -68,6 +69,8 @@ def device_cost(sizes, rays: int):
     from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, kernel_source
     from gpiscl.host.layout import gp_records
     from gpiscl.host.layout import function_space_records as FL
+    from gpiscl.host.layout.function_space_records import FS_OBS
+    from gpiscl.host.layout.records import GPIS_OBJECT
     from gpiscl.host.render.program_sources import fs_sampler_source
     dev = Device()
     kernel = SquaredExponential(sigma=0.2, length_scale=0.3)
@@ -81,12 +84,13 @@ def device_cost(sizes, rays: int):
     for n in sizes:
         prog = gp_records.pack_mean(mean)
         nodes, first = prog, 0
+        g, rows, doubles = GPIS_OBJECT.zeros(1), FS_OBS.zeros(1), np.zeros(1)
         if n:
             d = rng.standard_normal((n, 3))
             d /= np.linalg.norm(d, axis=1, keepdims=True)
             post = Posterior(kernel, mean, surface_observations(0.9 * d, noise=1e-4))
-            block = PC.pack_posterior(post)
-            nodes, first = np.concatenate([block, prog]), len(block)
+            rows, doubles = PC.pack_posterior(post)
+            g["posterior_count"] = n
         defs = FL.defines(16, 8, post_rows=n)
         opts = [f"-I{PYOPENCL_CL_DIR}"] + [f"-D{k}={v}" for k, v in sorted(defs.items())]
         k = cl.Program(dev.ctx, src).build(options=opts).flight
@@ -99,7 +103,7 @@ def device_cost(sizes, rays: int):
         out = np.zeros((rays, 3), np.int32)
         ob = cl.Buffer(dev.ctx, mf.WRITE_ONLY, out.nbytes)
         args = (buf(gp_records.pack_kernel(kernel)), buf(nodes), np.int32(first),
-                np.int32(len(prog)), buf(dirs), scratch, ob)
+                np.int32(len(prog)), buf(g), buf(rows), buf(doubles), buf(dirs), scratch, ob)
         k(dev.queue, (rays,), None, *args).wait()      # warm-up (compilation per size)
         t0 = time.perf_counter()
         k(dev.queue, (rays,), None, *args).wait()

@@ -92,3 +92,18 @@ def camera(res, position=(0, 0, 4), fov=36.0):
     """A square camera looking at the origin from `position`."""
     return {"position": list(position), "look_at": [0, 0, 0], "up": [0, 1, 0], "fov": fov,
             "resolution": [res, res]}
+
+
+def posterior_tables(post=None, lead=3):
+    """(GpisObject, rows, doubles): the posterior tables of one object, after `lead`
+    rows and doubles of another's (so the lookup must use the object's offsets)."""
+    from ..host.compile import posterior as PC
+    from ..host.layout import function_space_records as FL
+    from ..host.layout import records as layouts
+    g = layouts.GPIS_OBJECT.zeros(1)
+    rows, doubles = FL.FS_OBS.zeros(lead), np.full(lead, np.nan)
+    if post is not None:
+        r, d = PC.pack_posterior(post)
+        g["posterior_first"], g["posterior_count"], g["posterior_doubles"] = lead, len(r), lead
+        rows, doubles = np.concatenate([rows, r]), np.concatenate([doubles, d])
+    return g, rows, doubles

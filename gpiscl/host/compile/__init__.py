@@ -1,2 +1,2 @@
 """Scene records to device arrays: BVH, camera, environment tables, GPIS objects (means,
-kernels, proxies, SDF bakes, posterior blocks, colour fields). Imports scene and below."""
+kernels, proxies, SDF bakes, posterior tables, colour fields). Imports scene and below."""

@@ -21,6 +21,7 @@ from ..scene.gpis import DEFAULT_OCCUPANCY, FIELD_KEYS, field_minimum
 from .colour_fields import pack_field
 from ..errors import SceneError
 from .posterior import build_posterior, pack_posterior
+from ..kinds.memory_models import MEMORY_MODELS
 from .proxy_cut import cut_extent
 from ..layout import function_space_records as FSL
 from ..kinds.gp_kernels import GP_KERNELS
@@ -38,16 +39,6 @@ def _build_field(f: dict):
     params = {key: (tuple(v) if isinstance(v, list) else v) for key, v in f.items()
               if key != "type"}
     return K.FIELDS[f["type"]](**params)
-
-
-def pack_planes(planes: np.ndarray, record_dtype) -> np.ndarray:
-    """Planes as MeanNode-sized records (6 float4 each), read back as a float4 array."""
-    floats_per_record = record_dtype.itemsize // 4
-    per = floats_per_record // 4
-    count = -(-len(planes) // per)
-    raw = np.zeros(count * floats_per_record, np.float32)
-    raw[: planes.size] = planes.ravel()
-    return raw.view(record_dtype)
 
 
 def build_kernel(k: dict, proxy: dict | None = None) -> K.Kernel:
@@ -159,24 +150,111 @@ def _warn_if_cut(g: dict, mean: M.Mean, kernel: K.Kernel, source: str, key: str)
               f"if the cut is meant", file=sys.stderr)
 
 
-def _posterior_block(g: dict, kernel: K.Kernel, mean: M.Mean, source: str,
-                     key: str) -> np.ndarray:
+def _posterior(g: dict, kernel: K.Kernel, mean: M.Mean, source: str, key: str) -> tuple:
+    """(FsObs rows, doubles) of the object's posterior (compile/posterior.py), empty
+    without observations."""
+    if g.get("observations") is None:
+        return FSL.FS_OBS.zeros(0), np.zeros(0)
     try:
-        post = build_posterior(g["observations"], kernel, mean)
+        return pack_posterior(build_posterior(g["observations"], kernel, mean))
     except np.linalg.LinAlgError as exc:
         raise SceneError(source, f"{key}.observations", str(exc)) from None
-    return pack_posterior(post)
+
+
+@dataclass
+class ObjectShare:
+    """One object's share of the scene's tables; offsets within the share."""
+    kernel: K.Kernel
+    records: list           # MeanNode record arrays: its mean program, then the grid
+                            # fields of its kernel
+    mean_count: int         # records of the mean program
+    fields: dict            # GpisObject colour slot -> its field's records
+    planes: np.ndarray      # mesh proxy: face planes (p, 4) float32; else empty
+    posterior: tuple        # (FsObs rows, doubles), empty without observations
+
+
+def _object_fields(o, g: dict, material_of) -> None:
+    """The GpisObject fields that are the object's alone (no offsets into shared tables)."""
+    proxy = g["proxy"]
+    o["proxy_kind"] = layouts.GPIS_PROXIES[proxy["type"]]
+    box = bounding_proxy(proxy)
+    if box["type"] == "box":
+        o["proxy_p0"][:3], o["proxy_p1"][:3] = box["min"], box["max"]
+    else:
+        o["proxy_p0"][:] = (*box["center"], box["radius"])
+    o["sampler"] = layouts.GPIS_SAMPLERS[g["sampler"]["type"]]
+    o["features"] = g["sampler"].get("features") or 0
+    if g["sampler"]["type"] == "function_space":
+        fs = g["sampler"]
+        o["memory"] = layouts.GPIS_MEMORIES[fs["memory"]]
+        for key in ("memory_cap", "refine", "miss_tolerance"):
+            o[key] = fs[key]
+        o["window"] = sampler_window(g["kernel"])
+    o["material"] = material_of(g["bsdf"])
+    o["tolerance"] = ROOT_TOLERANCE * kernel_length_scale(g["kernel"])
+    o["occupancy_step"] = OCCUPANCY_MIN_STEP * kernel_length_scale(g["kernel"])
+
+
+def compile_object(g: dict, o, kernel_record: np.ndarray, source: str, key: str,
+                   bakes=None) -> ObjectShare:
+    """Builds the object's kernel and mean once and packs its share of the tables; fills
+    kernel_record (GpKernel, 1) and o's occupancy level."""
+    kernel = build_kernel(g["kernel"], g["proxy"])
+    kernel_record[:] = pack_kernel(kernel)
+    try:
+        mean = build_mean(g["mean"], bakes)
+        records = pack_mean_parts(mean)
+    except ValueError as exc:
+        raise SceneError(source, f"{key}.mean", str(exc)) from None
+    if not g.get("clip"):
+        _warn_if_cut(g, mean, kernel, source, key)
+    posterior = _posterior(g, kernel, mean, source, key)
+    mean = None                     # its grids live on in records alone
+    # the bound follows the prior mean, not the posterior's
+    o["occupancy_level"] = 0.0 if len(posterior[0]) else occupancy_level(g, kernel)
+    count = sum(len(part) for part in records)
+    # grid fields of sigma(x) and l(x): the kernel holds their offsets from the object's
+    # mean program (fs_sampling.h fs_fields)
+    records += pack_kernel_grids(kernel, kernel_record, count)
+    fields = {slot: pack_field(g[name])
+              for name, slot in (("color", "color_field"), ("emission", "emission_field"))
+              if g.get(name) is not None}
+    planes = np.zeros((0, 4), np.float32)
+    if g["proxy"]["type"] == "mesh":
+        planes = np.asarray(analyse(g["proxy"])[0], np.float32).reshape(-1, 4)
+    return ObjectShare(kernel, records, count, fields, planes, posterior)
 
 
 @dataclass
 class CompiledGpis:
     objects: np.ndarray     # GpisObject records
     kernels: np.ndarray     # GpKernel records, one per object
-    mean_nodes: np.ndarray  # MeanNode programs of all objects, concatenated
+    mean_nodes: np.ndarray  # MeanNode records: each object's mean program, then its
+                            # kernel's grid fields, object after object
+    field_nodes: np.ndarray  # colour and emission fields (MeanNode records); 0: none
     order_table: np.ndarray  # weight space: periodic-order CDFs of all objects (float32)
+    proxy_planes: np.ndarray      # mesh proxies' face planes, (p, 4) float32
+    posterior_obs: np.ndarray     # posteriors' observation rows (FsObs)
+    posterior_doubles: np.ndarray  # posteriors' alpha, factor and noise deviations
+    ring_stride: int        # function space: observations per path ring (>= 1)
+    window_max: int         # function space: the largest window (0: no such object)
+
+    @property
+    def posterior_rows(self) -> np.ndarray:
+        """Observation rows of each object's posterior (0: the prior)."""
+        return self.objects["posterior_count"]
 
     def uses(self, sampler: str) -> bool:
         return bool(np.any(self.objects["sampler"] == layouts.GPIS_SAMPLERS[sampler]))
+
+
+def ring_stride(objects: np.ndarray) -> int:
+    """Observations per path ring: the largest cap of a function-space object whose memory
+    model keeps a ring, else 1."""
+    fs = objects["sampler"] == layouts.GPIS_SAMPLERS["function_space"]
+    ids = [MEMORY_MODELS.id(name) for name in MEMORY_MODELS.with_trait("ring")]
+    ring = objects[fs & np.isin(objects["memory"], ids)]
+    return int(ring["memory_cap"].max()) if len(ring) else 1
 
 
 def compile_gpis(shapes: list, material_of, source: str = "<scene>",
@@ -187,78 +265,36 @@ def compile_gpis(shapes: list, material_of, source: str = "<scene>",
     keys = keys or [f"gpis[{i}]" for i in range(len(shapes))]
     objects = layouts.GPIS_OBJECT.zeros(len(shapes))
     kernels = GP_KERNEL.zeros(len(shapes))
-    programs, built = [], []
-    first = 0
+    records, planes, obs, doubles, built = [], [], [], [], []
+    fields = [MEAN_NODE.zeros(1)]       # record 0: no field
+    at_record, at_field, at_plane, at_obs, at_double = 0, 1, 0, 0, 0
     for i, g in enumerate(shapes):
         o = objects[i]
-        proxy = g["proxy"]
-        o["proxy_kind"] = layouts.GPIS_PROXIES[proxy["type"]]
-        box = bounding_proxy(proxy)
-        if box["type"] == "box":
-            o["proxy_p0"][:3], o["proxy_p1"][:3] = box["min"], box["max"]
-        else:
-            o["proxy_p0"][:] = (*box["center"], box["radius"])
-        o["sampler"] = layouts.GPIS_SAMPLERS[g["sampler"]["type"]]
-        o["features"] = g["sampler"].get("features") or 0
-        if g["sampler"]["type"] == "function_space":
-            fs = g["sampler"]
-            o["memory"] = layouts.GPIS_MEMORIES[fs["memory"]]
-            for key in ("memory_cap", "refine", "miss_tolerance"):
-                o[key] = fs[key]
-            o["window"] = sampler_window(g["kernel"])
-        o["material"] = material_of(g["bsdf"])
-        o["tolerance"] = ROOT_TOLERANCE * kernel_length_scale(g["kernel"])
-        built.append(build_kernel(g["kernel"], proxy))
-        kernels[i] = pack_kernel(built[-1])[0]
-        o["occupancy_level"] = occupancy_level(g, built[i])
-        o["occupancy_step"] = OCCUPANCY_MIN_STEP * kernel_length_scale(g["kernel"])
-        try:
-            mean = build_mean(g["mean"], bakes)
-            prog = pack_mean_parts(mean)
-        except ValueError as exc:
-            raise SceneError(source, f"{keys[i]}.mean", str(exc)) from None
-        if not g.get("clip"):
-            _warn_if_cut(g, mean, built[i], source, keys[i])
-        block = None
-        if g.get("observations") is not None:
-            block = _posterior_block(g, built[i], mean, source, keys[i])
-        mean = None                         # its grids live on in prog alone
-        if block is not None:
-            # the posterior block sits just before the mean program (fs_posterior.h)
-            first += len(block)
-            programs.append(block)
-            if "occupancy_level" in objects.dtype.names:
-                o["occupancy_level"] = 0.0   # the bound follows the prior mean, not this one
-        count = sum(len(part) for part in prog)
-        o["mean_first"], o["mean_count"] = first, count
-        first += count
-        programs.extend(prog)
-        prog = None                         # the list holds them; _join frees them
-    # mesh proxies' face planes, after every mean program like the fields below
-    for i, g in enumerate(shapes):
-        if g["proxy"]["type"] == "mesh":
-            planes = analyse(g["proxy"])[0]
-            records = pack_planes(planes, MEAN_NODE.dtype)
-            objects[i]["proxy_first"], objects[i]["proxy_count"] = first, len(planes)
-            first += len(records)
-            programs.append(records)
-    # grid fields of sigma(x) and l(x): the kernel holds their offsets from the object's
-    # mean program (fs_sampling.h fs_fields)
-    for i, kern in enumerate(built):
-        offset = first - objects[i]["mean_first"]
-        for records in pack_kernel_grids(kern, kernels[i:i + 1], offset):
-            first += len(records)
-            programs.append(records)
-    # colour and emission fields follow every mean program, so index 0 (never a field)
-    # can stand for "no field" (scene/colour_fields.py)
-    for i, g in enumerate(shapes):
-        for key, slot in (("color", "color_field"), ("emission", "emission_field")):
-            if g.get(key) is not None:
-                records = pack_field(g[key])
-                objects[i][slot] = first
-                first += len(records)
-                programs.append(records)
-    nodes = _join(programs)
+        _object_fields(o, g, material_of)
+        share = compile_object(g, o, kernels[i:i + 1], source, keys[i], bakes)
+        built.append(share.kernel)
+        o["mean_first"], o["mean_count"] = at_record, share.mean_count
+        for slot, field in share.fields.items():
+            o[slot] = at_field
+            at_field += len(field)
+            fields.append(field)
+        at_record += sum(len(part) for part in share.records)
+        records += share.records
+        share.records = None                    # the list holds them; _join frees them
+        o["proxy_first"], o["proxy_count"] = at_plane, len(share.planes)
+        at_plane += len(share.planes)
+        planes.append(share.planes)
+        rows, values = share.posterior
+        o["posterior_first"], o["posterior_count"] = at_obs, len(rows)
+        o["posterior_doubles"] = at_double
+        at_obs, at_double = at_obs + len(rows), at_double + len(values)
+        obs.append(rows)
+        doubles.append(values)
     table, t_first, t_count = pack_order_tables(built)
     objects["order_first"], objects["order_count"] = t_first, t_count
-    return CompiledGpis(objects, kernels, nodes, table)
+    fs = objects[objects["sampler"] == layouts.GPIS_SAMPLERS["function_space"]]
+    return CompiledGpis(objects, kernels, _join(records), _join(fields), table,
+                        np.concatenate([np.zeros((0, 4), np.float32), *planes]),
+                        np.concatenate([FSL.FS_OBS.zeros(0), *obs]),
+                        np.concatenate([np.zeros(0), *doubles]),
+                        ring_stride(objects), int(fs["window"].max(initial=0)))

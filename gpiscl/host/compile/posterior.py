@@ -1,5 +1,6 @@
-"""Posterior GPIS: the "observations" of a gpis record -> host Posterior -> the device
-block that fs_posterior.h reads (the record and its limits: scene/observations.py).
+"""Posterior GPIS: the "observations" of a gpis record -> host Posterior -> the object's
+share of the scene's posterior tables that fs_posterior.h reads (the record and its
+limits: scene/observations.py).
 
     "observations": {"file": "points.xyz", "noise": 1e-3, "normals": false,
                      "normal_noise": 1e-2}
@@ -22,21 +23,17 @@ are practical, a thousand only for small images. MAX_ROWS bounds n: the factor (
 doubles) and the per-row v cache (FS_MAX_ROWS n doubles per work item) grow with it.
 
 Weight space: each ray conditions its path's realization by Matheron's rule
-(ws_posterior.h), reading the same block plus the noise deviations appended after the
+(ws_posterior.h), reading the same tables plus the noise deviations stored after the
 factor; SE and RQ kernels only, at most WS_MAX_ROWS rows.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..layout.constants import FS_POSTERIOR_KIND
-from ..layout.gp_records import MEAN_NODE
 from ..layout.function_space_records import FS_OBS, OBS_KINDS
 from ..gp.posterior import Posterior, surface_observations
 from ..io.points import load_points
 from ..scene.observations import MAX_ROWS
-
-POSTERIOR_KIND = FS_POSTERIOR_KIND   # the block header's MeanNode kind
 
 
 def build_posterior(o: dict, kernel, mean) -> Posterior:
@@ -48,8 +45,11 @@ def build_posterior(o: dict, kernel, mean) -> Posterior:
     return Posterior(kernel, mean, obs)
 
 
-def pack_posterior(post: Posterior) -> np.ndarray:
-    """MeanNode records to place just before the object's mean program (fs_posterior.h)."""
+def pack_posterior(post: Posterior) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, doubles): the n FsObs observation rows, and alpha (n), the packed lower
+    factor L (n(n+1)/2, row-major as fs_tri) and the noise deviations (n) in float64
+    (fs_posterior.h, ws_posterior.h; function space never reads the deviations, weight
+    space draws each path's noise with them)."""
     obs = post.obs
     n = len(obs)
     if n > MAX_ROWS:
@@ -60,26 +60,5 @@ def pack_posterior(post: Posterior) -> np.ndarray:
     rows["ux"], rows["uy"], rows["uz"] = u.T
     rows["value"] = obs.y
     rows["kind"] = np.where(obs.is_value, OBS_KINDS["value"], OBS_KINDS["deriv"])
-    tri = post.L[np.tril_indices(n)]          # row-major packed, as fs_tri
-    # the noise deviations trail the factor: weight space draws each path's noise with them
-    # (ws_posterior.h); fs_posterior.h never reads past the factor
-    raw = (rows.tobytes() + np.ascontiguousarray(post.alpha, "<f8").tobytes()
-           + np.ascontiguousarray(tri, "<f8").tobytes()
-           + np.ascontiguousarray(np.sqrt(obs.noise), "<f8").tobytes())
-    size = MEAN_NODE.dtype.itemsize
-    raw += bytes(-len(raw) % size)
-    block = np.frombuffer(raw, MEAN_NODE.dtype).copy()
-    header = MEAN_NODE.zeros(1)
-    header["kind"] = POSTERIOR_KIND
-    header["flags"] = len(block)
-    header["p0"] = (n, 0.0, 0.0, 0.0)
-    return np.concatenate([block, header])
-
-
-def posterior_rows(nodes: np.ndarray, objects: np.ndarray) -> np.ndarray:
-    """Observation rows of each object's posterior (0: none), read as fs_posterior_of does."""
-    out = np.zeros(len(objects), np.int64)
-    for k, first in enumerate(objects["mean_first"]):
-        if first > 0 and nodes[first - 1]["kind"] == POSTERIOR_KIND:
-            out[k] = int(nodes[first - 1]["p0"][0])
-    return out
+    doubles = np.concatenate([post.alpha, post.L[np.tril_indices(n)], np.sqrt(obs.noise)])
+    return rows, doubles.astype("<f8")

@@ -48,6 +48,9 @@ class CompiledScene:
                  (stages.GPIS, self.gpis.objects),
                  (stages.KERNELS, self.gpis.kernels), (stages.MEAN_NODES, self.gpis.mean_nodes),
                  (stages.ORDER_TABLE, self.gpis.order_table),
+                 (stages.FIELD_NODES, self.gpis.field_nodes),
+                 *zip(stages.GPIS_TABLES, (self.gpis.proxy_planes, self.gpis.posterior_obs,
+                                           self.gpis.posterior_doubles)),
                  *zip(stages.ENV_MAP, (self.env_texels, self.env_marginal,
                                        self.env_conditional)))
         return {param.name: array for param, array in pairs}

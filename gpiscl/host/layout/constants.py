@@ -44,10 +44,8 @@ def _const(name, value, doc, ctype="int", hex=False):
     return value
 
 
-# --- GPIS posterior block (compile/posterior.py) --------------------------------------
+# --- GPIS posterior (compile/posterior.py) ----------------------------------------------
 
-FS_POSTERIOR_KIND = _const("FS_POSTERIOR_KIND", 48, "MeanNode kind of a posterior block's header")
-WS_POSTERIOR_KIND = _const("WS_POSTERIOR_KIND", FS_POSTERIOR_KIND, "the same header, ws_posterior.h")
 # a ray's solve vector lives in private memory (8 bytes a row)
 WS_POST_MAX = _const("WS_POST_MAX", 512, "observation rows of a weight-space posterior")
 

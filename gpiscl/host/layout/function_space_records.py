@@ -53,16 +53,23 @@ RULE_ROWS = RULE_MEMORY + 2 * C.FS_RULE_SAMPLES + 2   # its latest samples and o
                                                       # (value, slope) pair
 
 
+def obs_declarations() -> str:
+    """FsObs and its kinds: every program has them (records.c_header), as the scene's
+    posterior observations are FsObs rows."""
+    lines = [f"#define FS_OBS_{k.upper()} {v}" for k, v in OBS_KINDS.items()]
+    return "\n".join(lines) + "\n" + FS_OBS.c_declaration()
+
+
 def c_declarations() -> str:
     """#defines and structs fs_linalg.h / fs_sampling.h assume (the lead adds this to the
     generated header, or passes it as Program(extra_c=...))."""
     lines = ["/* Generated from gpiscl/host/layout/function_space_records.py: do not edit. */"]
-    lines += [f"#define FS_OBS_{k.upper()} {v}" for k, v in OBS_KINDS.items()]
     lines += [f"#define FS_STATUS_{k.upper()} {v}" for k, v in STATUS.items()]
     lines.append(f"#define FS_HIT_ROWS {HIT_ROWS}")
     lines.append(f"#define FS_RULE_MEMORY {RULE_MEMORY}")
     lines.append(f"#define FS_RULE_ROWS {RULE_ROWS}")
-    return "\n".join(lines) + "\n" + "\n".join(s.c_declaration() for s in STRUCTS)
+    # FsObs: every program's header has it (records.c_header: the posterior-row table)
+    return "\n".join(lines) + "\n" + FS_VERTEX.c_declaration()
 
 
 def max_rows(window: int, memory_cap: int, refine: int = DEFAULT_REFINE) -> int:

@@ -92,16 +92,22 @@ GPIS_OBJECT = Struct("GpisObject", (
     ("int", "memory_cap"),     # function space, global memory: observations kept
     ("int", "refine"),         # function space: root-search points forced in a crossing bracket
     ("float", "step_corr"),    # function space: > 0 the uniform baseline step (benchmarks)
-    ("int", "color_field"),    # albedo multiplier: its MeanNode record, 0 = none (scene/colour_fields.py)
-    ("int", "emission_field"), # emitted radiance: its MeanNode record, 0 = none
+    ("int", "color_field"),    # albedo multiplier: its record in the field table, 0 = none
+    ("int", "emission_field"), # emitted radiance: the same (scene/colour_fields.py)
     ("float", "occupancy_level"),  # z sigma_max: mean above it = occupancy below the
                                    # object's epsilon (gpis_proxy.h); 0: bounds off
     ("float", "occupancy_step"),   # world length: the bound's marches stop below it
-    ("int", "proxy_first"),    # mesh proxy: its face planes (float4 n, w: n.x <= w) start
-    ("int", "proxy_count"),    # at this record of the mean-node array; how many planes
+    ("int", "proxy_first"),    # mesh proxy: its face planes (float4 n, w: n.x <= w) in
+    ("int", "proxy_count"),    # the proxy-plane table: the first and how many
     ("float", "miss_tolerance"),   # function space: expected missed crossings per l_d
     ("int", "general"),        # function space: 1 keeps the general conditional sampler
                                # where the Markov one applies (tests, benchmarks; no scene key)
+    # a posterior (compile/posterior.py): its n observations in the posterior-row table
+    # (FsObs) and, in the posterior-double table from posterior_doubles on, alpha (n), the
+    # packed lower factor L (n(n+1)/2) and the noise deviations (n); n = 0: the prior
+    ("int", "posterior_first"),
+    ("int", "posterior_count"),
+    ("int", "posterior_doubles"),
 ))
 
 # Per-launch constants of the integrator.
@@ -229,5 +235,7 @@ def c_header() -> str:
     parts = ["/* Generated from gpiscl/host/layout/records.py: do not edit. */\n", _defines(),
              constants.c_defines(), random_slots.c_defines()]
     parts += [s.c_declaration() for s in STRUCTS]
+    # the posterior-row table's type and its kinds, which every GPIS stage reads
+    parts.append(function_space_records.obs_declarations())
     parts.append(gp_declarations())
     return "\n".join(parts)

@@ -111,6 +111,13 @@ GPIS = Param("gpis", "__global const GpisObject*")
 KERNELS = Param("kernels", "__global const GpKernel*")
 MEAN_NODES = Param("mean_nodes", "__global const MeanNode*")
 ORDER_TABLE = Param("order_table", "__global const float*")
+# The GPIS objects' side tables (GpisObject says where each object's part starts): mesh
+# proxies' face planes, posteriors' observations and their solve (compile/gpis.py)
+GPIS_TABLES = (Param("proxy_planes", "__global const float4*"),
+               Param("posterior_obs", "__global const FsObs*"),
+               Param("posterior_doubles", "__global const double*"))
+# Colour and emission fields, which GpisObject's color_field / emission_field index (0: none)
+FIELD_NODES = Param("field_nodes", "__global const MeanNode*")
 # The batch's kept weight-space posterior weights (render/kriging_cache.py, ws_objects.h)
 WS_POST_CACHE = Group("post", (Param("tags", "__global uint4*"),
                                Param("values", "__global double*"),
@@ -139,10 +146,10 @@ INTERSECT = Stage("intersect", (
     PARAMS, NUM_RAYS, queue("in", RAY_QUEUE), NODES, PRIMS, MATERIALS))
 GPIS_WEIGHT_SPACE = Stage("gpis_weight_space", (
     PARAMS, NUM_RAYS, queue("path", PATH_STATE), queue("in", RAY_QUEUE), GPIS, KERNELS,
-    MEAN_NODES, ORDER_TABLE, COUNTERS, WS_POST_CACHE))
+    MEAN_NODES, *GPIS_TABLES, ORDER_TABLE, COUNTERS, WS_POST_CACHE))
 GPIS_FUNCTION_SPACE = Stage("gpis_function_space", (
     PARAMS, NUM_RAYS, queue("path", PATH_STATE), queue("in", RAY_QUEUE), GPIS, KERNELS,
-    MEAN_NODES, *_fs_work(""), COUNTERS))
+    MEAN_NODES, *GPIS_TABLES, *_fs_work(""), COUNTERS))
 QUEUE_HITS = Stage("queue_hits", (
     NUM_RAYS, queue("in", RAY_QUEUE), queue("hits", INDEX_QUEUE),
     queue("escaped", INDEX_QUEUE), COUNTERS))
@@ -151,17 +158,17 @@ ESCAPED_RAYS = Stage("escaped_rays", (
     COUNTERS, LIGHTS, *ENV_MAP, LIGHT_CHOICE))
 EMISSION = Stage("emission", (
     PARAMS, queue("path", PATH_STATE), queue("in", RAY_QUEUE), queue("hits", INDEX_QUEUE),
-    COUNTERS, PRIMS, LIGHTS, GPIS, MEAN_NODES, LIGHT_CHOICE))
+    COUNTERS, PRIMS, LIGHTS, GPIS, FIELD_NODES, LIGHT_CHOICE))
 SCATTER = Stage("scatter", (
     PARAMS, queue("path", PATH_STATE), queue("in", RAY_QUEUE), queue("out", RAY_QUEUE),
     queue("hits", INDEX_QUEUE), queue("shadow", SHADOW_QUEUE), COUNTERS, PRIMS, MATERIALS,
-    LIGHTS, *ENV_MAP, GPIS, MEAN_NODES, LIGHT_CHOICE))
+    LIGHTS, *ENV_MAP, GPIS, FIELD_NODES, LIGHT_CHOICE))
 GPIS_SHADOW_WEIGHT_SPACE = Stage("gpis_shadow_weight_space", (
     PARAMS, queue("path", PATH_STATE), queue("shadow", SHADOW_QUEUE), GPIS, KERNELS,
-    MEAN_NODES, ORDER_TABLE, COUNTERS, WS_POST_CACHE))
+    MEAN_NODES, *GPIS_TABLES, ORDER_TABLE, COUNTERS, WS_POST_CACHE))
 GPIS_SHADOW_FUNCTION_SPACE = Stage("gpis_shadow_function_space", (
     PARAMS, NUM_RAYS, queue("path", PATH_STATE), queue("shadow", SHADOW_QUEUE), GPIS,
-    KERNELS, MEAN_NODES, *_fs_work("const "), COUNTERS))
+    KERNELS, MEAN_NODES, *GPIS_TABLES, *_fs_work("const "), COUNTERS))
 SHADOW_RAYS = Stage("shadow_rays", (
     PARAMS, queue("path", PATH_STATE), queue("shadow", SHADOW_QUEUE), COUNTERS, NODES,
     PRIMS, MATERIALS))

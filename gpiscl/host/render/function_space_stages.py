@@ -13,7 +13,7 @@ import os
 import numpy as np
 import pyopencl as cl
 
-from ..kinds.memory_models import MEMORY_MODELS
+from ..compile.gpis import CompiledGpis
 from ..layout import records as layouts
 from ..layout import stages
 from .program_sources import FS_HEADERS, FS_STAGE_FILES
@@ -39,19 +39,6 @@ SCRATCH_BUDGET, CPU_SCRATCH_BUDGET = 256 << 20, 4 << 20
 GROUPS_PER_UNIT = 4
 
 
-def _fs_objects(objects: np.ndarray) -> np.ndarray:
-    return objects[objects["sampler"] == layouts.GPIS_SAMPLERS["function_space"]]
-
-
-def ring_stride(objects: np.ndarray) -> int:
-    """Observations per path ring: the largest cap of an object whose memory model keeps
-    a ring, else 1."""
-    fs = _fs_objects(objects)
-    ids = [MEMORY_MODELS.id(name) for name in MEMORY_MODELS.with_trait("ring")]
-    ring = fs[np.isin(fs["memory"], ids)]
-    return int(ring["memory_cap"].max()) if len(ring) else 1
-
-
 def budget(device: Device) -> int:
     """Bytes of rings per batch on this device."""
     return CPU_BUDGET if device.is_cpu else BUDGET
@@ -62,63 +49,29 @@ def scratch_budget(device: Device) -> int:
     return CPU_SCRATCH_BUDGET if device.is_cpu else SCRATCH_BUDGET
 
 
-def max_batch(objects: np.ndarray, device: Device) -> int:
+def max_batch(gpis: CompiledGpis, device: Device) -> int:
     """The largest batch whose rings fit the device's budget."""
-    return max(1, budget(device)
-               // (ring_stride(objects) * FL.FS_OBS.dtype.itemsize))
-
-
-def posterior_rows_on_device(device: Device, objects: np.ndarray, means) -> int:
-    """The most observation rows of any function-space object's posterior, read from the
-    header records just before the mean programs in the device's mean buffer
-    (fs_posterior.h): the stages are built from GpisObject records alone, which do not
-    carry it, and one record per object is all that is read."""
-    from ..layout.gp_records import MEAN_NODE
-    from ..compile.posterior import POSTERIOR_KIND
-    size, best = MEAN_NODE.dtype.itemsize, 0
-    for first in _fs_objects(objects)["mean_first"]:
-        if first <= 0:
-            continue
-        rec = MEAN_NODE.zeros(1)
-        cl.enqueue_copy(device.queue, rec, means, src_offset=int(first - 1) * size)
-        if rec["kind"][0] == POSTERIOR_KIND:
-            best = max(best, int(rec["p0"][0][0]))
-    return best
+    return max(1, budget(device) // (gpis.ring_stride * FL.FS_OBS.dtype.itemsize))
 
 
 class FunctionSpaceStages:
-    """mean_nodes: the host mean-node array, to size the posterior cache now. Without it
-    the stages are built for the prior and, if the first launch finds a posterior in the
-    device's mean buffer, rebuilt then (its compilation then counts as render time)."""
+    """The program and per-batch buffers of a scene's function-space objects (gpis)."""
 
-    def __init__(self, device: Device, objects: np.ndarray, batch: int,
-                 timings: KernelTimings | None = None, mean_nodes: np.ndarray | None = None):
-        self.device, self.objects, self.batch, self.timings = device, objects, batch, timings
-        self.stride = ring_stride(objects)
+    def __init__(self, device: Device, gpis: CompiledGpis, batch: int,
+                 timings: KernelTimings | None = None):
+        self.device, self.batch, self.timings = device, batch, timings
+        self.stride = gpis.ring_stride
         self.local = 16 if device.is_cpu else 64
-        self.checked = mean_nodes is not None
-        rows = 0
-        if mean_nodes is not None:
-            from ..compile.posterior import posterior_rows
-            rows = int(posterior_rows(mean_nodes, objects).max(initial=0))
         self.work = None      # the per-batch buffers, allocated when a launch needs them
-        self._build(rows)
+        fs = gpis.objects["sampler"] == layouts.GPIS_SAMPLERS["function_space"]
+        self._build(gpis.window_max, int(gpis.objects["refine"][fs].max()),
+                    int(gpis.posterior_rows[fs].max()))
 
-    def _check_posterior(self, means):
-        if not self.checked:
-            self.checked = True
-            rows = posterior_rows_on_device(self.device, self.objects, means)
-            if rows > self.post_rows:
-                self._build(rows)
-
-    def _build(self, post_rows: int):
+    def _build(self, window_max: int, refine_max: int, post_rows: int):
         """Program and scratch: a posterior of n rows adds a v cache of n doubles per row
         (fs_sampling.h, FsScratch.v) to every scratch slice."""
-        fs = _fs_objects(self.objects)
         rows_cap = self.stride if self.stride > 1 else 2
-        self.post_rows = post_rows
-        defines = FL.defines(int(fs["window"].max()), rows_cap, int(fs["refine"].max()),
-                             post_rows)
+        defines = FL.defines(window_max, rows_cap, refine_max, post_rows)
         if os.environ.get("GPISCL_FS_PROFILE"):   # fs_march.h's work counters (off: no code)
             defines["FS_PROFILE"] = 1
         self.program = Program(self.device, FS_STAGE_FILES, defines=defines,
@@ -131,7 +84,6 @@ class FunctionSpaceStages:
                            parallel))
         self.items = int(-(-items // self.local) * self.local)   # work items a launch
         self.scratch_bytes = 2 * slice_bytes * self.items
-        self.release()        # a rebuilt program may need a larger scratch
 
     def _work(self) -> tuple:
         """(vertex, vertex_object, rings, scratch): the path-indexed vertex records and
@@ -161,7 +113,6 @@ class FunctionSpaceStages:
         """One launch of at most self.items work items striding over [0, n), with a fixed
         local size: PoCL compiles a kernel once per work-group size, and these kernels
         take seconds to compile."""
-        self._check_posterior(named["mean_nodes"])
         launch(self.program, stage, n, local=self.local, max_items=self.items,
                num_rays=np.int32(n), **self._work_arguments(), **named)
 

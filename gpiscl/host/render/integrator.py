@@ -135,20 +135,17 @@ class WavefrontIntegrator:
         gpis = scene.gpis
         self.weight_space = gpis.uses("weight_space")
         if self.weight_space:   # a posterior's kept weights fit their budget
-            self.batch = min(self.batch, kriging_cache.max_batch(gpis.objects,
-                                                                 gpis.mean_nodes, device))
+            self.batch = min(self.batch, kriging_cache.max_batch(gpis.objects, device))
         self.function_space = None
         if gpis.uses("function_space"):
-            self.batch = min(self.batch, function_space_stages.max_batch(gpis.objects, device))
+            self.batch = min(self.batch, function_space_stages.max_batch(gpis, device))
             self.function_space = function_space_stages.FunctionSpaceStages(
-                device, gpis.objects, self.batch, self.program.timings,
-                mean_nodes=gpis.mean_nodes)   # sizes a posterior's program up front
+                device, gpis, self.batch, self.program.timings)
         self.paths = None     # the work queues: _allocate_work, release_work
         # not a scene key: off, every ray solves for its posterior weights (the baseline
         # of tests/test_kriging_cache.py). Kept across release_work: its tags are zeroed
         # once, its slots stay valid (keyed by realization) and a batch touches ~1 MB.
-        self.kriging = kriging_cache.KrigingCache(device, gpis.objects, gpis.mean_nodes,
-                                                  self.batch,
+        self.kriging = kriging_cache.KrigingCache(device, gpis.objects, self.batch,
                                                   settings.get("kriging_cache", True))
         self.counters_host = np.zeros(layouts.NUM_COUNTERS, np.int32)
         self.counters = to_device(device, self.counters_host, writable=True)

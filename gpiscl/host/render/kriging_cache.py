@@ -20,7 +20,6 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from ..compile.posterior import posterior_rows
 from ..layout import records as layouts
 from .device import Device
 
@@ -36,10 +35,10 @@ def budget(device: Device) -> int:
     return CPU_BUDGET if device.is_cpu else BUDGET
 
 
-def layout(objects: np.ndarray, mean_nodes: np.ndarray) -> tuple[np.ndarray, int, int]:
+def layout(objects: np.ndarray) -> tuple[np.ndarray, int, int]:
     """(table int32 (len(objects), 2), tags_per_path, doubles_per_path) for the
-    weight-space objects with a posterior."""
-    rows = posterior_rows(mean_nodes, objects)
+    weight-space objects (GpisObject records) with a posterior."""
+    rows = objects["posterior_count"]
     ws = objects["sampler"] == layouts.GPIS_SAMPLERS["weight_space"]
     table = np.full((len(objects), 2), -1, np.int32)
     tags = doubles = 0
@@ -50,9 +49,9 @@ def layout(objects: np.ndarray, mean_nodes: np.ndarray) -> tuple[np.ndarray, int
     return table, tags, doubles
 
 
-def max_batch(objects: np.ndarray, mean_nodes: np.ndarray, device: Device) -> int:
+def max_batch(objects: np.ndarray, device: Device) -> int:
     """The largest batch whose kept weights fit the device's budget."""
-    _, tags, doubles = layout(objects, mean_nodes)
+    _, tags, doubles = layout(objects)
     per_path = 8 * doubles + TAG_BYTES * tags
     return max(1, budget(device) // per_path) if per_path else 1 << 62
 
@@ -62,9 +61,8 @@ class KrigingCache:
     -1, so each search solves for its own weights (the uncached baseline of the tests and
     tools/bench_scenes.py)."""
 
-    def __init__(self, device: Device, objects: np.ndarray, mean_nodes: np.ndarray,
-                 batch: int, enabled: bool = True):
-        table, self.tags_per_path, self.doubles_per_path = layout(objects, mean_nodes)
+    def __init__(self, device: Device, objects: np.ndarray, batch: int, enabled: bool = True):
+        table, self.tags_per_path, self.doubles_per_path = layout(objects)
         if not enabled:
             table[:] = -1
         mf, ctx = cl.mem_flags, device.ctx

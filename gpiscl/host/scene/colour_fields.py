@@ -23,12 +23,10 @@ shadow rays are blocked by it: it is found by BSDF-sampled rays only, which coun
 MIS weight 1 (emission.cl). Bright small emitters are therefore noisy; use lights for
 illumination and emission for glowing detail.
 
-Device form: one MeanNode record per field (kinds: kinds/colour_fields.py), appended
-after every object's mean program in the mean-node array, so no buffer is added and the
-mean walkers never see them; a grid's interleaved RGB samples follow as payload records
-in the layout of grid means (layout/gp_records.py). GpisObject.color_field / emission_field
-hold the record's index, 0 for none: fields follow at least one mean program, so no
-field record is ever at index 0.
+Device form: one MeanNode record per field (kinds: kinds/colour_fields.py) in the
+scene's field table; a grid's interleaved RGB samples follow as payload records in the
+layout of grid means (layout/gp_records.py). GpisObject.color_field / emission_field
+hold the record's index, 0 for none: the table's record 0 is no field.
 """
 from __future__ import annotations
 

@@ -15,7 +15,8 @@ inline uint fs_object_seed(uint seed, int k)
 inline FsResult fs_object_flight(__constant RenderParams* params,
                                  __global const GpisObject* gpis, int k,
                                  __global const GpKernel* kernels,
-                                 __global const MeanNode* means, float4 o, float4 d, float t1,
+                                 __global const MeanNode* means, GpisTables T, float4 o,
+                                 float4 d, float t1,
                                  int pixel, int sample, uint stream, FsVertex v,
                                  __global const FsObs* ring, FsScratch S,
                                  __global int* counters, FsRay* ray, FsParams* prm)
@@ -24,13 +25,13 @@ inline FsResult fs_object_flight(__constant RenderParams* params,
     __global const GpisObject* g = &gpis[k];
     float t0 = o.w;
     if (g->sampler != GPIS_SAMPLER_FUNCTION_SPACE
-        || !gpis_proxy_clip(g, means, o.xyz, d.xyz, &t0, &t1)
+        || !gpis_proxy_clip(g, T.planes, o.xyz, d.xyz, &t0, &t1)
         || !gpis_occupancy_clip(g, means, o.xyz, d.xyz, &t0, &t1, !v.valid))
         return none;
     FsParams pr = {g->window, g->memory, g->memory_cap, g->refine, (double)g->step_corr,
                    (double)g->miss_tolerance};
     FsRay r = {convert_double3(o.xyz), convert_double3(d.xyz), (double)t0, (double)t1};
-    S.post = fs_posterior_of(means, g->mean_first);   /* none: the prior */
+    S.post = fs_posterior_of(g, T.obs, T.doubles);   /* none: the prior */
     FsRng rng = {fs_object_seed(params->seed, k), (uint)pixel, (uint)sample,
                  (uint)params->bounce, stream};
     /* Matern 3/2 and 5/2 along a ray without off-ray conditioning: the exact Markov

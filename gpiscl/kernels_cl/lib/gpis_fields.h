@@ -1,6 +1,6 @@
 /* Colour and emission fields of GPIS objects, evaluated at hit points by scatter.cl and
  * emission.cl. gpiscl/host/scene/colour_fields.py is the reference and packs each field into one
- * MeanNode record after the mean programs (kinds GPIS_FIELD_*, generated from
+ * MeanNode record of the scene's field table (kinds GPIS_FIELD_*, generated from
  * gpiscl/host/kinds/colour_fields.py):
  * row0..row2 map world points to the field's coordinates y, p0 / p1 hold colours a / b;
  *   constant  p0.xyz
@@ -8,7 +8,7 @@
  *   gradient  t = clamp(y.x, 0, 1); (1 - t) a + t b
  *   grid      y = index coordinates; p1.xyz = sample counts; flags payload records of
  *             interleaved RGB samples follow; trilinear, clamped to the sample box
- * Index 0 means "no field": fields follow every mean program, so none is at index 0. */
+ * Index 0 means "no field": the field table's record 0 is no field (compile/gpis.py). */
 
 /* float q of a grid payload: GP_MEAN_GRID_PAYLOAD_FLOATS per record (row0..p1), past
  * which each record's int tail lies, as in gp_grid_sample */

@@ -1,15 +1,25 @@
 /* GPIS proxies (box, sphere, convex mesh) are clipped here, not traced in the BVH: a GPIS
  * stage needs the interval a ray spends inside, not a surface to shade. */
 
+/* The GPIS objects' side tables, which GpisObject indexes (layout/stages.py GPIS_TABLES) */
+typedef struct {
+    __global const float4* planes;      /* mesh proxies' face planes */
+    __global const FsObs* obs;          /* posteriors' observations */
+    __global const double* doubles;     /* posteriors' alpha, factor and noise */
+} GpisTables;
+
+/* The struct made of the tables' stage kernel parameters */
+#define GPIS_TABLES {proxy_planes, posterior_obs, posterior_doubles}
+
 /* Clip [t0, t1] to the part of the ray inside the proxy; false if empty. A mesh proxy's
- * face planes (n, w: inside where n.x <= w) are float4s stored from mean-node record
- * g->proxy_first on (scene/proxies.py). */
-inline int gpis_proxy_clip(__global const GpisObject* g, __global const MeanNode* means,
+ * face planes (n, w: inside where n.x <= w) are all_planes[g->proxy_first] on
+ * (scene/proxies.py). */
+inline int gpis_proxy_clip(__global const GpisObject* g, __global const float4* all_planes,
                            float3 o, float3 d, float* t0, float* t1)
 {
     float enter, leave;
     if (g->proxy_kind == GPIS_PROXY_MESH) {
-        __global const float4* planes = (__global const float4*)(means + g->proxy_first);
+        __global const float4* planes = all_planes + g->proxy_first;
         enter = -T_INFINITY;
         leave = T_INFINITY;
         for (int j = 0; j < g->proxy_count; ++j) {

@@ -34,17 +34,17 @@ inline WsPostSlot ws_post_slot(WsPostCache C, int k, int p)
  * decide is counted in COUNT_GPIS_FAILED and reported by the host as undecided. */
 inline float ws_object_first_root(__global const GpisObject* gpis, int k,
                                   __global const GpKernel* kernels,
-                                  __global const MeanNode* means,
+                                  __global const MeanNode* means, GpisTables T,
                                   __global const float* order_table, uint2 key, WsPostSlot S,
                                   float3 o, float3 d, float t0, float t1, float3* normal,
                                   __global int* counters)
 {
     __global const GpisObject* g = &gpis[k];
-    if (g->sampler != GPIS_SAMPLER_WEIGHT_SPACE || !gpis_proxy_clip(g, means, o, d, &t0, &t1)
+    if (g->sampler != GPIS_SAMPLER_WEIGHT_SPACE || !gpis_proxy_clip(g, T.planes, o, d, &t0, &t1)
         || !gpis_occupancy_clip(g, means, o, d, &t0, &t1, 1))
         return T_INFINITY;
     int status = 0, evaluations;
-    WsPostBlock B = ws_posterior_block(means, g->mean_first);
+    WsPostBlock B = ws_posterior_block(g, T.obs, T.doubles);
     /* two call sites: the prior's compiles to the search without any posterior code */
     float t = B.n ? ws_first_root_post(B, S, kernels[k], means + g->mean_first, g->mean_count,
                                        order_table + g->order_first, g->order_count,

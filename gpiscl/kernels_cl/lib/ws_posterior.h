@@ -7,10 +7,9 @@
  * whenever f has the prior's (random features do, averaged over the features), so the
  * realization needs no approximation beyond the prior's.
  *
- * Data: the function-space posterior block (fs_posterior.h; compile/posterior.py packs it
- * before the mean program), read as raw doubles: n rows of 8 (x, u, y, kind in the low
- * int of the eighth), alpha (unused here), the packed row-major factor L of K + N, then
- * the n noise deviations.
+ * Data: the function-space posterior's tables (fs_posterior.h; compile/posterior.py fills
+ * them): n FsObs rows (x, u, y, kind), and among the doubles alpha (unused here), the
+ * packed row-major factor L of K + N, then the n noise deviations.
  * Noise: e_j = sd_j z_j, z_j from Philox call WS_CALL_NOISE with the features' counter
  * (key, object, j): the realization stays a pure function of the path's key.
  * Cost: n prior evaluations at the rows (n M features) and two triangular solves (n^2) in
@@ -46,10 +45,10 @@
  * intervals around roots, the cone long ones near observations.
  * Other kernels are rejected by the scene schema (scene/observations.observations_problem).
  */
-/* WS_POSTERIOR_KIND, WS_CALL_NOISE, WS_POST_MAX: layout/constants.py */
+/* WS_CALL_NOISE, WS_POST_MAX: layout/constants.py */
 
 typedef struct {
-    __global const double* rows;
+    __global const FsObs* rows;
     __global const double* L;
     __global const double* sd;
     int n;
@@ -58,34 +57,36 @@ typedef struct {
 /* One ray's conditioned correction: the block, v = (K + N)^-1 (y - f(X) - e), and rho,
  * a bound on the correction's norm in the kernel's RKHS (ws_post_prepare). */
 typedef struct {
-    __global const double* rows;
+    __global const FsObs* rows;
     const double* v;
     int n;
     double rho;
 } WsPost;
 
-/* The posterior block before the program at mean_first (n = 0: none, the prior). */
-inline WsPostBlock ws_posterior_block(__global const MeanNode* means, int mean_first)
+/* Object g's posterior in the scene's posterior tables (n = 0: none, the prior). */
+inline WsPostBlock ws_posterior_block(__global const GpisObject* g, __global const FsObs* obs,
+                                      __global const double* doubles)
 {
     WsPostBlock B;
-    B.rows = B.L = B.sd = 0;
-    B.n = 0;
-    if (mean_first <= 0) return B;
-    __global const MeanNode* h = means + mean_first - 1;
-    if (h->kind != WS_POSTERIOR_KIND) return B;
-    B.n = (int)h->p0.x;
-    B.rows = (__global const double*)(h - h->flags);
-    B.L = B.rows + 9 * B.n;
+    B.rows = 0;
+    B.L = B.sd = 0;
+    B.n = g->posterior_count;
+    if (B.n == 0) return B;
+    B.rows = obs + g->posterior_first;
+    B.L = doubles + g->posterior_doubles + B.n;      /* after alpha */
     B.sd = B.L + B.n * (B.n + 1) / 2;
     return B;
 }
 
-inline double3 ws_post_x(__global const double* row) { return vload3(0, row); }
-inline double3 ws_post_u(__global const double* row) { return vload3(1, row); }
-inline int ws_post_is_deriv(__global const double* row)
+inline double3 ws_post_x(__global const FsObs* row)
 {
-    return ((__global const int*)(row + 7))[0] != 0;
+    return (double3)(row->px, row->py, row->pz);
 }
+inline double3 ws_post_u(__global const FsObs* row)
+{
+    return (double3)(row->ux, row->uy, row->uz);
+}
+inline int ws_post_is_deriv(__global const FsObs* row) { return row->kind != FS_OBS_VALUE; }
 
 inline double3 ws_post_aniso(GpKernel k)
 {
@@ -120,14 +121,15 @@ typedef struct {
     wpd v;            /* weight v_j, 0 past n */
 } WsPostRows;
 
-inline WsPostRows ws_post_rows(__global const double* rows, const double* v, int n, int j0)
+inline WsPostRows ws_post_rows(__global const FsObs* rows, const double* v, int n, int j0)
 {
     double t[6][WS_POST_LANES], vv[WS_POST_LANES];
     long dv[WS_POST_LANES];
     for (int l = 0; l < WS_POST_LANES; ++l) {
         int j = min(j0 + l, n - 1);
-        __global const double* row = rows + 8 * j;
-        for (int f = 0; f < 6; ++f) t[f][l] = row[f];
+        __global const FsObs* row = rows + j;
+        t[0][l] = row->px; t[1][l] = row->py; t[2][l] = row->pz;
+        t[3][l] = row->ux; t[4][l] = row->uy; t[5][l] = row->uz;
         dv[l] = ws_post_is_deriv(row) ? -1 : 0;
         vv[l] = j0 + l < n ? v[j] : 0.0;
     }
@@ -214,13 +216,13 @@ inline double ws_post_prepare(const float* cache, GpKernel k, __global const Mea
         ws_vstore(z, 0, zs);
         for (int l = 0; l < WS_LANES && j0 + l < B.n; ++l) {
             int j = j0 + l;
-            __global const double* row = B.rows + 8 * j;
+            __global const FsObs* row = B.rows + j;
             float3 g;
             float f = ws_eval_cached(cache, k, mean, mean_count, order_cdf, order_count, M,
                                      key, object, convert_float3(ws_post_x(row)), &g);
             double fo = ws_post_is_deriv(row) ? dot(convert_double3(g), ws_post_u(row))
                                               : (double)f;
-            v[j] = row[6] - fo - B.sd[j] * (double)zs[l];
+            v[j] = row->value - fo - B.sd[j] * (double)zs[l];
         }
     }
     double zz = 0.0, diag = 0.0, vv = 0.0, nv = 0.0;

@@ -15,7 +15,7 @@ __kernel void emission(EMISSION_PARAMS)
         if (f <= 0) return;
         int p = in_path[r];
         float3 x = in_o[r].xyz + in_hit_t[r] * in_d[r].xyz;
-        float3 Le = gpis_field_eval(mean_nodes, f, x, 0.0f);
+        float3 Le = gpis_field_eval(field_nodes, f, x, 0.0f);
         path_radiance[p] += (float4)(path_beta[p].xyz * Le, 0.0f);
         return;
     }

@@ -18,6 +18,7 @@
 __kernel void gpis_function_space(GPIS_FUNCTION_SPACE_PARAMS)
 {
     int item = get_global_id(0);
+    GpisTables T = GPIS_TABLES;
     for (int i = item; i < num_rays; i += get_global_size(0)) {
         float4 o = in_o[i], d = in_d[i];
         int p = in_path[i];
@@ -32,7 +33,7 @@ __kernel void gpis_function_space(GPIS_FUNCTION_SPACE_PARAMS)
         for (int k = 0; k < params->num_gpis; ++k) {
             FsRay r;
             FsParams prm;
-            FsResult res = fs_object_flight(params, gpis, k, kernels, mean_nodes, o, d, t_hit,
+            FsResult res = fs_object_flight(params, gpis, k, kernels, mean_nodes, T, o, d, t_hit,
                                             path_pixel[p], path_sample[p], 0u,
                                             vk == k ? prev : none, ring,
                                             fs_scratch(scratch, 2 * item + slot), counters, &r,

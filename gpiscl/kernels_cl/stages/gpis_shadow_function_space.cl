@@ -26,6 +26,7 @@ __kernel void gpis_shadow_function_space(GPIS_SHADOW_FUNCTION_SPACE_PARAMS)
 {
     int item = get_global_id(0), end = min(num_rays, counters[COUNT_SHADOW]);
     FsScratch S = fs_scratch(scratch, item);
+    GpisTables T = GPIS_TABLES;
     for (int i = item; i < end; i += get_global_size(0)) {
         if (max3(shadow_contribution[i].xyz) <= 0.0f) continue;   /* blocked already */
         float4 o = shadow_o[i], d = shadow_d[i];
@@ -40,9 +41,9 @@ __kernel void gpis_shadow_function_space(GPIS_SHADOW_FUNCTION_SPACE_PARAMS)
         for (int k = 0; k < params->num_gpis; ++k) {
             FsRay r;
             FsParams prm;
-            if (fs_object_flight(params, gpis, k, kernels, mean_nodes, o, d, d.w, path_pixel[p],
-                                 path_sample[p], 1u, vk == k ? prev : none, ring, S, counters,
-                                 &r, &prm).hit) {
+            if (fs_object_flight(params, gpis, k, kernels, mean_nodes, T, o, d, d.w,
+                                 path_pixel[p], path_sample[p], 1u, vk == k ? prev : none,
+                                 ring, S, counters, &r, &prm).hit) {
                 shadow_contribution[i] = (float4)(0.0f);
                 break;
             }

@@ -9,9 +9,10 @@ __kernel void gpis_shadow_weight_space(GPIS_SHADOW_WEIGHT_SPACE_PARAMS)
     int p = shadow_path[i];
     uint2 key = gpis_realization_key(params, path_pixel[p], path_sample[p]);
     WsPostCache C = WS_POST_CACHE;
+    GpisTables T = GPIS_TABLES;
     for (int k = 0; k < params->num_gpis; ++k) {
         float3 n;
-        float t = ws_object_first_root(gpis, k, kernels, mean_nodes, order_table, key,
+        float t = ws_object_first_root(gpis, k, kernels, mean_nodes, T, order_table, key,
                                        ws_post_slot(C, k, p), o.xyz, d.xyz, o.w, d.w, &n,
                                        counters);
         if (t < T_INFINITY) {

@@ -12,9 +12,10 @@ __kernel void gpis_weight_space(GPIS_WEIGHT_SPACE_PARAMS)
     int hit = -1;
     float3 n_hit = (float3)(0.0f);
     WsPostCache C = WS_POST_CACHE;
+    GpisTables T = GPIS_TABLES;
     for (int k = 0; k < params->num_gpis; ++k) {
         float3 n;
-        float t = ws_object_first_root(gpis, k, kernels, mean_nodes, order_table, key,
+        float t = ws_object_first_root(gpis, k, kernels, mean_nodes, T, order_table, key,
                                        ws_post_slot(C, k, p), o.xyz, d.xyz, o.w, t_hit, &n,
                                        counters);
         if (t < t_hit) {

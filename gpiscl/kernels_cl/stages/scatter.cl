@@ -27,7 +27,7 @@ __kernel void scatter(SCATTER_PARAMS)
         __global const GpisObject* g = &gpis[GPIS_HIT_BASE - hp];
         mat = &materials[g->material];
         /* the object's colour field scales the micro-BSDF albedo where the path hit */
-        albedo = mat->albedo.xyz * gpis_field_eval(mean_nodes, g->color_field, x, 1.0f);
+        albedo = mat->albedo.xyz * gpis_field_eval(field_nodes, g->color_field, x, 1.0f);
         ng = in_hit_n[r].xyz;
         eps = 0.0f;
         if (!(dot(ng, wo) < 0.0f)) {  /* a crossing's gradient must face the ray */
