@@ -292,3 +292,24 @@ def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
         write_uq_outputs(run.sums, Scene.resolved(data, scene.source, scene.base_dir),
                          output, checked["exposure"], run.meta)
     return run
+
+
+def density(scene, obj: int = 0, output="density", ray=None, paths: int = 20000,
+            bounces: int = 2, seed: int = 1, device: Device | None = None) -> list:
+    """The GPIS density of GPIS number `obj` of a scene file: free flights and first-hit
+    normals of `paths` device flights per memory model (docs/design/classical-limits.md),
+    written to the folder `output` as flights.csv, summary.csv, free_flight.png and, for a
+    mean with a gradient along the ray, normals.png. Needs matplotlib (the `plots` extra).
+
+    ray: 'ox,oy,oz,dx,dy,dz,length' or None (through the proxy's centre, against the
+    mean's gradient there). Returns the written paths."""
+    from .host.commands.density import parse_ray, write_density
+    from .host.schema import Context, Int
+
+    ctx = Context(arguments.API_SOURCE, ".")
+    paths = Int(ge=1, le=10**8).resolve(paths, "paths", ctx)
+    bounces = Int(ge=1, le=64).resolve(bounces, "bounces", ctx)
+    obj = Int(ge=0).resolve(obj, "obj", ctx)
+    checked = arguments.check(seed=seed)
+    return write_density(str(scene), obj, output, parse_ray(ray) if ray else None, paths,
+                         bounces, checked["seed"], device)

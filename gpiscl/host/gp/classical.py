@@ -1,0 +1,100 @@
+"""Closed forms of a GPIS's classical limits (derived in docs/design/classical-limits.md):
+the participating medium (Rice's entry rate as extinction, the visible-normal phase
+function) and the microfacet surface (Beckmann alpha from the gradient variance).
+
+f = mu + g with the inside at f < 0; levels are the mean's value mu at the point."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from .kernels import Kernel
+
+
+def slope_variance(kernel: Kernel, d=(1.0, 0.0, 0.0)) -> float:
+    """lambda_2 along d: Var(d . grad g) = d' Lambda d for the unit direction d."""
+    d = np.asarray(d, float)
+    d = d / np.linalg.norm(d)
+    lam2 = float(kernel.cov_dd(np.zeros(3), d, np.zeros(3), d))
+    if not math.isfinite(lam2) or lam2 <= 0.0:
+        raise ValueError(f"{kernel.kind}: no finite slope variance (its realizations are "
+                         "not differentiable): no Rice rate and no Beckmann limit")
+    return lam2
+
+
+def _normal_pdf(z):
+    return np.exp(-0.5 * np.square(z)) / math.sqrt(2.0 * math.pi)
+
+
+_erfc = np.vectorize(math.erfc, otypes=[np.float64])
+
+
+def _normal_cdf(z):
+    return 0.5 * _erfc(-np.asarray(z, float) / math.sqrt(2.0))
+
+
+def crossing_rate(kernel: Kernel, level, d=(1.0, 0.0, 0.0), mean_slope=0.0):
+    """Rice: down-crossings (f >= 0 -> f < 0) per unit length along unit d at a point where
+    the mean is `level` and its slope along d is `mean_slope` (Eq. 2 of the note)."""
+    sigma = math.sqrt(kernel.variance)
+    s = math.sqrt(slope_variance(kernel, d))
+    m = np.asarray(mean_slope, float)
+    negative_part = s * _normal_pdf(m / s) - m * _normal_cdf(-m / s)   # E[(-f')^+]
+    return _normal_pdf(np.asarray(level, float) / sigma) / sigma * negative_part
+
+
+def entry_rate(kernel: Kernel, level, d=(1.0, 0.0, 0.0), mean_slope=0.0):
+    """The medium counterpart's extinction: entries per unit length travelled outside,
+    crossing_rate / P(f > 0) (Eq. 3)."""
+    sigma = math.sqrt(kernel.variance)
+    return crossing_rate(kernel, level, d, mean_slope) / _normal_cdf(np.asarray(level) / sigma)
+
+
+def beckmann_alpha(kernel: Kernel, tangent=(1.0, 0.0, 0.0), mean_gradient_norm=1.0) -> float:
+    """The surface counterpart's Beckmann roughness along `tangent`: sqrt(2 lambda_2) / |grad mu|
+    (sqrt(2) sigma / l for SE and RQ, sqrt(6) sigma / l for Matern 3/2, sqrt(10/3) sigma / l
+    for Matern 5/2, at a unit mean slope)."""
+    return math.sqrt(2.0 * slope_variance(kernel, tangent)) / float(mean_gradient_norm)
+
+
+def beckmann_tan2_survival(x, alpha):
+    """P(tan^2 theta_m > x) of the Beckmann normal law D(m) cos theta_m (the visible law at
+    normal incidence): tan^2 theta_m / alpha^2 is exponential with mean 1."""
+    return np.exp(-np.asarray(x, float) / (alpha * alpha))
+
+
+def beckmann_cos_pdf(c, alpha):
+    """Density of cos theta_m under D(m) cos theta_m (isotropic Beckmann), for plots."""
+    c = np.asarray(c, float)
+    t2 = (1.0 - c * c) / (c * c)
+    return 2.0 * np.exp(-t2 / (alpha * alpha)) / (alpha * alpha * c ** 3)
+
+
+def lambert_sphere_phase(theta):
+    """Phase function (per steradian) of a cloud of diffuse spheres, theta the deflection
+    angle: the medium counterpart of a diffuse micro-BSDF (Sec. 2.3 of the note)."""
+    theta = np.asarray(theta, float)
+    return 2.0 / (3.0 * math.pi ** 2) * (np.sin(theta) - theta * np.cos(theta))
+
+
+def ks_to_exponential(t, rate) -> float:
+    """One-sample Kolmogorov-Smirnov distance of the samples t to Exp(rate)."""
+    t = np.sort(np.asarray(t, float))
+    n = len(t)
+    cdf = -np.expm1(-rate * t)
+    i = np.arange(1, n + 1)
+    return float(max(np.max(i / n - cdf), np.max(cdf - (i - 1) / n)))
+
+
+def ks_to_cdf(x, cdf) -> float:
+    """One-sample Kolmogorov-Smirnov distance of the samples x to a distribution function."""
+    x = np.sort(np.asarray(x, float))
+    n = len(x)
+    c = cdf(x)
+    i = np.arange(1, n + 1)
+    return float(max(np.max(i / n - c), np.max(c - (i - 1) / n)))
+
+
+def ks_critical(n: int, alpha: float = 1e-3) -> float:
+    """Asymptotic one-sample KS critical value at level alpha."""
+    return math.sqrt(-math.log(alpha / 2.0) / 2.0) / math.sqrt(n)
