@@ -264,20 +264,31 @@ def plot_density(data: dict, title: str, out_dir) -> list:
 
 
 def plot_limits(medium: dict, surface: dict, path) -> None:
-    """The two limits: KS distance to the exponential against l (medium: at fixed mu/sigma
-    and at a fixed mean free path), KS distance to Beckmann against alpha (surface)."""
+    """The two limits: against l, the fitted extinction over Rice's entry rate and the KS
+    distance of first flights to the exponential of their own mean (medium: at a fixed
+    mu/sigma, and at a fixed Rice mean free path); against alpha, the KS distance of
+    first-hit slopes to Beckmann (surface). Dotted: 1/sqrt(n), the KS noise level."""
     plt = _pyplot()
-    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.8))
+    fig, (a, r, b) = plt.subplots(1, 3, figsize=(14, 3.8))
     for label, rows in medium.items():
-        a.loglog([r["length_scale"] for r in rows], [r["ks_exponential"] for r in rows], "o-",
-                 label=label)
+        ls = [row["length_scale"] for row in rows]
+        r.semilogx(ls, [row["fitted_rate"] / row["rice_entry_rate"] for row in rows], "o-",
+                   label=label)
+        a.loglog(ls, [row["ks_exponential"] for row in rows], "o-", label=label)
+        a.axhline(1 / math.sqrt(rows[0]["hits"]), color="gray", ls=":", lw=1)
+    r.axhline(1.0, color="k", lw=0.8)
+    r.set_xlabel("length scale l")
+    r.set_ylabel("fitted extinction / Rice entry rate")
+    r.set_title("medium limit: extinction (first flights, SE)", fontsize=9)
+    r.legend(fontsize=7)
     a.set_xlabel("length scale l")
     a.set_ylabel("KS distance to the exponential")
-    a.set_title("medium limit (first flights, SE)", fontsize=9)
+    a.set_title("medium limit: shape of the free flight", fontsize=9)
     a.legend(fontsize=7)
     for label, rows in surface.items():
-        b.loglog([r["beckmann_alpha"] for r in rows], [r["ks_beckmann"] for r in rows], "o-",
-                 label=label)
+        b.loglog([row["beckmann_alpha"] for row in rows], [row["ks_beckmann"] for row in rows],
+                 "o-", label=label)
+        b.axhline(1 / math.sqrt(rows[0]["hits"]), color="gray", ls=":", lw=1)
     b.set_xlabel("Beckmann alpha = sqrt(2 lambda_2)")
     b.set_ylabel("KS distance to Beckmann")
     b.set_title("surface limit (plane mean, normal incidence)", fontsize=9)

@@ -299,5 +299,8 @@ GPIS = SHAPES.register("gpis", Record({
     # true: the proxy cuts the object on purpose (a medium's container, the authors'
     # wedge prism); false: compile/proxy_cut.py warns where the object reaches it
     "clip": Field(Bool(), False),
+    # "surface": render the classical counterpart instead (compile/classical.py): the
+    # mean's zero set with the GP's Beckmann slopes (docs/design/classical-limits.md)
+    "classical": Field(Nullable(Enum("surface")), None),
 }, checks=[mesh_proxy_problem, _weight_space_kernel, _thin_plate_span, _fields_positive,
            observations_problem]))
