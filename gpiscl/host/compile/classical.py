@@ -1,4 +1,4 @@
-"""A GPIS shape's classical surface counterpart ("classical": "surface" on a gpis shape):
+"""A GPIS shape's classical counterparts ("classical" on a gpis shape). "surface":
 the mean's zero set as an ordinary shape with a microfacet BSDF of the micro-BSDF's kind
 and the GP's slope law, Beckmann alpha = sqrt(2 lambda_2) / |grad mu|
 (docs/design/classical-limits.md, Sec. 3). Built before compiling, so the counterpart
@@ -6,7 +6,8 @@ goes through the ordinary shape and material kinds and costs nothing on the devi
 
 Zero sets written here: a sphere mean (a sphere) and a plane mean whose normal is an
 axis of a box proxy (a rectangle filling the box's section). Other means would need the
-zero set extracted (a mesh); they are refused with that reason."""
+zero set extracted (a mesh); they are refused with that reason. "medium": checked here,
+rendered by kernels_cl/lib/fs_classical.h (exponential flights of Rice's entry rate)."""
 from __future__ import annotations
 
 import math
@@ -102,10 +103,43 @@ def surface_counterpart(shape: dict, source: str, where: str) -> dict:
     return {**geometry, "bsdf": counterpart_bsdf(shape["bsdf"], alpha, source, where)}
 
 
+def check_medium(shape: dict, source: str, where: str) -> None:
+    """What the medium counterpart (kernels_cl/lib/fs_classical.h) needs: it runs in the
+    function-space stage, takes Rice's rate at the mean where a flight starts (exact for a
+    constant mean only) and draws normals of an isotropic stationary GP."""
+    if shape["sampler"]["type"] != "function_space":
+        raise SceneError(source, f"{where}.sampler", '"classical": "medium" runs in the '
+                         'function-space stage: give "sampler": {"type": "function_space"}')
+    if shape["mean"]["type"] != "constant":
+        raise SceneError(source, f"{where}.mean", "the medium counterpart is homogeneous: "
+                         "give a constant mean (a heterogeneous extinction from Rice's "
+                         "formula at mu(x) is not built)")
+    for key in ("color", "emission", "observations"):
+        if shape.get(key) is not None:
+            raise SceneError(source, f"{where}.{key}", "not supported together with "
+                             '"classical": "medium"')
+    fields = [k for k in FIELD_KEYS if shape["kernel"].get(k) is not None]
+    if fields:
+        raise SceneError(source, f"{where}.kernel.{fields[0]}", "the medium counterpart is "
+                         "homogeneous: give constant sigma and length_scale")
+    kernel = build_kernel(shape["kernel"])
+    try:
+        lam = [C.slope_variance(kernel, axis) for axis in np.eye(3)]
+    except ValueError as exc:
+        raise SceneError(source, f"{where}.kernel", str(exc)) from None
+    if not np.allclose(lam, lam[0], rtol=1e-9):
+        raise SceneError(source, f"{where}.kernel.aniso", "the medium counterpart is "
+                         "isotropic: give an isotropic kernel")
+
+
 def with_counterparts(data: dict, source: str = "<scene>") -> dict:
     """data with every gpis shape marked "classical": "surface" replaced by its counterpart
-    (the same dict when there is none)."""
+    (the same dict when there is none); shapes marked "medium" are checked and stay (the
+    function-space stage runs them, compile/gpis.py marks their memory)."""
     shapes = data.get("shapes", [])
+    for i, s in enumerate(shapes):
+        if s["type"] == "gpis" and s.get("classical") == "medium":
+            check_medium(s, source, f"shapes[{i}]")
     if not any(s["type"] == "gpis" and s.get("classical") == "surface" for s in shapes):
         return data
     return {**data, "shapes": [surface_counterpart(s, source, f"shapes[{i}]")

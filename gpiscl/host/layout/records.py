@@ -185,7 +185,10 @@ NUM_COUNTERS = len(COUNTERS)
 BOUNCE_SUMMED = ("fs_flights", "fs_samples", "fs_evals")
 GPIS_PROXIES = {"box": 0, "sphere": 1, "mesh": 2}
 GPIS_SAMPLERS = {"weight_space": 0, "function_space": 1}
-GPIS_MEMORIES = {"none": 0, "renewal": 1, "renewal_plus": 2, "global": 3}
+# classical_medium: not a memory model but the memoryless exponential counterpart
+# (kernels_cl/lib/fs_classical.h), set by "classical": "medium" on a gpis shape
+GPIS_MEMORIES = {"none": 0, "renewal": 1, "renewal_plus": 2, "global": 3,
+                 "classical_medium": 4}
 GPIS_HIT_BASE = -2
 
 
