@@ -1,34 +1,30 @@
-"""The Python API: load a scene, render it, get numpy images, write them, run uq.
+"""The Python API: load a scene, render it, get numpy images, write them, run uq; and what
+the other commands do (devices, sample figures, convert-vdb).
 
-Every argument is checked as the command line checks it (host/scene/arguments.py): a bad one
-raises SceneError naming it, before any work.
+Every argument is checked by host/scene/arguments.py: a bad one raises SceneError naming
+it, before any work. The command line is a shell over these functions (gpiscl/cli/).
+
+Only scene loading is imported here: the rest is imported by the function that needs it,
+so that convert-vdb runs under a Python with numpy but no pyopencl or OpenEXR (the system
+Python with Debian's python3-openvdb), and Dask is imported only for a cluster.
 """
 from __future__ import annotations
 
-import copy
+import sys
 
-import numpy as np
-
+from .host.errors import API_SOURCE, SceneError
 from .host.scene import arguments
-from .host.render.device import Device, shared_device
-from .host.render.device_bakes import DeviceBakes
-from .host.render.integrator import RenderResult, WavefrontIntegrator
-from .host.render.memory import return_freed_pages
 from .host.scene.loading import Scene, load_scene
-from .host.errors import SceneError
-from .host.compile.scene import compile_scene
-from .host.render.aov import parse as aov_names
 
 __all__ = ["Scene", "SceneError", "load_scene", "render", "render_result", "write_image",
-           "uq"]
+           "uq", "write_uq", "uq_merge", "check_output", "check_uq_output", "devices", "sample_figures",
+           "convert_vdb"]
 
 
 def render_result(scene, spp: int | None = None, seed: int | None = None,
-                  resolution=None, device: Device | str | None = None,
-                  batch_size: int | None = None, time_limit: float | None = None,
-                  progress=None, realization: int | None = None,
-                  stop=None, max_memory: int | None = None, aov=None,
-                  cluster=None) -> RenderResult:
+                  resolution=None, device=None, batch_size: int | None = None,
+                  time_limit: float | None = None, progress=None, realization=None,
+                  stop=None, max_memory=None, aov=None, cluster=None, on_compiled=None):
     """Render a scene; the image with its standard errors, sample counts and statistics.
 
     Parameters
@@ -53,14 +49,16 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
     progress : callable or bool, optional
         progress(paths) after each batch, or True for a progress bar in spp (a notebook
         widget under Jupyter).
-    realization : int, optional
-        Render GPIS realization R in [0, 2**31) for every pixel (weight space only).
+    realization : int or 'none', optional
+        Render GPIS realization R in [0, 2**31) for every pixel (weight space only);
+        'none' averages over realizations whatever the scene says.
     stop : callable, optional
         stop() -> bool, asked between bounces: True ends the render with the batches
         completed so far (stats.interrupted). Ctrl-C does the same.
-    max_memory : int, optional
-        Bytes the render may use, instead of the estimate of free memory: the film must fit
-        (SceneError naming camera.resolution otherwise) and batches shrink to fit beside it.
+    max_memory : int or str, optional
+        Bytes the render may use (or a size like '8G'), instead of the estimate of free
+        memory: the film must fit (SceneError naming camera.resolution otherwise) and
+        batches shrink to fit beside it.
     aov : str or list of str, optional
         Also collect these first-hit AOVs: 'depth', 'normal', 'albedo', 'position' (or
         'depth,normal'); write_image adds them as EXR layers. How they are averaged over a
@@ -69,6 +67,10 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
         Trace the samples on a Dask cluster: a Client, a scheduler address
         ('tcp://HOST:8786') or 'local:N' (N worker processes for this call); the image is
         the local one bit for bit. Needs the extra: pip install 'gpiscl[distributed]'.
+    on_compiled : callable, optional
+        on_compiled(scene, where) once the scene is compiled, before the first sample:
+        the resolved Scene to be rendered and where it renders (the device's name, or the
+        cluster).
 
     Returns
     -------
@@ -82,61 +84,70 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
     SceneError
         For a mistake in the scene or in an argument, naming it.
     """
+    from .host.render.memory import return_freed_pages
+
     checked = arguments.check(spp=spp, seed=seed, resolution=resolution,
                               realization=realization, batch_size=batch_size,
                               time_limit=time_limit, max_memory=max_memory)
-    aovs = aov_names(aov, "aov") if aov else ()
+    time_limit = checked.pop("time_limit", None)
+    aovs = _aovs(aov)
     if aovs and cluster is not None:
-        # cluster units ship each path's radiance only (commands/cluster.py)
-        raise SceneError(arguments.API_SOURCE, "aov", "not available with cluster yet")
-    integrator, scene = prepare_render(scene, device=device, aov=bool(aovs), **{
-        k: v for k, v in checked.items() if k != "time_limit"})
+        # cluster units ship each path's radiance only (distributed/cluster.py)
+        raise SceneError(API_SOURCE, "aov", "not available with `cluster` yet")
+    distributed = _dask() if cluster is not None else None
+    integrator, scene = prepare_render(scene, device=device, aov=bool(aovs), **checked)
+    if on_compiled is not None:
+        on_compiled(scene, _where(cluster, integrator.device))
     spp = scene.data["render"]["spp"]
     bar = None
     if progress is True:
         from .host.render.progress import SppBar
         w, h = scene.data["camera"]["resolution"]
-        progress = bar = SppBar(spp, w * h, notebook=True)
+        progress = bar = SppBar(spp, w * h, file=sys.stderr, notebook=True)
     elif progress is False:
         progress = None
     try:
-        if cluster is not None:
-            from .host.commands.cluster import render_on_cluster
-            result = render_on_cluster(cluster, integrator, scene, spp,
-                                       checked.get("time_limit"), progress, stop)
+        if distributed is not None:
+            result = distributed.render_on_cluster(cluster, integrator, scene, spp,
+                                                   time_limit, progress, stop)
         else:
-            result = integrator.render(spp, time_limit=checked.get("time_limit"),
-                                       progress=progress, stop=stop)
+            result = integrator.render(spp, time_limit=time_limit, progress=progress,
+                                       stop=stop)
     finally:
         if bar is not None:
             bar.close()
+    # The film is on the host now: drop the integrator, so that its device buffers (the
+    # film's sums, the scene's records: on a CPU device the process's own memory, the
+    # film's in the malloc heap) are freed and handed back before the output files'
+    # buffers are allocated. The peak RSS of csg_baked was there, 4 MB above the render's
+    # (tools/bench_scenes.py).
+    del integrator
+    return_freed_pages()
     result.scene, result.aovs = scene, aovs
     return result
 
 
 def prepare_render(scene, spp=None, seed=None, resolution=None, device=None, batch_size=None,
-             realization=None, max_memory=None, aov=False):
+                   realization=None, max_memory=None, aov=False):
     """The compiled integrator and the resolved Scene with the overrides applied: the part
-    of render_result before any sample is traced (the command line renders in between)."""
-    scene = load_scene(scene)
-    data = copy.deepcopy(scene.data)
-    settings = data["render"]
-    for key, value in (("spp", spp), ("seed", seed), ("realization", realization)):
-        if value is not None:
-            settings[key] = value
-    if resolution is not None:
-        data["camera"]["resolution"] = list(resolution)
-    _check_realization(data, scene.source)
-    if not isinstance(device, Device):
-        device = shared_device(device)
-    compiled = compile_scene(data, scene.source, DeviceBakes(device))
+    of render_result before any sample is traced (the arguments already checked)."""
+    from .host.compile.scene import compile_scene
+    from .host.render.device_bakes import DeviceBakes
+    from .host.render.integrator import WavefrontIntegrator
+    from .host.render.memory import return_freed_pages
+
+    scene = load_scene(scene).with_overrides(spp=spp, seed=seed, resolution=resolution,
+                                             realization=realization)
+    _check_realization(scene.data, scene.source)
+    device = _device(device)
+    compiled = compile_scene(scene.data, scene.source, DeviceBakes(device))
     # the compile's temporaries (a bake's samples read and checked, grid records packed)
     # are freed, but glibc keeps them in its heap; handed back, the programs and the film
     # do not come on top of them
     return_freed_pages()
-    integrator = WavefrontIntegrator(device, compiled, settings, batch_size, max_memory,
-                                     scene.source, aov)
-    return integrator, Scene.resolved(data, scene.source, scene.base_dir)
+    integrator = WavefrontIntegrator(device, compiled, scene.data["render"], batch_size,
+                                     max_memory, scene.source, aov)
+    return integrator, scene
 
 
 def _check_realization(data: dict, source: str):
@@ -152,17 +163,36 @@ def _check_realization(data: dict, source: str):
                              "one realization")
 
 
+def _aovs(aov) -> tuple:
+    from .host.render.aov import parse
+    return parse(aov, "aov") if aov else ()
+
+
+def _device(device):
+    from .host.render.device import Device, shared_device
+    return device if isinstance(device, Device) else shared_device(device)
+
+
+def _dask():
+    """The cluster backend, imported before any work: without Dask, a one-line error."""
+    from .host.distributed import cluster
+    return cluster
+
+
+def _where(cluster, device) -> str:
+    return f"the Dask cluster {cluster}" if cluster is not None else device.name
+
+
 def render(scene, spp: int | None = None, seed: int | None = None, resolution=None,
-           device: Device | str | None = None, batch_size: int | None = None,
-           time_limit: float | None = None, progress=None,
-           realization: int | None = None, stop=None,
-           max_memory: int | None = None) -> np.ndarray:
+           device=None, batch_size: int | None = None, time_limit: float | None = None,
+           progress=None, realization=None, stop=None, max_memory=None, aov=None,
+           cluster=None):
     """Render a scene; its mean image.
 
     Parameters
     ----------
     scene, spp, seed, resolution, device, batch_size, time_limit, progress, realization,
-    stop, max_memory
+    stop, max_memory, aov, cluster
         As for render_result.
 
     Returns
@@ -178,11 +208,25 @@ def render(scene, spp: int | None = None, seed: int | None = None, resolution=No
     """
     return render_result(scene, spp=spp, seed=seed, resolution=resolution, device=device,
                          batch_size=batch_size, time_limit=time_limit, progress=progress,
-                         realization=realization, stop=stop,
-                         max_memory=max_memory).image.mean
+                         realization=realization, stop=stop, max_memory=max_memory,
+                         aov=aov, cluster=cluster).image.mean
 
 
-def write_image(path, result: RenderResult, exposure: float = 0.0) -> dict:
+def check_output(output, scene, aov=None, exposure: float = 0.0) -> None:
+    """SceneError now, before any work, unless write_image(output, result, exposure) could
+    write a render of scene (with these AOVs): a long render must not end in 'cannot
+    write'."""
+    from .host.io.output_files import check_writable, scene_inputs
+    from .host.render.output import output_paths
+
+    arguments.check(exposure=exposure)
+    paths = output_paths(output)
+    if _aovs(aov) and paths["exr"] is None:
+        raise SceneError(API_SOURCE, "aov", "AOVs are EXR layers: use NAME.exr")
+    check_writable(paths.values(), "output", inputs=scene_inputs(load_scene(scene)))
+
+
+def write_image(path, result, exposure: float = 0.0) -> dict:
     """Write a render as the command line does.
 
     Parameters
@@ -207,21 +251,23 @@ def write_image(path, result: RenderResult, exposure: float = 0.0) -> dict:
         For an unknown extension or a path that cannot be written, before anything is
         written; each file is written whole or not at all.
     """
-    from .host.render.output import output_paths, write_outputs
     from .host.io.output_files import check_writable, scene_inputs
+    from .host.render.integrator import RenderResult
+    from .host.render.output import output_paths, write_outputs
 
     if not isinstance(result, RenderResult) or result.scene is None:
-        raise SceneError(arguments.API_SOURCE, "result",
-                         "expected the RenderResult of render_result()")
+        raise SceneError(API_SOURCE, "result", "expected the RenderResult of render_result()")
     exposure = arguments.check(exposure=exposure)["exposure"]
-    check_writable(output_paths(path).values(), "path", inputs=scene_inputs(result.scene))
-    return write_outputs(result.image, result.scene, path, exposure, result.stats, result.aovs)
+    check_writable(output_paths(path, "path").values(), "path",
+                   inputs=scene_inputs(result.scene))
+    return write_outputs(result.image, result.scene, path, exposure, result.stats,
+                         result.aovs, "path")
 
 
 def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
-       first: int = 0, resolution=None, device: Device | str | None = None,
-       batch_size: int | None = None, output=None, exposure: float = 0.0, stop=None,
-       cluster=None):
+       first: int = 0, resolution=None, device=None, batch_size: int | None = None,
+       output=None, exposure: float = 0.0, stop=None, cluster=None, progress=None,
+       on_started=None):
     """Per-pixel mean and unbiased variance over GPIS realizations (as `gpiscl uq`).
 
     Parameters
@@ -239,77 +285,190 @@ def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
     resolution, device, batch_size, stop
         As for render_result.
     output : str or os.PathLike, optional
-        NAME.exr: also write the EXR (mean, variance, std and their standard errors), the
-        previews, NAME.uq.npz (partial sums for merging) and the resolved scene; needs
+        NAME.exr: checked writable before any work, then written as write_uq does; needs
         N >= 2 in all.
     exposure : float
         Preview exposure in stops.
     cluster : distributed.Client or str, optional
         Render the realizations on a Dask cluster, as for render_result: the same sums.
+    progress : callable or bool, optional
+        progress(1) after each realization, or True for a progress bar.
+    on_started : callable, optional
+        on_started(scene, where) once the arguments and the scene are checked, before any
+        realization is compiled or rendered (as render_result's on_compiled).
 
     Returns
     -------
     UqRun
         .sums (UqSums: .mean, .variance, .std, .mean_stderr, .variance_stderr, .n),
-        .ids, .seconds, .paths, .interrupted.
+        .ids, .seconds, .paths, .interrupted, .scene (the resolved scene rendered).
 
     Raises
     ------
     SceneError
         For a mistake in the scene or an argument, naming it.
     """
-    from .host.io.output_files import check_writable, scene_inputs
-    from .host.schema import Context, Int
-    from .host.commands.uq import check_uq_scene, render_realizations, uq_output_paths, write_uq_outputs
+    from .host.uq.realizations import check_uq_scene, render_realizations
 
-    ctx = Context(arguments.API_SOURCE, ".")
-    realizations = Int(ge=1, le=2**31).resolve(realizations, "realizations", ctx)
-    spp = Int(ge=2, lt=2**31).resolve(spp, "spp", ctx)
-    first = Int(ge=0, lt=2**31).resolve(first, "first", ctx)
-    checked = arguments.check(seed=seed, resolution=resolution, batch_size=batch_size,
-                              exposure=exposure)
+    checked = arguments.check(arguments.UQ_SPECS, realizations=realizations, spp=spp,
+                              first=first, seed=seed, resolution=resolution,
+                              batch_size=batch_size, exposure=exposure)
+    if checked["first"] + checked["realizations"] > 2**31:
+        # ids are distinct only modulo 2^31
+        raise SceneError(API_SOURCE, "realizations",
+                         "`first` + `realizations` must be <= 2**31")
+    distributed = _dask() if cluster is not None else None
     scene = load_scene(scene)
     check_uq_scene(scene.data, scene.source)
     if output is not None:
-        check_writable(uq_output_paths(output).values(), "output", inputs=scene_inputs(scene))
-    if cluster is not None:
-        from .host.commands.cluster import uq_on_cluster
-        run = uq_on_cluster(cluster, scene, realizations, spp, seed=checked.get("seed"),
-                            first=first, resolution=checked.get("resolution"),
-                            batch_size=checked.get("batch_size"), stop=stop)
-    else:
-        run = render_realizations(scene, realizations, spp, seed=checked.get("seed"),
-                                  first=first, resolution=checked.get("resolution"),
-                                  device=device, batch_size=checked.get("batch_size"),
-                                  stop=stop)
+        check_uq_output(output, scene)
+    if distributed is None:
+        device = _device(device)
+    if on_started is not None:
+        on_started(scene, _where(cluster, device if distributed is None else None))
+    bar = None
+    if progress is True:
+        from tqdm.auto import tqdm
+        progress = (bar := tqdm(total=checked["realizations"], unit="realization",
+                                file=sys.stderr, desc="realizations")).update
+    elif progress is False:
+        progress = None
+    kw = dict(seed=checked.get("seed"), first=checked["first"],
+              resolution=checked.get("resolution"), batch_size=checked.get("batch_size"),
+              progress=progress, stop=stop)
+    try:
+        if distributed is not None:
+            run = distributed.uq_on_cluster(cluster, scene, checked["realizations"],
+                                            checked["spp"], **kw)
+        else:
+            run = render_realizations(scene, checked["realizations"], checked["spp"],
+                                      device=device, **kw)
+    finally:
+        if bar is not None:
+            bar.close()
     if output is not None:
         if run.sums.n < 2:
-            raise SceneError(arguments.API_SOURCE, "output",
+            raise SceneError(API_SOURCE, "output",
                              f"needs >= 2 realizations to write (got {run.sums.n})")
-        data = copy.deepcopy(scene.data)
-        if "resolution" in checked:
-            data["camera"]["resolution"] = checked["resolution"]
-        write_uq_outputs(run.sums, Scene.resolved(data, scene.source, scene.base_dir),
-                         output, checked["exposure"], run.meta)
+        write_uq(output, run, checked["exposure"])
     return run
 
 
-def density(scene, obj: int = 0, output="density", ray=None, paths: int = 20000,
+def check_uq_output(output, scene, exposure: float = 0.0) -> None:
+    """SceneError now, before any work, unless write_uq(output, run, exposure) could write
+    a uq run of scene."""
+    from .host.io.output_files import check_writable, scene_inputs
+    from .host.uq.files import uq_output_paths
+
+    arguments.check(exposure=exposure)
+    check_writable(uq_output_paths(output).values(), "output",
+                   inputs=scene_inputs(load_scene(scene)))
+
+
+def write_uq(output, run, exposure: float = 0.0) -> dict:
+    """Write a uq run: with N >= 2 realizations the EXR (mean, variance, std and their
+    standard errors), the previews, NAME.uq.npz (partial sums for merging) and the
+    resolved scene; with one, only NAME.uq.npz (it has no variance yet: merge it with
+    other batches, uq_merge). Returns {name: path} of the files written."""
+    from .host.io.output_files import write_atomically
+    from .host.uq.files import uq_output_paths, write_uq_outputs
+
+    exposure = arguments.check(exposure=exposure)["exposure"]
+    if run.sums.n < 1:
+        raise SceneError(API_SOURCE, "run", "no realization completed: nothing to write")
+    if run.sums.n < 2:
+        path = uq_output_paths(output)["sums"]
+        write_atomically(path, lambda tmp: run.sums.save(tmp, run.meta))
+        return {"sums": path}
+    return write_uq_outputs(run.sums, run.scene, output, exposure, run.meta)
+
+
+def uq_merge(partials, output, exposure: float = 0.0):
+    """Merge the partial sums (NAME.uq.npz) of uq runs of one scene and seed, and write
+    the EXR, previews and merged sums to output (NAME.exr) as write_uq does (no scene
+    file: the partial sums do not carry the scene). Batches that overlap or do not
+    belong together are refused, naming the file. Returns (UqSums, {name: path})."""
+    from .host.io.output_files import check_writable
+    from .host.uq.files import merge_partials, uq_output_paths, write_uq_outputs
+
+    exposure = arguments.check(exposure=exposure)["exposure"]
+    sums, meta = merge_partials(partials)
+    if sums.n < 2:
+        raise SceneError(API_SOURCE, "partials", "needs >= 2 realizations in all")
+    check_writable(uq_output_paths(output).values(), "output", inputs=partials)
+    return sums, write_uq_outputs(sums, None, output, exposure, meta)
+
+
+def devices() -> list:
+    """The OpenCL devices present: dicts with "index" ('P:D', for device=), "platform",
+    "name", "type" ('cpu', 'gpu', ...), "compute_units" and "default" (the one a render
+    picks without device=)."""
+    import pyopencl as cl
+    from .host.errors import DeviceError
+    from .host.render.device import Device, list_devices
+
+    try:
+        default = Device().device
+    except DeviceError:
+        default = None
+    return [{"index": f"{pi}:{di}", "platform": plat.name.strip(), "name": dev.name.strip(),
+             "type": cl.device_type.to_string(dev.type).lower(),
+             "compute_units": dev.max_compute_units,
+             "default": default is not None and dev.int_ptr == default.int_ptr}
+            for pi, di, plat, dev in list_devices()]
+
+
+def sample_figures(target: str, output="figures", object: int = 0,
+                   features=(10, 100, 1000), realizations: int = 4, resolution: int = 128,
+                   seed: int = 0, observations=None, noise: float = 1e-4) -> list:
+    """PNG figures of GPIS realizations into the folder output (needs matplotlib): lines,
+    slices, weight-space features vs exact samples, prior occupancy, and with
+    observations (a file of surface points) the posterior. target: a kernel type, a
+    kernel JSON object or a scene file (its GPIS number object). Returns the paths."""
+    from .host.figures.samples import load_observations, resolve_target, write_figures
+
+    checked = arguments.check(arguments.SAMPLE_SPECS, object=object, features=features,
+                              realizations=realizations, resolution=resolution, seed=seed,
+                              noise=noise)
+    found = resolve_target(target, checked["object"])
+    obs = load_observations(observations, checked["noise"]) if observations else None
+    return write_figures(found, output, tuple(checked["features"]), checked["realizations"],
+                         checked["seed"], checked["resolution"], observations=obs)
+
+
+def convert_vdb(input, output, grid: str | None = None) -> dict:
+    """Copy one float grid of an OpenVDB file (needs OpenVDB's Python binding) to an .npz
+    grid usable as a grid mean; returns {"grid", "shape", "voxel_size", "origin"}."""
+    from .host.io.vdb import convert_vdb as convert
+    return convert(input, output, grid)
+
+
+def convert_tungsten(scene, output, environment=None, grid_dir=None) -> list:
+    """Convert the GPIS subset of a scene of the authors' Tungsten-based renderer into a
+    gpiscl scene file; returns the notes on lossy mappings. environment substitutes the
+    scene's environment: a radiance (number) or an .exr/.hdr map's path. Nothing is
+    written on an error (SceneError: file, key path, reason); the mapping is documented
+    in gpiscl/host/scene/tungsten.py, the output guarantees in docs/design/tungsten-import.md."""
+    from .host.scene.tungsten_convert import convert_file, environment_option
+    return convert_file(scene, output, environment_option(
+        None if environment is None else str(environment)), grid_dir)
+
+
+def density(scene, object: int = 0, output="density", ray=None, paths: int = 20000,
             bounces: int = 2, seed: int = 1, device: Device | None = None) -> list:
-    """The GPIS density of GPIS number `obj` of a scene file: free flights and first-hit
-    normals of `paths` device flights per memory model (docs/design/classical-limits.md),
-    written to the folder `output` as flights.csv, summary.csv, free_flight.png and, for a
-    mean with a gradient along the ray, normals.png. Needs matplotlib (the `plots` extra).
+    """The GPIS density of GPIS number `object` of a scene file: free flights and first-hit
+    normals of `paths` device flights per memory model and of the classical medium
+    counterpart (docs/design/classical-limits.md), written to the folder `output` as
+    flights.csv, summary.csv, free_flight.png and, for a mean with a gradient along the
+    ray, normals.png. Needs matplotlib (the `plots` extra). ray: 'ox,oy,oz,dx,dy,dz,length'
+    or None (through the proxy's centre, against the mean's gradient there). Returns the
+    paths written."""
+    from .host.figures.density import parse_ray, write_density
+    from .host.schema import Int
 
-    ray: 'ox,oy,oz,dx,dy,dz,length' or None (through the proxy's centre, against the
-    mean's gradient there). Returns the written paths."""
-    from .host.commands.density import parse_ray, write_density
-    from .host.schema import Context, Int
-
-    ctx = Context(arguments.API_SOURCE, ".")
-    paths = Int(ge=1, le=10**8).resolve(paths, "paths", ctx)
-    bounces = Int(ge=1, le=64).resolve(bounces, "bounces", ctx)
-    obj = Int(ge=0).resolve(obj, "obj", ctx)
-    checked = arguments.check(seed=seed)
-    return write_density(str(scene), obj, output, parse_ray(ray) if ray else None, paths,
-                         bounces, checked["seed"], device)
+    checked = arguments.check({"object": Int(ge=0, lt=2**31), "paths": Int(ge=1, le=10**8),
+                               "bounces": Int(ge=1, le=64), "seed": Int(ge=0, lt=2**32)},
+                              object=object, paths=paths, bounces=bounces, seed=seed)
+    return write_density(str(scene), checked["object"], output,
+                         parse_ray(ray) if ray else None, checked["paths"],
+                         checked["bounces"], checked["seed"], device)

@@ -183,10 +183,20 @@ def _mode(mode: str):
         _state.mode = previous
 
 
-def noting():
-    """While rendering: a signal is noted for requested(), not raised."""
-    _reassert()   # the device and its programs were built since install()
-    return _mode("noting")
+@contextmanager
+def rendering():
+    """Around a render: start-up mode until the started() it yields is called (once the
+    scene is compiled), noting from then on; the previous mode after."""
+    previous = _state.mode
+
+    def started():
+        _reassert()   # the device and its programs were built since install()
+        _state.mode = "noting"
+
+    try:
+        yield started
+    finally:
+        _state.mode = previous
 
 
 def writing():

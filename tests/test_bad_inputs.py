@@ -174,11 +174,11 @@ def test_observed_points_beyond_float32_are_refused(tmp_path):
 
 def test_cluster_without_dask_is_one_line(tmp_path, monkeypatch, capsys):
     """Dask is an optional extra: without it --cluster says how to get it, before any work."""
-    from gpiscl.__main__ import main
+    from gpiscl.cli import main
     monkeypatch.setitem(sys.modules, "distributed", None)     # import distributed fails
-    monkeypatch.delitem(sys.modules, "gpiscl.host.commands.cluster", raising=False)
-    import gpiscl.host.commands as commands
-    monkeypatch.delattr(commands, "cluster", raising=False)
+    monkeypatch.delitem(sys.modules, "gpiscl.host.distributed.cluster", raising=False)
+    import gpiscl.host.distributed as distributed
+    monkeypatch.delattr(distributed, "cluster", raising=False)
     path = scene(tmp_path, [{"type": "sphere", "center": [0, 0, 0], "radius": 0.5}])
     assert main(["render", str(path), "--cluster", "local:1", "-o",
                  str(tmp_path / "x.exr")]) == 2

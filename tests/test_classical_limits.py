@@ -14,7 +14,7 @@ import pytest
 from gpiscl.host.gp import Matern32, Matern52, RationalQuadratic, SquaredExponential
 from gpiscl.host.gp import classical as C
 from gpiscl.host.gp import function_space as FS
-from gpiscl.host.commands.density import medium_limit_series, surface_limit_series
+from gpiscl.host.figures.density import medium_limit_series, surface_limit_series
 from stats import z_threshold
 
 

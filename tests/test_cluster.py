@@ -1,4 +1,4 @@
-"""render and uq on a Dask cluster (commands/cluster.py): the EXR is the local render's bit
+"""render and uq on a Dask cluster (host/distributed/cluster.py): the EXR is the local render's bit
 for bit, on 1 and 2 worker processes, in any completion order, and with a worker killed
 mid-run; a stop or a lost scheduler keeps exactly the units merged; a bad --cluster is one
 line. Real Dask throughout: LocalClusters of worker processes started by the tests."""
@@ -18,8 +18,8 @@ from distributed import Client, LocalCluster
 
 import gpiscl
 from gpiscl.api import prepare_render
-from gpiscl.host.commands import cluster as cm
-from gpiscl.host.commands.uq import UqSums
+from gpiscl.host.distributed import cluster as cm
+from gpiscl.host.uq.sums import UqSums
 from gpiscl.host.io.images import read_exr
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -255,7 +255,7 @@ def test09_cli_local_cluster_writes_the_local_exr(tmp_path):
 
 
 def test10_without_cluster_dask_is_never_imported(tmp_path):
-    code = ("import sys; from gpiscl.__main__ import main; "
+    code = ("import sys; from gpiscl.cli import main; "
             f"rc = main(['render', {SCENE!r}, '--resolution', '4x4', '--spp', '1', '-o', "
             f"{str(tmp_path / 'x.exr')!r}]); "
             "print(rc, sorted(m for m in sys.modules if m.split('.')[0] in "

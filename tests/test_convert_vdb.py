@@ -11,7 +11,7 @@ from gpiscl.host.io.grids import load_grid
 
 
 def test_without_a_binding_the_command_says_how_to_get_one(tmp_path, monkeypatch, capsys):
-    from gpiscl.__main__ import main
+    from gpiscl.cli import main
     monkeypatch.setattr(vdb, "import_openvdb", lambda: None)  # as on a PyPI-only machine
     code = main(["convert-vdb", str(tmp_path / "a.vdb"), str(tmp_path / "a.npz")])
     err = capsys.readouterr().err
@@ -81,7 +81,7 @@ def test_convert_vdb_runs_without_pyopencl_or_openexr(tmp_path):
     code = ("import sys\n"
             "for name in ('pyopencl', 'OpenEXR', 'trimesh', 'igl'):\n"
             "    sys.modules[name] = None  # importing it now raises ImportError\n"
-            "from gpiscl.__main__ import main\n"
+            "from gpiscl.cli import main\n"
             f"sys.exit(main(['convert-vdb', {str(tmp_path / 'a.vdb')!r}, "
             f"{str(tmp_path / 'a.npz')!r}]))\n")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gpiscl.__main__ import main
+from gpiscl.cli import main
 from gpiscl.host.io.images import read_exr
 
 ROOT = Path(__file__).resolve().parents[1]

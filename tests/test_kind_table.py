@@ -39,3 +39,15 @@ def test_a_kind_must_state_every_trait_and_have_its_device_file():
         t.register(Kind("bad", traits={"smooth": True, "order": 0}, device_file="lib/nope.h"))
     with pytest.raises(ValueError, match="declared twice"):
         t.register(Kind("plain", traits={"smooth": True, "order": 0}))
+
+
+def test_void_dispatch_named_dispatch_and_a_second_table_of_a_prefix():
+    t = table()
+    void = t.c_dispatch("fill", "void", "float* x", "x")
+    assert "case TOY_PLAIN: plain_fill(x); return;" in void and "default: return;" in void
+    assert t.c_dispatch("eval", "float", "float x", "x", name="toy_of").startswith(
+        "inline float toy_of(int kind, float x)")
+    ops = KindTable("toy op", "TOY", [Kind("join", traits={})], first_id=16, schema=t.schema)
+    assert ops.id("join") == 16 and ops.c_enum(count=False) == ["#define TOY_JOIN 16"]
+    ops.register(Kind("meet", Record({}), traits={}))
+    assert "meet" in t.schema.variants     # one scene key, two tables

@@ -8,7 +8,7 @@ import gpiscl
 ROOT = Path(gpiscl.__file__).resolve().parent
 # A package may import packages of a lower rank (and itself), never a higher or equal one.
 RANK = {"errors": 0, "gp": 1, "io": 2, "schema": 3, "kinds": 4, "layout": 5, "scene": 6,
-        "compile": 7, "render": 8, "commands": 9}
+        "compile": 7, "render": 8, "uq": 9, "figures": 9, "distributed": 10}
 
 
 def _module_name(path: Path) -> str:
@@ -55,7 +55,7 @@ def _layer(mod: str):
     parts = mod.split(".")
     if len(parts) >= 3 and parts[1] == "host":
         return parts[2]
-    return None  # gpiscl, gpiscl.api, gpiscl.__main__, gpiscl.host: the top
+    return None  # gpiscl, gpiscl.api, gpiscl.cli, gpiscl.__main__, gpiscl.host: the top
 
 
 def test_packages_import_only_lower_layers():
@@ -110,3 +110,18 @@ def test_every_package_says_what_it_owns_and_may_import():
             init = ROOT / "host" / f"{pkg}.py"
         doc = ast.get_docstring(ast.parse(init.read_text()))
         assert doc and "import" in doc.lower(), pkg
+
+
+# What gpiscl/cli/ may import of the host: the rest it reaches through gpiscl.api, so that
+# the command line holds no rendering logic and the API can do all that it does.
+CLI_MAY_IMPORT = {"gpiscl.host.scene.arguments", "gpiscl.host.errors"}
+
+
+def test_the_command_line_imports_of_the_host_only_arguments_and_errors():
+    modules, _ = _graph()
+    found = [f"{mod} -> {target}" for mod, path in modules.items()
+             if mod == "gpiscl.cli" or mod.startswith("gpiscl.cli.")
+             for target, names in _imports(path)
+             for t in ([f"{target}.{n}" for n in names] if target == "gpiscl.host" else [target])
+             if t.startswith("gpiscl.host") and t not in CLI_MAY_IMPORT]
+    assert not found, "the command line reaches past gpiscl.api:\n" + "\n".join(found)

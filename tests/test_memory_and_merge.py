@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 
 from gpiscl import SceneError, render_result
-from gpiscl.__main__ import main
+from gpiscl.cli import main
 from gpiscl.api import prepare_render
-from gpiscl.host.render.memory import bytes_per_path, parse_size
+from gpiscl.host.render.memory import bytes_per_path
+from gpiscl.host.scene.arguments import parse_size
 from gpiscl.host.render.integrator import default_batch
-from gpiscl.host.commands.uq import load_partial
+from gpiscl.host.uq.files import load_partial
 
 TINY = {"lights": [{"type": "environment"}], "camera": {"resolution": [4, 3]},
         "render": {"spp": 2}}

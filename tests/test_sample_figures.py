@@ -8,9 +8,9 @@ import sys
 import numpy as np
 import pytest
 
-from gpiscl.__main__ import main
+from gpiscl.cli import main
 from gpiscl.host.gp import RationalQuadratic, Sphere, SquaredExponential
-from gpiscl.host.commands.sample_figures import (PLOTS_MISSING, empirical_covariance, exact_samples,
+from gpiscl.host.figures.samples import (PLOTS_MISSING, empirical_covariance, exact_samples,
                                         fig2_data, implied_kernel, kernel_covariance,
                                         line_points, load_observations, occupancy,
                                         plane_points, posterior_maps, resolve_target,
@@ -119,7 +119,7 @@ def test07_without_matplotlib_the_command_says_how_to_install(monkeypatch, tmp_p
 
 
 def test08_the_renderer_does_not_import_matplotlib():
-    code = ("import sys, gpiscl, gpiscl.__main__, gpiscl.host.commands.uq, gpiscl.host.commands.sample_figures;"
+    code = ("import sys, gpiscl, gpiscl.__main__, gpiscl.host.uq.realizations, gpiscl.host.figures.samples;"
             "sys.exit('matplotlib' in sys.modules)")
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
 
@@ -184,7 +184,7 @@ def test10_posterior_maps_honour_the_observed_surface(tmp_path):
 def test_spatially_varying_kernels_are_refused_with_the_key(tmp_path, capsys):
     import json
     from pathlib import Path
-    from gpiscl.__main__ import main
+    from gpiscl.cli import main
     scene = json.loads((Path(__file__).resolve().parent.parent / "scenes" /
                         "fs_sphere_se.json").read_text())
     scene["shapes"][1]["kernel"]["sigma_field"] = {

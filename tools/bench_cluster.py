@@ -30,7 +30,7 @@ os.environ["PYTHONPATH"] = os.pathsep.join(      # the workers import this check
 from distributed import Client, LocalCluster  # noqa: E402
 
 from gpiscl.api import prepare_render, render_result  # noqa: E402
-from gpiscl.host.commands import cluster as cm  # noqa: E402
+from gpiscl.host.distributed import cluster as cm  # noqa: E402
 
 LINK_BYTES_PER_S = 125e6     # 1 Gbit/s into the client
 

@@ -17,7 +17,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from gpiscl.api import render_result  # noqa: E402
 from gpiscl.host.render.device import Device  # noqa: E402
-from gpiscl.host.commands.uq import render_realizations  # noqa: E402
+from gpiscl.host.uq.realizations import render_realizations  # noqa: E402
 
 
 def scene(resolution: int) -> dict:

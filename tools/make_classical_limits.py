@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gpiscl.host.commands.density import (medium_limit_series, plot_limits,
+from gpiscl.host.figures.density import (medium_limit_series, plot_limits,
                                           surface_limit_series, write_csv, write_density)
 from gpiscl.host.gp import Matern32, SquaredExponential
 from gpiscl.host.gp import classical as C

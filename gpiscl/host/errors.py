@@ -15,5 +15,15 @@ class SceneError(Exception):
         return type(self), (self.file, self.key, self.reason)
 
 
+# The `file` of a SceneError about an argument: the Python API's parameters are spelled
+# like_this, the command line's options --like-this.
+API_SOURCE = "<arguments>"
+CLI_SOURCE = "<command line>"
+
+
+def argument_source(option: str) -> str:
+    return CLI_SOURCE if option.startswith("--") else API_SOURCE
+
+
 class DeviceError(RuntimeError):
     """No usable OpenCL device, or a device-side build failure (a user-facing error)."""

@@ -138,7 +138,8 @@ def with_counterparts(data: dict, source: str = "<scene>") -> dict:
     function-space stage runs them, compile/gpis.py marks their memory)."""
     shapes = data.get("shapes", [])
     for i, s in enumerate(shapes):
-        if s["type"] == "gpis" and s.get("classical") == "medium":
+        if s["type"] == "gpis" and (s.get("classical") == "medium"
+                                    or s["sampler"].get("memory") == "classical_medium"):
             check_medium(s, source, f"shapes[{i}]")
     if not any(s["type"] == "gpis" and s.get("classical") == "surface" for s in shapes):
         return data

@@ -23,10 +23,8 @@ from ..errors import SceneError
 from .posterior import build_posterior, pack_posterior
 from .proxy_cut import cut_extent
 from ..layout import function_space_records as FSL
-
-_KERNELS = {"squared_exponential": K.SquaredExponential, "rational_quadratic": K.RationalQuadratic,
-            "periodic": K.Periodic, "locally_periodic": K.LocallyPeriodic,
-            "thin_plate": K.ThinPlate, "matern32": K.Matern32, "matern52": K.Matern52}
+from ..kinds.gp_kernels import GP_KERNELS
+from ..kinds.means import MEAN_OPS, MEAN_PRIMITIVES
 
 # Roots are refined to this fraction of the kernel's length scale: far below the scale
 # on which the realization varies, far above float32 resolution of scene coordinates.
@@ -57,7 +55,7 @@ def build_kernel(k: dict, proxy: dict | None = None) -> K.Kernel:
     linear length_scale_field)."""
     params = {key: (tuple(v) if isinstance(v, list) else v) for key, v in k.items()
               if key not in ("type", *FIELD_KEYS)}
-    base = _KERNELS[k["type"]](**params)
+    base = GP_KERNELS[k["type"]].host.cls(**params)
     sf, lf = k.get("sigma_field"), k.get("length_scale_field")
     if sf is None and lf is None:
         return base
@@ -72,27 +70,13 @@ def build_mean(m: dict, bakes=None) -> M.Mean:
     """The mean tree of a resolved mean; bakes: a device's bakes for procedural grids and
     grid slope bounds (render/device_bakes.py; numpy when None, the same numbers)."""
     kind = m["type"]
-    if kind == "constant":
-        return M.Constant(offset=m["value"])
-    if kind == "plane":
-        return M.Plane(point=tuple(m["point"]), normal=tuple(m["normal"]), scale=m["scale"])
-    if kind == "sphere":
-        return M.Sphere(center=tuple(m["center"]), radius=m["radius"])
-    if kind == "box":
-        return M.Box(half_extents=tuple(m["half_extents"]), center=tuple(m["center"]))
-    if kind == "rounded_box":
-        return M.RoundedBox(half_extents=tuple(m["half_extents"]), radius=m["radius"],
-                            center=tuple(m["center"]))
-    if kind == "torus":
-        return M.Torus(major=m["major"], minor=m["minor"], center=tuple(m["center"]))
-    if kind == "capsule":
-        return M.Capsule(a=tuple(m["a"]), b=tuple(m["b"]), radius=m["radius"])
-    if kind in ("union", "intersection", "difference"):
-        cls = {"union": M.Union, "intersection": M.Intersection, "difference": M.Difference}
-        return cls[kind](build_mean(m["left"], bakes), build_mean(m["right"], bakes),
-                         k=m["k"])
+    if kind in MEAN_OPS:
+        return MEAN_OPS[kind].host(build_mean(m["left"], bakes), build_mean(m["right"], bakes),
+                                   k=m["k"])
     if kind == "transform":
         return M.Transform(build_mean(m["child"], bakes), transform_matrix(m))
+    if kind in MEAN_PRIMITIVES and MEAN_PRIMITIVES[kind].schema is not None:
+        return MEAN_PRIMITIVES[kind].host.build(m)
     from .sdf_bake import mesh_mean, prepare_slopes, procedural_mean
     if kind == "mesh":
         grid = mesh_mean(m["file"], m["resolution"], m["margin"], m["band"],
@@ -124,32 +108,14 @@ def _join(parts: list) -> np.ndarray:
     return nodes
 
 
-# The rational quadratic's correlation falls like 1/t^2 (alpha = 1), so samples many length
-# scales back still inform the next one; the adaptive step packs samples near the level,
-# where a window of 16 (8 after a slide) then spans a short stretch of ray. Measured (RQ
-# alpha 1, global memory, 4e6 length scales, one seed so the rows are comparable): crossing
-# rate against the exact expectation at mu = sigma +0.45 / +0.24 / +0.18 % (+- 0.15) with
-# windows 16 / 32 / 64, at mu = 2 sigma +0.60 / +0.27 / +0.20 % (+- 0.36); free flight
-# 1.25x / 1.4x the time of 16. On a uniform grid (numpy, 4e5 chains) no window shows it,
-# and SE, whose correlation is gone after ~3 l, matches Rice with 16; the Matern kernels
-# are Markov in (f, f') or (f, f', f''): 16 values condition to 1e-11 of the full past.
-WINDOWS = {"rational_quadratic": 32}
-
-
 def sampler_window(kernel: dict) -> int:
     """Samples of the ray a function-space flight conditions on besides its memory."""
-    return WINDOWS.get(kernel["type"], FSL.DEFAULT_WINDOW)
+    return GP_KERNELS[kernel["type"]].host.window or FSL.DEFAULT_WINDOW
 
 
 def kernel_length_scale(k: dict) -> float:
     """The length on which a realization varies: root tolerances and steps scale with it."""
-    if k["type"] == "thin_plate":
-        return k["radius"]
-    if k["type"] == "locally_periodic":
-        return min(k["length_scale"] / k["w"], k["se_length_scale"])
-    if k["type"] == "periodic":
-        return k["length_scale"] / k["w"]
-    return k["length_scale"] / max(k["aniso"]) ** 0.5
+    return GP_KERNELS[k["type"]].host.length(k)
 
 
 # The occupancy bound's marches stop at steps below this fraction of the length scale:
@@ -157,15 +123,16 @@ def kernel_length_scale(k: dict) -> float:
 OCCUPANCY_MIN_STEP = 0.1
 
 
-def occupancy_level(g: dict) -> float:
+def occupancy_level(g: dict, kernel: K.Kernel | None = None) -> float:
     """z sigma_max for the object's occupancy bound epsilon (0: off): where the mean
     exceeds it, P(f <= 0) = Phi(-mu / sigma(x)) < Phi(-z) = epsilon, because sigma(x) <=
     sigma_max everywhere in the proxy. Rounded up to the next float32, as the device
-    compares in float."""
+    compares in float. kernel: build_kernel(g["kernel"], g["proxy"]) if already built."""
     eps = (g.get("bounds") or {}).get("occupancy")
     if eps is None:
         return 0.0
-    kernel = build_kernel(g["kernel"], g["proxy"])
+    if kernel is None:
+        kernel = build_kernel(g["kernel"], g["proxy"])
     base = kernel.base if isinstance(kernel, K.NonStationary) else kernel
     m_max, sf = 1.0, g["kernel"].get("sigma_field")
     if sf is not None and sf["type"] == "radial":
@@ -192,10 +159,10 @@ def _warn_if_cut(g: dict, mean: M.Mean, kernel: K.Kernel, source: str, key: str)
               f"if the cut is meant", file=sys.stderr)
 
 
-def _posterior_block(g: dict, proxy: dict, source: str, key: str, bakes=None) -> np.ndarray:
+def _posterior_block(g: dict, kernel: K.Kernel, mean: M.Mean, source: str,
+                     key: str) -> np.ndarray:
     try:
-        post = build_posterior(g["observations"], build_kernel(g["kernel"], proxy),
-                               build_mean(g["mean"], bakes))
+        post = build_posterior(g["observations"], kernel, mean)
     except np.linalg.LinAlgError as exc:
         raise SceneError(source, f"{key}.observations", str(exc)) from None
     return pack_posterior(post)
@@ -244,7 +211,7 @@ def compile_gpis(shapes: list, material_of, source: str = "<scene>",
         o["tolerance"] = ROOT_TOLERANCE * kernel_length_scale(g["kernel"])
         built.append(build_kernel(g["kernel"], proxy))
         kernels[i] = pack_kernel(built[-1])[0]
-        o["occupancy_level"] = occupancy_level(g)
+        o["occupancy_level"] = occupancy_level(g, built[i])
         o["occupancy_step"] = OCCUPANCY_MIN_STEP * kernel_length_scale(g["kernel"])
         try:
             mean = build_mean(g["mean"], bakes)
@@ -253,10 +220,12 @@ def compile_gpis(shapes: list, material_of, source: str = "<scene>",
             raise SceneError(source, f"{keys[i]}.mean", str(exc)) from None
         if not g.get("clip"):
             _warn_if_cut(g, mean, built[i], source, keys[i])
-        mean = None                         # its grids live on in prog alone
+        block = None
         if g.get("observations") is not None:
+            block = _posterior_block(g, built[i], mean, source, keys[i])
+        mean = None                         # its grids live on in prog alone
+        if block is not None:
             # the posterior block sits just before the mean program (fs_posterior.h)
-            block = _posterior_block(g, proxy, source, keys[i], bakes)
             first += len(block)
             programs.append(block)
             if "occupancy_level" in objects.dtype.names:
@@ -291,6 +260,6 @@ def compile_gpis(shapes: list, material_of, source: str = "<scene>",
                 first += len(records)
                 programs.append(records)
     nodes = _join(programs)
-    table, t_first, t_count = pack_order_tables([build_kernel(g["kernel"]) for g in shapes])
+    table, t_first, t_count = pack_order_tables(built)
     objects["order_first"], objects["order_count"] = t_first, t_count
     return CompiledGpis(objects, kernels, nodes, table)

@@ -22,7 +22,6 @@ from ..layout import constants as C
 from .kernels import covariance_matrix
 
 JITTER = C.FS_JITTER
-MEMORIES = ("none", "renewal", "renewal_plus", "global")
 _SQRT2PI = math.sqrt(2.0 * math.pi)
 
 

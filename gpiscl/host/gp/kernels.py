@@ -272,11 +272,6 @@ class LocallyPeriodic(_LogSeparableKernel):
         return h + np.sum(ar * r, -1) / (2.0 * L2), dh + ar / L2, hh + a / L2
 
 
-KERNELS = {cls.kind: cls for cls in
-           (SquaredExponential, RationalQuadratic, Periodic, LocallyPeriodic, ThinPlate,
-            Matern32, Matern52)}
-
-
 def _observation_rows(x1, x2, u1, u2):
     """Points and derivative directions of two observation sets: (x1, u1, d1, x2, u2, d2),
     d marking derivative rows (u given and not NaN), u zero on value rows; x2 = None means

@@ -17,7 +17,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from ..errors import SceneError
+from ..errors import SceneError, argument_source
 
 FORMATS = {".exr": ("exr", "png", "scene"), ".png": ("png", "scene")}
 
@@ -28,7 +28,7 @@ def plan(path, option: str = "--output", formats=FORMATS) -> dict:
     ext = p.suffix.lower()
     if ext not in formats or not p.stem:
         known = " or ".join(formats)
-        raise SceneError("<command line>", option,
+        raise SceneError(argument_source(option), option,
                          f"cannot tell the image format of {str(p)!r} from its extension "
                          f"(use {known})")
     wanted = formats[ext]
@@ -38,11 +38,13 @@ def plan(path, option: str = "--output", formats=FORMATS) -> dict:
             "scene": base.with_name(base.name + ".scene.json") if "scene" in wanted else None}
 
 
-def check_writable(paths, option: str = "--output", inputs=(), source="<command line>") -> None:
+def check_writable(paths, option: str = "--output", inputs=(), source=None) -> None:
     """SceneError (source, option, reason) unless every path can be written: its folder
     exists or can be made, and is writable; an existing file there is a plain file (a
     rename over /dev/full would replace the device); its name leaves room for the
-    temporary name; no path is one of the inputs (also through a link)."""
+    temporary name; no path is one of the inputs (also through a link). source defaults
+    to the command line or the API, as the option is spelled."""
+    source = source or argument_source(option)
     inputs = [Path(i) for i in inputs if i]
     for path in (Path(p) for p in paths if p is not None):
         where = path.absolute()

@@ -36,11 +36,16 @@ class Kind:
 
 class KindTable:
     def __init__(self, axis: str, prefix: str, kinds: Sequence[Kind] = (),
-                 traits: Sequence[str] = (), family: str | None = None):
+                 traits: Sequence[str] = (), family: str | None = None,
+                 first_id: int = 0, schema: Tagged | None = None):
+        """first_id: the id of the first kind (a table sharing its C prefix with another
+        starts past it); schema: a Tagged shared with another table (one scene key whose
+        variants two tables declare)."""
         self.axis, self.prefix, self.trait_names = axis, prefix, tuple(traits)
         self.family = family or axis
+        self.first_id = first_id
         self._kinds: list[Kind] = []
-        self.schema = Tagged(self.family)
+        self.schema = schema if schema is not None else Tagged(self.family)
         self._views: list = []   # (trait, Tagged): schema_where's
         for kind in kinds:
             self.register(kind)
@@ -54,6 +59,7 @@ class KindTable:
         if missing or unknown:
             raise ValueError(f"{self.axis}: kind {kind.name!r} traits: missing "
                              f"{sorted(missing)}, unknown {sorted(unknown)}")
+        # a path outside kernels_cl/ (absolute) serves tests' temporary kinds
         if kind.device_file is not None and not self.device_path(kind).is_file():
             raise ValueError(f"{self.axis}: kind {kind.name!r}: no device file "
                              f"{self.device_path(kind)}")
@@ -105,7 +111,7 @@ class KindTable:
         raise KeyError(f"{self.axis}: no kind {name!r} (one of: {', '.join(self.names)})")
 
     def id(self, name: str) -> int:
-        return self.names.index(self[name].name)
+        return self.first_id + self.names.index(self[name].name)
 
     def with_trait(self, trait: str, value=True) -> tuple:
         return tuple(k.name for k in self._kinds if k.traits[trait] == value)
@@ -127,9 +133,10 @@ class KindTable:
     def c_name(self, name: str) -> str:
         return f"{self.prefix}_{name.upper()}"
 
-    def c_enum(self) -> list:
-        lines = [f"#define {self.c_name(k.name)} {i}" for i, k in enumerate(self._kinds)]
-        return lines + [f"#define {self.prefix}_COUNT {len(self._kinds)}"]
+    def c_enum(self, count: bool = True) -> list:
+        """The ids, and PREFIX_COUNT unless `count` is false (a second table of a prefix)."""
+        lines = [f"#define {self.c_name(k.name)} {self.id(k.name)}" for k in self._kinds]
+        return lines + ([f"#define {self.prefix}_COUNT {len(self._kinds)}"] if count else [])
 
     def c_traits(self) -> list:
         """`PREFIX_IS_TRAIT(k)` for bool traits, `PREFIX_TRAIT(k)` for int traits."""
@@ -149,14 +156,18 @@ class KindTable:
         return lines
 
     def c_dispatch(self, function: str, returns: str, params: str, args: str,
-                   default: str = "0", kinds: Sequence[str] | None = None) -> str:
-        """`returns prefix_function(int kind, params)`: a switch calling `<name>_<function>
-        (args)` for each kind (or the `kinds` named), `default` for the others."""
+                   default: str = "0", kinds: Sequence[str] | None = None,
+                   name: str | None = None) -> str:
+        """`returns prefix_function(int kind, params)` (or `name`): a switch calling
+        `<kind>_<function>(args)` for each kind (or the `kinds` named), `default` for the
+        others. A `void` function calls and returns (its default does nothing)."""
         chosen = [self[n] for n in kinds] if kinds is not None else self._kinds
-        cases = "\n".join(f"    case {self.c_name(k.name)}: return {k.name}_{function}({args});"
-                          for k in chosen)
-        head = f"{returns} {self.prefix.lower()}_{function}(int kind, {params})"
-        return f"{head} {{\n  switch (kind) {{\n{cases}\n    default: return {default};\n  }}\n}}"
+        call = "{}; return;" if returns == "void" else "return {};"
+        cases = "\n".join(f"    case {self.c_name(k.name)}: "
+                          + call.format(f"{k.name}_{function}({args})") for k in chosen)
+        tail = "return;" if returns == "void" else f"return {default};"
+        head = f"inline {returns} {name or self.prefix.lower() + '_' + function}(int kind, {params})"
+        return f"{head} {{\n  switch (kind) {{\n{cases}\n    default: {tail}\n  }}\n}}"
 
     def device_files(self) -> list:
         return [k.device_file for k in self._kinds if k.device_file is not None]

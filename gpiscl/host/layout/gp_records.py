@@ -17,6 +17,9 @@ import numpy as np
 from .struct import Struct
 from ..gp import kernels as K
 from ..gp import means as M
+from ..kinds.colour_fields import COLOUR_FIELDS
+from ..kinds.gp_kernels import GP_KERNELS
+from ..kinds.means import MEAN_OPS, MEAN_PRIMITIVES, op_of, primitive_of
 
 GP_KERNEL = Struct("GpKernel", (
     ("float4", "aniso"),            # xyz: diagonal of A
@@ -79,12 +82,12 @@ MEAN_NODE = Struct("MeanNode", (
     ("float", "k"),         # ops: smooth blend width, 0 = sharp
 ))
 
-KERNEL_KINDS = {"squared_exponential": 0, "rational_quadratic": 1, "periodic": 2,
-                "locally_periodic": 3, "thin_plate": 4, "matern32": 5, "matern52": 6}
 FIELD_KINDS = {"none": 0, "linear": 1, "radial": 2, "grid": 3}
-MEAN_KINDS = {"constant": 0, "plane": 1, "sphere": 2, "box": 3, "rounded_box": 4,
-              "torus": 5, "capsule": 6, "grid": 7, "union": 16, "intersection": 17,
-              "difference": 18, "payload": 31}
+# payload: records of samples after a grid leaf or field, which every walker of a
+# program skips as a non-leaf (ids from GP_MEAN_FIRST_OP up are not leaves)
+MEAN_PAYLOAD = 31
+MEAN_KINDS = {**{k: MEAN_PRIMITIVES.id(k) for k in MEAN_PRIMITIVES.names},
+              **{k: MEAN_OPS.id(k) for k in MEAN_OPS.names}, "payload": MEAN_PAYLOAD}
 MEAN_FLAG_SWAPPED = 1
 MEAN_STACK_DEPTH = 8    # GP_MEAN_STACK_DEPTH in gp_mean.h
 GRID_PAYLOAD_FLOATS = 20    # the float4 fields row0..p1; kind must stay a valid int
@@ -93,16 +96,17 @@ GRID_PAYLOAD_FLOATS = 20    # the float4 fields row0..p1; kind must stay a valid
 GRID_BRICK = 4
 STRUCTS = (GP_KERNEL, MEAN_NODE)
 
-_F32_MAX = float(np.finfo(np.float32).max)
 
 
 def c_declarations() -> str:
     """#defines and struct declarations that gp_kernel.h and gp_mean.h assume."""
     lines = ["/* Generated from gpiscl/host/layout/gp_records.py: do not edit. */"]
-    lines += [f"#define GP_KERNEL_{k.upper()} {v}" for k, v in KERNEL_KINDS.items()]
+    lines += GP_KERNELS.c_enum() + GP_KERNELS.c_traits()
     lines += [f"#define GP_FIELD_{k.upper()} {v}" for k, v in FIELD_KINDS.items()]
-    lines += [f"#define GP_MEAN_{k.upper()} {v}" for k, v in MEAN_KINDS.items()]
-    lines.append(f"#define GP_MEAN_FIRST_OP {MEAN_KINDS['union']}")
+    lines += MEAN_PRIMITIVES.c_enum() + MEAN_OPS.c_enum(count=False)
+    lines.append(f"#define GP_MEAN_PAYLOAD {MEAN_PAYLOAD}")
+    lines.append(f"#define GP_MEAN_FIRST_OP {MEAN_OPS.first_id}")
+    lines += COLOUR_FIELDS.c_enum()
     lines.append(f"#define GP_MEAN_FLAG_SWAPPED {MEAN_FLAG_SWAPPED}")
     lines.append(f"#define GP_MEAN_STACK_DEPTH {MEAN_STACK_DEPTH}")
     lines.append(f"#define GP_MEAN_GRID_PAYLOAD_FLOATS {GRID_PAYLOAD_FLOATS}")
@@ -138,23 +142,21 @@ def pack_kernel(kernel: K.Kernel) -> np.ndarray:
         return out
     out = GP_KERNEL.zeros(1)
     out["aniso"] = (*np.asarray(kernel.aniso, dtype=np.float64), 0.0)
-    out["kind"] = KERNEL_KINDS[kernel.kind]
+    out["kind"] = GP_KERNELS.id(kernel.kind)
     out["sigma2"] = float(kernel.sigma) ** 2
-    for name in ("length_scale", "alpha", "w", "se_length_scale", "radius"):
-        if hasattr(kernel, name):
-            out[name] = getattr(kernel, name)
+    for name in GP_KERNELS[kernel.kind].host.params:
+        out[name] = getattr(kernel, name)
     return out
 
 
 # --- means -----------------------------------------------------------------------------
 
-_OPS = {M.Union: "union", M.Intersection: "intersection", M.Difference: "difference"}
 
 
 def _stack_need(node) -> int:
     if isinstance(node, M.Transform):
         return _stack_need(node.child)
-    if type(node) in _OPS:
+    if op_of(node) is not None:
         a, b = _stack_need(node.left), _stack_need(node.right)
         return max(a, b) if a != b else a + 1
     return 1
@@ -171,33 +173,14 @@ def _translate(m: np.ndarray, center) -> np.ndarray:
 
 
 def _leaf(node, m, scale):
-    rec = MEAN_NODE.zeros(1)
-    p0, p1 = np.zeros(4), np.zeros(4)
-    if isinstance(node, M.Constant):
-        kind, p0[0] = "constant", node.offset
-    elif isinstance(node, M.Plane):
-        n = np.asarray(node.normal, float) / np.linalg.norm(node.normal)
-        kind = "plane"
-        p0[:3] = (np.dot(n, node.point), node.scale, max(node.min_value, -_F32_MAX))
-        p1[:3] = n
-    elif isinstance(node, M.Sphere):
-        kind, m, p0[0] = "sphere", _translate(m, node.center), node.radius
-    elif isinstance(node, M.RoundedBox):
-        kind, m = "rounded_box", _translate(m, node.center)
-        p0[0], p1[:3] = node.radius, node.half_extents
-    elif isinstance(node, M.Box):
-        kind, m, p1[:3] = "box", _translate(m, node.center), node.half_extents
-    elif isinstance(node, M.Torus):
-        kind, m = "torus", _translate(m, node.center)
-        p0[:2] = node.major, node.minor
-    elif isinstance(node, M.Capsule):
-        kind = "capsule"
-        p0[:3], p0[3], p1[:3] = node.a, node.radius, node.b
-    elif isinstance(node, M.GridMean):
+    if isinstance(node, M.GridMean):
         return _grid_leaf(node, m, scale)
-    else:
-        raise TypeError(f"no device form for mean {type(node).__name__}")
-    rec["kind"] = MEAN_KINDS[kind]
+    kind = primitive_of(node)
+    center, p0, p1 = kind.host.pack(node)
+    if center is not None:
+        m = _translate(m, center)
+    rec = MEAN_NODE.zeros(1)
+    rec["kind"] = MEAN_PRIMITIVES.id(kind.name)
     rec["row0"], rec["row1"], rec["row2"] = m
     rec["p0"], rec["p1"], rec["scale"] = p0, p1, scale
     return rec
@@ -319,13 +302,14 @@ def _emit(node, m, scale, out):
     if isinstance(node, M.Transform):
         _emit(node.child, _compose(m, node.world_to_object), scale * node.distance_scale, out)
         return
-    if type(node) in _OPS:
+    op = op_of(node)
+    if op is not None:
         swapped = _stack_need(node.right) > _stack_need(node.left)
         first, second = (node.right, node.left) if swapped else (node.left, node.right)
         _emit(first, m, scale, out)
         _emit(second, m, scale, out)
         rec = MEAN_NODE.zeros(1)
-        rec["kind"] = MEAN_KINDS[_OPS[type(node)]]
+        rec["kind"] = MEAN_OPS.id(op.name)
         rec["flags"] = MEAN_FLAG_SWAPPED if swapped else 0
         rec["k"] = max(node.k, 0.0) * scale
         out.append(rec)

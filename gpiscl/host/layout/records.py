@@ -10,6 +10,7 @@ from __future__ import annotations
 from ..kinds import lights, materials
 from . import constants, random_slots
 from . import function_space_records, gp_records
+from ..kinds.memory_models import MEMORY_MODELS
 from .gp_records import c_declarations as gp_declarations
 from .struct import Queue, Struct
 
@@ -185,19 +186,16 @@ NUM_COUNTERS = len(COUNTERS)
 BOUNCE_SUMMED = ("fs_flights", "fs_samples", "fs_evals")
 GPIS_PROXIES = {"box": 0, "sphere": 1, "mesh": 2}
 GPIS_SAMPLERS = {"weight_space": 0, "function_space": 1}
-# classical_medium: not a memory model but the memoryless exponential counterpart
-# (kernels_cl/lib/fs_classical.h), set by "classical": "medium" on a gpis shape
-GPIS_MEMORIES = {"none": 0, "renewal": 1, "renewal_plus": 2, "global": 3,
-                 "classical_medium": 4}
+GPIS_MEMORIES = {name: MEMORY_MODELS.id(name) for name in MEMORY_MODELS.names}
 GPIS_HIT_BASE = -2
 
 
 def _defines() -> str:
     lines = []
     for prefix, table in (("PRIM", PRIM_KINDS), ("COUNT", COUNTERS),
-                          ("GPIS_PROXY", GPIS_PROXIES), ("GPIS_SAMPLER", GPIS_SAMPLERS),
-                          ("GPIS_MEMORY", GPIS_MEMORIES)):
+                          ("GPIS_PROXY", GPIS_PROXIES), ("GPIS_SAMPLER", GPIS_SAMPLERS)):
         lines += [f"#define {prefix}_{k.upper()} {v}" for k, v in table.items()]
+    lines += MEMORY_MODELS.c_enum() + MEMORY_MODELS.c_traits()
     # the kind tables' ids and traits, read at each call: a test's temporary kind shows
     lines += materials.c_declarations() + lights.c_declarations()
     lines.append(f"#define NUM_COUNTERS {NUM_COUNTERS}")

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import SceneError
+from ..errors import SceneError, argument_source
 
 AOVS = ("depth", "normal", "albedo", "position")
 # film layout: 12 doubles a pixel = position xyz + distance, normal xyz + hit, albedo xyz + 0
@@ -32,8 +32,8 @@ def parse(text, option: str = "--aov") -> tuple:
     names = [n.strip().lower() for n in (text.split(",") if isinstance(text, str) else text)]
     unknown = [n for n in names if n not in AOVS]
     if unknown or not names:
-        raise SceneError("<command line>" if option.startswith("--") else "<arguments>",
-                         option, f"unknown AOV {', '.join(map(repr, unknown)) or '(none)'} "
+        raise SceneError(argument_source(option), option,
+                         f"unknown AOV {', '.join(map(repr, unknown)) or '(none)'} "
                          f"(choose from {', '.join(AOVS)})")
     return tuple(dict.fromkeys(names))
 

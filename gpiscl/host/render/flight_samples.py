@@ -2,7 +2,8 @@
 sampler (fs_free_flight and fs_vertex_at_hit of kernels_cl/lib): the data of the GPIS
 density (docs/design/classical-limits.md). After each hit the path scatters off a
 Lambertian facet (cosine-weighted about the sampled normal) and flies again from the
-vertex, so the second and later flights show what each memory model remembers."""
+vertex, so the second and later flights show what each memory model remembers. The
+"memory" classical_medium runs the medium counterpart's flight (fs_classical.h) instead."""
 from __future__ import annotations
 
 import numpy as np
@@ -12,7 +13,7 @@ from ..layout import function_space_records as FL
 from ..layout import gp_records
 from ..layout.records import GPIS_MEMORIES
 from .device import Device, build_quietly
-from .program_sources import fs_sampler_options, fs_sampler_source
+from .program_sources import fs_sampler_options, fs_sampler_source, kernel_source
 
 WINDOW_MAX, CAP_MAX = 32, 128
 PER_FLIGHT = 5          # t (-1: no hit), grad x, y, z, solver status
@@ -38,8 +39,9 @@ __kernel void theory_flights(__global const GpKernel* kp, __global const MeanNod
     }
     for (int b = 0; b < bounces; ++b) {
         rng.bounce = turn.bounce = (uint)b;
-        FsResult res = fs_free_flight(kp[0], mean, mc, prm, r, v, rings + (size_t)i * cap,
-                                      rng, S);
+        FsResult res = GPIS_MEMORY_IS_EXPONENTIAL(memory)
+            ? fs_classical_flight(kp[0], mean, mc, r, rng)
+            : fs_free_flight(kp[0], mean, mc, prm, r, v, rings + (size_t)i * cap, rng, S);
         if (res.status) { o[5 * b + 4] = res.status; break; }
         if (!res.hit) break;
         o[5 * b] = res.t;
@@ -63,7 +65,9 @@ _BUILT: dict = {}      # by context: one build (~1 min on PoCL) per process
 
 def _kernel(device: Device):
     if device.ctx not in _BUILT:
-        _BUILT[device.ctx] = build_quietly(device, fs_sampler_source(_WRAPPER),
+        source = fs_sampler_source(f'#line 1 "fs_classical.h"\n{kernel_source("fs_classical.h")}'
+                                   f'\n#line 1 "flight_samples.py"\n{_WRAPPER}')
+        _BUILT[device.ctx] = build_quietly(device, source,
                                            fs_sampler_options(WINDOW_MAX, CAP_MAX)).theory_flights
     return _BUILT[device.ctx]
 

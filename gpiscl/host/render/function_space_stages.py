@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
+from ..kinds.memory_models import MEMORY_MODELS
 from ..layout import records as layouts
 from ..layout import stages
 from .program_sources import FS_HEADERS, FS_STAGE_FILES
@@ -41,10 +42,12 @@ def _fs_objects(objects: np.ndarray) -> np.ndarray:
 
 
 def ring_stride(objects: np.ndarray) -> int:
-    """Observations per path ring: the largest cap of a global-memory object, else 1."""
+    """Observations per path ring: the largest cap of an object whose memory model keeps
+    a ring, else 1."""
     fs = _fs_objects(objects)
-    glob = fs[fs["memory"] == layouts.GPIS_MEMORIES["global"]]
-    return int(glob["memory_cap"].max()) if len(glob) else 1
+    ids = [MEMORY_MODELS.id(name) for name in MEMORY_MODELS.with_trait("ring")]
+    ring = fs[np.isin(fs["memory"], ids)]
+    return int(ring["memory_cap"].max()) if len(ring) else 1
 
 
 def budget(device: Device) -> int:

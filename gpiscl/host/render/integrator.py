@@ -28,17 +28,13 @@ from ..compile.scene import CompiledScene
 
 # The most paths in flight unless asked otherwise (queue memory, ~440 bytes a path, ~560
 # with function space's vertex records). On a CPU the queues are the process's own memory
-# and every page a batch touches stays resident, while 2^15 paths already kept its cores as
-# busy as 2^18 (wedge_volume, 4 spp, same run: paths per CPU second x1.00, per wall second
-# x0.98), and 2^14 as busy as 2^15 (2026-12-03, 8 spp, alternating in one run, paths per CPU
-# second: fs_sphere_se x1.10 / x1.02 / x0.98, wedge_volume x1.05 / x1.05, knob_no_csg x1.01
-# / x1.05, csg_two_spheres x1.01, fs_mirror_ball_sun x1.04, ws_sphere_rq x0.99), touching
-# 5-7 MB less at the peak (knob_no_csg 167 -> 161 MB, fs_sphere_se 151 -> 145).
+# and every touched page stays resident, so the cap is the smallest batch that keeps the
+# cores as busy as larger ones (docs/design/batches.md has the measurements).
 DEFAULT_BATCH, CPU_DEFAULT_BATCH = 1 << 18, 1 << 14
 
 
 # PATH_STATE's first-hit fields (aov.py): one element each when no AOV is asked for, as
-# every kernel's access is guarded by params->aov (16384 paths: 0.8 MB)
+# every kernel's access is guarded by params->aov
 AOV_FIELDS = ("aov_position", "aov_normal", "aov_albedo")
 
 
@@ -49,7 +45,7 @@ def default_batch(device: Device) -> int:
 def ws_defines(device: Device) -> dict:
     """Weight-space features run WS_LANES per work-item in vector types: what makes the
     feature loop SIMD on CPU runtimes; GPUs vectorise across work-items instead."""
-    # the native float width measured 1.3-1.6x faster than 8 lanes on a 16-wide CPU
+    # the native float width: faster than 8 lanes on a 16-wide CPU (docs/design/batches.md)
     lanes = min(WS_MAX_LANES, max(1, device.device.native_vector_width_float))
     return {"WS_LANES": lanes if device.is_cpu else 1}
 

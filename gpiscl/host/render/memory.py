@@ -15,7 +15,6 @@ RAM, the process's rlimits, its cgroup's memory limit), not free RAM alone.
 from __future__ import annotations
 
 import ctypes
-import re
 
 from ..errors import SceneError
 from ..io.memory_budget import Budget, gib, memory_budget
@@ -26,18 +25,6 @@ FILM_BYTES_PER_PIXEL = 7 * 8          # film.py: 3 sums, 3 sums of squares, 1 co
 HOST_BYTES_PER_PIXEL = 7 * 8 * 2 + 6 * 4 * 2 + 3 * 4 + 3
 AOV_BYTES_PER_PIXEL = 12 * 8         # aov.py: first-hit sums, in double
 QUEUE_SHARE = 0.25
-UNITS = {"": 1, "k": 1 << 10, "m": 1 << 20, "g": 1 << 30, "t": 1 << 40}
-
-
-def parse_size(text: str) -> int:
-    """'512M', '8G', '8GiB', '1.5g', '1000000' -> bytes."""
-    m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*([kmgt]?)(i?b)?\s*", str(text).lower())
-    if not m:
-        raise ValueError(f"expected a size like 8G, 512M or a number of bytes (got {text!r})")
-    size = int(float(m[1]) * UNITS[m[2]])
-    if size <= 0:
-        raise ValueError(f"expected a size > 0 (got {text!r})")
-    return size
 
 
 # the queues integrator.py allocates per batch slot: path state, two ray queues, the hit

@@ -7,7 +7,6 @@ UNCOVERED (magenta).
 """
 from __future__ import annotations
 
-import copy
 import math
 
 import numpy as np
@@ -17,27 +16,27 @@ from ..io import output_files
 from .film import FilmImage
 from ..io.images import tonemap_srgb8, write_exr, write_png
 from ..scene.loading import Scene, write_resolved
-from ..errors import SceneError
+from ..errors import API_SOURCE, SceneError
 
 UNCOVERED = (255, 0, 255)
 
 
-def output_paths(path) -> dict:
+def output_paths(path, option: str = "output") -> dict:
     """{"exr", "png", "scene"} paths for -o path (output_files.plan: the extension picks
     the format; "exr" is None for a .png)."""
-    return output_files.plan(path)
+    return output_files.plan(path, option)
 
 
 def write_outputs(image: FilmImage, scene: Scene, path, exposure: float = 0.0,
-                  stats=None, aovs=()) -> dict:
+                  stats=None, aovs=(), option: str = "output") -> dict:
     """Write the files the extension of path asks for (see output_files), each whole or
     not at all. stats (RenderStats), when given, go into the EXR header (gpiscl:* attributes:
     spp reached and requested, paths, seed, render seconds, version, scene file), and for a
     render stopped early the resolved scene records the spp every pixel has. aovs: names of
     aov.AOVS to add as EXR layers (the film must have collected them)."""
-    paths = output_paths(path)
+    paths = output_paths(path, option)
     if aovs and paths["exr"] is None:
-        raise SceneError("<command line>", "--aov", "AOVs are EXR layers: write NAME.exr")
+        raise SceneError(API_SOURCE, "aov", "AOVs are EXR layers: write NAME.exr")
     if paths["exr"] is not None:
         extra = {f"stderr.{c}": image.stderr[..., i] for i, c in enumerate("RGB")}
         extra["samples"] = image.count
@@ -81,6 +80,4 @@ def resolved_as_rendered(scene: Scene, stats=None) -> Scene:
     the EXR's samples channel), so that rendering it again gives those passes."""
     if stats is None or stats.paths >= stats.pixels * stats.spp_requested:
         return scene
-    data = copy.deepcopy(scene.data)
-    data["render"]["spp"] = max(1, math.floor(stats.spp_reached))
-    return Scene.resolved(data, scene.source, scene.base_dir)
+    return scene.with_overrides(spp=max(1, math.floor(stats.spp_reached)))

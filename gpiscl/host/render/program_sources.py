@@ -8,11 +8,12 @@ header uses only those before it), then stages.
 """
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pyopencl as cl
 
-from ..kinds import lights, materials
+from ..kinds import gp_kernels, lights, materials, means
 from ..layout import records, stages
 from ..layout.function_space_records import c_declarations, defines
 
@@ -31,19 +32,31 @@ GPIS_HEADERS = ("gpis_proxy.h", "ws_features.h", "ws_posterior.h", "ws_intersect
                 "ws_objects.h", "gpis_fields.h", "fs_normal_pdf.h", "fs_random_normal.h")
 # The function-space stages (a second program, built only for scenes that use them).
 FS_STAGE_FILES = ("gpis_function_space.cl", "gpis_shadow_function_space.cl")
-FS_HEADERS = ("gpis_proxy.h", "fs_linalg.h", "fs_sampling.h", "fs_march.h", "fs_markov.h",
-              "fs_posterior.h", "fs_classical.h", "fs_objects.h")
+FS_HEADERS = ("gpis_proxy.h", "fs_linalg.h", "fs_sampling.h", "fs_memory.h", "fs_march.h",
+              "fs_markov.h", "fs_posterior.h", "fs_classical.h", "fs_objects.h")
 # Scene preparation on the device (device_bakes.py: built only when a bake is not cached).
 BAKE_FILES = ("bake_procedural.cl", "bake_grid_slopes.cl")
 BAKE_HEADERS = ("knob_sdf.h",)
 # The function-space sampler alone, for tests and benchmarks.
 FS_SAMPLER_HEADERS = ("compat.h", "rng.h", "gp_kernel.h", "gp_mean.h", "fs_linalg.h",
-                      "fs_sampling.h", "fs_march.h", "fs_markov.h")
+                      "fs_sampling.h", "fs_memory.h", "fs_march.h", "fs_markov.h")
+
+
+# `/* @kinds <axis> <part> */` lines in a header stand for that part of every kind's
+# device file and the dispatch generated over them (host/kinds/).
+KIND_PARTS = {"gp_kernels": gp_kernels.device_source, "gp_means": means.device_source}
+_KIND_LINE = re.compile(r"^/\* @kinds (\w+) (\w+) \*/$", re.M)
 
 
 def kernel_source(name: str) -> str:
-    """The text of one device source file: lib/ for headers, stages/ for stages."""
-    return (KERNEL_DIR / ("lib" if name.endswith(".h") else "stages") / name).read_text()
+    """The text of one device source file: lib/ for headers, stages/ for stages, with
+    its kinds' device code joined in."""
+    text = (KERNEL_DIR / ("lib" if name.endswith(".h") else "stages") / name).read_text()
+
+    def expand(m):
+        line = text.count("\n", 0, m.end()) + 2   # of the line after the marker
+        return f'{KIND_PARTS[m[1]](m[2])}#line {line} "{name}"'
+    return _KIND_LINE.sub(expand, text)
 
 
 def _marked(name) -> str:

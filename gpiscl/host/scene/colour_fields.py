@@ -23,7 +23,7 @@ shadow rays are blocked by it: it is found by BSDF-sampled rays only, which coun
 MIS weight 1 (emission.cl). Bright small emitters are therefore noisy; use lights for
 illumination and emission for glowing detail.
 
-Device form: one MeanNode record per field (kinds GPIS_FIELD_* in gpis_fields.h), appended
+Device form: one MeanNode record per field (kinds: kinds/colour_fields.py), appended
 after every object's mean program in the mean-node array, so no buffer is added and the
 mean walkers never see them; a grid's interleaved RGB samples follow as payload records
 in the layout of grid means (layout/gp_records.py). GpisObject.color_field / emission_field
@@ -34,28 +34,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..io.grids import load_rgb_grid, problem_of
-from .records import ALBEDO, RGB, VEC3
-from ..schema import Field, File, Number, Record, Spec, Tagged, is_number, is_sequence
+from ..io.grids import load_rgb_grid
+from ..kinds.colour_fields import COLOUR_FIELDS
+from ..kinds.values import ALBEDO, RGB
+from ..schema import Spec, Tagged, is_number, is_sequence
 
 
 # ---- declarations -------------------------------------------------------------------------
 
 def _field_family(name: str, value_spec, upper) -> Tagged:
-    def gradient_length(g):
-        if all(a == b for a, b in zip(g["start"], g["end"])):
-            return "end", "must differ from start (the gradient needs a direction)"
-        return None
-
-    return Tagged(name, {
-        "constant": Record({"value": Field(value_spec)}),
-        "checker": Record({"scale": Field(Number(gt=0)), "a": Field(value_spec),
-                           "b": Field(value_spec), "offset": Field(VEC3, [0, 0, 0])}),
-        "gradient": Record({"start": Field(VEC3), "end": Field(VEC3), "a": Field(value_spec),
-                            "b": Field(value_spec)}, [gradient_length]),
-        "grid": Record({"file": Field(File((".npz",), problem_of(
-            lambda path: load_rgb_grid(path, upper))))}),
-    })
+    return Tagged(name, {k.name: k.host.schema(value_spec, upper) for k in COLOUR_FIELDS})
 
 
 class ColourField(Spec):

@@ -16,18 +16,20 @@ from __future__ import annotations
 
 from ..io.meshes import mesh_problem
 from ..kinds.materials import MICRO_BSDFS
-from .records import SHAPES, TRANSFORM, VEC3, box_extent
+from ..kinds.values import VEC3
+from .records import SHAPES, TRANSFORM, box_extent
 from ..layout import function_space_records as FSL
 from ..schema import (Bool, Enum, Field, File, Int, Nullable, Number, Record, Tagged,
-                     Vector, child)
+                     child)
 from .proxies import bounding_proxy, mesh_proxy_problem
 from ..io.grids import load_field_grid, load_grid, problem_of
+from ..kinds.gp_kernels import FIELD_KEYS, GP_KERNELS
+from ..kinds.memory_models import MEMORY_MODELS
+from ..kinds.means import MEAN_PRIMITIVES
 from ..io.points import EXTENSIONS as POINT_FILES
 from .observations import observations_problem, points_problem
 from .colour_fields import COLOR, EMISSION
 
-DIRECTION = Vector(normalize=True)
-POSITIVE3 = Vector(broadcast=True, item=Number(gt=0))
 
 PROXIES = Tagged("proxy", {
     "box": Record({"min": Field(VEC3), "max": Field(VEC3)}, [box_extent]),
@@ -41,27 +43,10 @@ PROXIES = Tagged("proxy", {
     "scene": Record({}),
 })
 
-# Means are signed distances, positive outside (gpiscl/host/gp/means.py).
-MEANS = Tagged("mean")
-MEANS.register("constant", Record({"value": Field(Number(), 0.0)}))
-MEANS.register("plane", Record({"point": Field(VEC3, [0, 0, 0]),
-                                "normal": Field(DIRECTION, [0, 1, 0]),
-                                "scale": Field(Number(gt=0), 1.0)}))
-MEANS.register("sphere", Record({"center": Field(VEC3, [0, 0, 0]),
-                                 "radius": Field(Number(gt=0), 1.0)}))
-MEANS.register("box", Record({"center": Field(VEC3, [0, 0, 0]),
-                              "half_extents": Field(POSITIVE3, 1.0)}))
-MEANS.register("rounded_box", Record({"center": Field(VEC3, [0, 0, 0]),
-                                      "half_extents": Field(POSITIVE3, 1.0),
-                                      "radius": Field(Number(gt=0), 0.1)}))
-MEANS.register("torus", Record({"center": Field(VEC3, [0, 0, 0]),
-                                "major": Field(Number(gt=0), 1.0),
-                                "minor": Field(Number(gt=0), 0.25)}))
-MEANS.register("capsule", Record({"a": Field(VEC3, [0, -0.5, 0]), "b": Field(VEC3, [0, 0.5, 0]),
-                                  "radius": Field(Number(gt=0), 0.25)}))
-for _op in ("union", "intersection", "difference"):  # k > 0: smooth blend of width k
-    MEANS.register(_op, Record({"left": Field(MEANS), "right": Field(MEANS),
-                                "k": Field(Number(ge=0), 0.0)}))
+# Means are signed distances, positive outside (gpiscl/host/gp/means.py). The primitives
+# and the CSG operations (k > 0: smooth blend of width k) are declared in kinds/means.py;
+# below, the scene forms that compile into them.
+MEANS = MEAN_PRIMITIVES.schema
 MEANS.register("transform", Record({"child": Field(MEANS), **TRANSFORM.fields}))
 # Sampled means (mesh bakes, grids, procedural shapes) are interpolated "linear"
 # (trilinear: stays within the samples' range, gradient jumps at cell faces, which a
@@ -91,60 +76,8 @@ MEANS.register("procedural", Record({
     "interpolation": _INTERPOLATION,
 }))
 
-# Spatially varying multipliers (function space only): sigma(x) = sigma m(x) on every
-# kernel ("sigma_field"), l(x) = l m(x) on SE and RQ ("length_scale_field", the
-# Paciorek-Schervish form, gpiscl/host/gp/kernels.py). A field is 1 where it is absent.
-#   linear  m = value + gradient . (x - origin); must stay positive over the proxy
-#   radial  m = inner + (outer - inner) (1 + tanh((|x - center|^2 - radius^2)
-#               / (2 radius width))) / 2: inner inside the sphere, outer beyond, blended
-#               over about `width`
-#   grid    trilinear in an .npz laid out like a mean grid (values (nx, ny, nz) > 0,
-#           origin, voxel_size), the border value held outside the sample box
-FIELDS = Tagged("field", {
-    "linear": Record({"value": Field(Number(gt=0), 1.0), "gradient": Field(VEC3, [0, 0, 0]),
-                      "origin": Field(VEC3, [0, 0, 0])}),
-    "radial": Record({"center": Field(VEC3, [0, 0, 0]), "radius": Field(Number(gt=0)),
-                      "width": Field(Number(gt=0)), "inner": Field(Number(gt=0)),
-                      "outer": Field(Number(gt=0))}),
-    "grid": Record({"file": Field(File((".npz",), problem_of(load_field_grid)))}),
-})
-_SIGMA_FIELD = Field(Nullable(FIELDS), None)
-_LS_FIELD = Field(Nullable(FIELDS), None)
-FIELD_KEYS = ("sigma_field", "length_scale_field")
-
-# Squared exponential: sigma^2 exp(-r^T A r / (2 l^2)), A = diag(aniso).
-_ANISO = Field(POSITIVE3, 1.0)
-KERNELS = Tagged("kernel", {
-    "squared_exponential": Record({"sigma": Field(Number(gt=0), 1.0),
-                                   "length_scale": Field(Number(gt=0), 1.0), "aniso": _ANISO,
-                                   "sigma_field": _SIGMA_FIELD,
-                                   "length_scale_field": _LS_FIELD}),
-    "rational_quadratic": Record({"sigma": Field(Number(gt=0), 1.0),
-                                  "length_scale": Field(Number(gt=0), 1.0),
-                                  "alpha": Field(Number(gt=0), 1.0), "aniso": _ANISO,
-                                  "sigma_field": _SIGMA_FIELD,
-                                  "length_scale_field": _LS_FIELD}),
-    "periodic": Record({"sigma": Field(Number(gt=0), 1.0),
-                        "length_scale": Field(Number(gt=0), 1.0),
-                        "w": Field(Number(gt=0), 6.283185307179586), "aniso": _ANISO,
-                        "sigma_field": _SIGMA_FIELD}),
-    "locally_periodic": Record({"sigma": Field(Number(gt=0), 1.0),
-                                "length_scale": Field(Number(gt=0), 1.0),
-                                "w": Field(Number(gt=0), 6.283185307179586),
-                                "se_length_scale": Field(Number(gt=0), 1.0), "aniso": _ANISO,
-                                "sigma_field": _SIGMA_FIELD}),
-    # Matern nu = 3/2, 5/2: sigma^2 (1 + c rho) e^(-c rho), c = sqrt(3)/l, and
-    # sigma^2 (1 + c rho + c^2 rho^2 / 3) e^(-c rho), c = sqrt(5)/l; rho^2 = r^T A r
-    "matern32": Record({"sigma": Field(Number(gt=0), 1.0),
-                        "length_scale": Field(Number(gt=0), 1.0), "aniso": _ANISO,
-                        "sigma_field": _SIGMA_FIELD}),
-    "matern52": Record({"sigma": Field(Number(gt=0), 1.0),
-                        "length_scale": Field(Number(gt=0), 1.0), "aniso": _ANISO,
-                        "sigma_field": _SIGMA_FIELD}),
-    "thin_plate": Record({"sigma": Field(Number(gt=0), 1.0),
-                          "radius": Field(Number(gt=0), 1.0), "aniso": _ANISO,
-                          "sigma_field": _SIGMA_FIELD}),
-})
+# The kernels and their sigma(x) / l(x) fields are declared in kinds/gp_kernels.py.
+KERNELS = GP_KERNELS.schema
 
 
 def field_minimum(field: dict, proxy: dict) -> float:
@@ -165,11 +98,6 @@ def field_minimum(field: dict, proxy: dict) -> float:
     c, r = proxy["center"], proxy["radius"]
     return (v + sum(gi * (ci - oi) for gi, ci, oi in zip(g, c, o))
             - r * sum(gi * gi for gi in g) ** 0.5)
-
-# Random Fourier features per realization when "features" is null: the RQ and Matern spectra are
-# heavy-tailed scale mixtures and need more features to reach the same covariance error.
-DEFAULT_FEATURES = {"rational_quadratic": 1024, "matern32": 1024, "matern52": 1024}
-DEFAULT_FEATURES_OTHER = 256
 
 class _FunctionSpaceSampler(Record):
     """Keys of the segment sampler that are gone fail with what replaces them (a silent
@@ -196,7 +124,7 @@ SAMPLERS = Tagged("sampler", {
     # along-ray length scale, and root-search points forced in a crossing bracket (0: the
     # root width alone decides).
     "function_space": _FunctionSpaceSampler({
-        "memory": Field(Enum("none", "renewal", "renewal_plus", "global"), "renewal_plus"),
+        "memory": Field(Enum(*MEMORY_MODELS.names), "renewal_plus"),
         "memory_cap": Field(Int(ge=8, le=512), FSL.DEFAULT_GLOBAL_CAP),
         "miss_tolerance": Field(Number(ge=1e-9, le=0.1), FSL.DEFAULT_MISS_TOLERANCE),
         "refine": Field(Int(ge=0, le=20), FSL.DEFAULT_REFINE),
@@ -213,12 +141,12 @@ def _weight_space_kernel(g):
                                          "weight space samples stationary kernels only (random "
                                          "Fourier features of one spectral density); use the "
                                          "function_space sampler")
-        if g["kernel"]["type"] == "thin_plate":
-            return "kernel.type", ("thin_plate has no spectral density, so weight space "
+        kind = GP_KERNELS[g["kernel"]["type"]]
+        if not kind.traits["spectral"]:
+            return "kernel.type", (f"{kind.name} has no spectral density, so weight space "
                                    "cannot sample it; use the function_space sampler")
         if g["sampler"]["features"] is None:  # resolve "auto" so the written scene is explicit
-            g["sampler"]["features"] = DEFAULT_FEATURES.get(g["kernel"]["type"],
-                                                            DEFAULT_FEATURES_OTHER)
+            g["sampler"]["features"] = kind.host.features
     return None
 
 

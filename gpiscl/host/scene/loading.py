@@ -6,11 +6,13 @@ idempotent, so a written resolved scene loads back to the same data.
 """
 from __future__ import annotations
 
+import copy
 import json
 import os
 from dataclasses import dataclass, field
 
 from . import gpis  # noqa: F401  (registers the "gpis" shape with records.SHAPES)
+from .arguments import NO_REALIZATION
 from .records import SCENE
 from ..schema import Context, kind_of
 from .tungsten_keys import tungsten_hint, tungsten_hint_of_text
@@ -45,6 +47,23 @@ class Scene:
         scene = object.__new__(cls)
         scene.data, scene.source, scene.base_dir = data, source, base_dir
         return scene
+
+    def with_overrides(self, spp=None, seed=None, resolution=None, realization=None,
+                       tonemap=None) -> "Scene":
+        """This scene with the settings given (None: the scene's own), as a new Scene;
+        realization='none' averages over realizations whatever the scene says. The values
+        are checked by the caller (scene/arguments.py), so the scene is not resolved again."""
+        render = {k: v for k, v in (("spp", spp), ("seed", seed), ("realization", realization),
+                                    ("tonemap", tonemap)) if v is not None}
+        if not render and resolution is None:
+            return self
+        data = copy.deepcopy(self.data)
+        data["render"].update(render)
+        if realization == NO_REALIZATION:
+            data["render"]["realization"] = None
+        if resolution is not None:
+            data["camera"]["resolution"] = [int(resolution[0]), int(resolution[1])]
+        return Scene.resolved(data, self.source, self.base_dir)
 
     def __repr__(self):
         return (f"Scene(source={self.source!r}, {len(self.data.get('shapes', []))} shapes, "

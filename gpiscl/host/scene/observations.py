@@ -11,12 +11,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..io.points import load_points
+from ..kinds.gp_kernels import GP_KERNELS
 from ..layout.constants import WS_POST_MAX
 
 MAX_ROWS = 4096
 WS_MAX_ROWS = WS_POST_MAX   # a ray's solve vector lives in private memory
-# kernels whose cross-covariance slopes ws_posterior.h bounds along a ray
-WS_KERNELS = ("squared_exponential", "rational_quadratic")
 
 
 def points_problem(path: str):
@@ -38,9 +37,11 @@ def observations_problem(g: dict):
     if o is None:
         return None
     weight_space = g["sampler"]["type"] == "weight_space"
-    if weight_space and g["kernel"]["type"] not in WS_KERNELS:
+    # kernels whose cross-covariance slopes ws_posterior.h bounds along a ray
+    if weight_space and not GP_KERNELS[g["kernel"]["type"]].traits["ws_posterior"]:
+        names = GP_KERNELS.with_trait("ws_posterior")
         return "kernel.type", (f"weight-space posteriors (pathwise conditioning) support the "
-                               f"{' and '.join(WS_KERNELS)} kernels only, whose "
+                               f"{' and '.join(names)} kernels only, whose "
                                f"cross-covariance slopes the root search bounds; use one, or "
                                f"the function_space sampler")
     pts = load_points(o["file"])

@@ -14,8 +14,7 @@ from ..io.images import TONEMAPS
 from ..io.meshes import mesh_problem
 from ..kinds.lights import LIGHTS as LIGHT_TABLE
 from ..kinds.materials import MATERIALS
-from ..kinds.values import (ALBEDO, DIRECTION, NONZERO, RGB, VEC3, parallel,
-                            rectangle_area)
+from ..kinds.values import DIRECTION, NONZERO, VEC3, parallel, rectangle_area
 from ..schema import (Bool, Enum, Field, File, Int, ListOf, Nullable, String, Number, Record,
                      Tagged, Vector, show)
 

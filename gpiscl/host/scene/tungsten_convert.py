@@ -18,7 +18,7 @@ import secrets
 import shutil
 from pathlib import Path
 
-from ..errors import SceneError
+from ..errors import SceneError, argument_source
 from ..io.lenient_json import read_lenient_json
 from ..io.output_files import check_writable, write_atomically
 from .tungsten import convert_tungsten
@@ -36,19 +36,20 @@ def environment_option(text):
 
 
 def convert_file(src, dst, environment: dict | None = None, grid_dir=None,
-                 option: str = "output") -> list[str]:
+                 option: str = "output", grid_option: str = "grid_dir") -> list[str]:
     """Convert Tungsten scene file `src` into gpiscl scene file `dst`; the notes on lossy
     mappings. SceneError (one line: file, key path, reason) on any problem, and then
     nothing is written. `environment` substitutes the scene's environment (a light dict,
     see environment_option); `grid_dir` is where derived grids go (default: dst's folder).
-    `option` names dst in an error about it (the command line's name for it)."""
+    `option` and `grid_option` name dst and grid_dir in an error about them (as the API
+    spells them; the command line renames them)."""
     src, dst = Path(src), Path(dst)
     grids = Path(grid_dir) if grid_dir is not None else dst.absolute().parent
     if dst.absolute() == src.absolute() or _same_file(src, dst):
-        raise SceneError("<command line>", option, f"{dst} is the Tungsten scene being "
+        raise SceneError(argument_source(option), option, f"{dst} is the Tungsten scene being "
                          "converted; it would be overwritten")
     check_writable([dst], option, inputs=[src])
-    check_writable([grids / "grid.npz"], "grid folder")
+    check_writable([grids / "grid.npz"], grid_option)
     doc = read_lenient_json(src)
     # made by the first write into it (write_atomically), if any; removed in the end
     staging = grids / f".convert-{os.getpid()}-{secrets.token_hex(4)}"

@@ -487,7 +487,7 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
     /* (q1, q2) = m + L z with the 2x2 lower factor L = [[l11, 0], [l21, l22]] of their
      * covariance given s: res.law_* keeps (m, L) for the normal's density */
     double q1, q2, m1, m2, l11, l21, l22;
-    if (fs_isotropic_radial(p) && !S.post.n && prm.memory != GPIS_MEMORY_GLOBAL) {
+    if (fs_isotropic_radial(p) && !S.post.n && fs_memory_markov_ok(prm)) {
         /* every row on the ray: d_T f(x_h) is independent of them (fs_sampling.h) */
         m1 = fs_prior_mean(mean, mc, x, T, FS_OBS_DERIV);
         m2 = fs_prior_mean(mean, mc, x, B, FS_OBS_DERIV);

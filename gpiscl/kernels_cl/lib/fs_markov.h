@@ -42,16 +42,15 @@ typedef struct {
 
 inline int fs_markov_applies(GpKernel p, FsParams prm, FsScratch S)
 {
-    return (p.kind == GP_KERNEL_MATERN32 || p.kind == GP_KERNEL_MATERN52)
+    return GP_KERNEL_MARKOV_ORDER(p.kind) > 0
         && !gp_kernel_nonstationary(p) && !S.post.n && !(prm.step_corr > 0.0)
-        && (prm.memory == GPIS_MEMORY_NONE || prm.memory == GPIS_MEMORY_RENEWAL
-            || prm.memory == GPIS_MEMORY_RENEWAL_PLUS);
+        && fs_memory_markov_ok(prm);
 }
 
 inline FsMarkov fs_markov_of(GpKernel p, double3 dn)
 {
     FsMarkov m;
-    int five = p.kind == GP_KERNEL_MATERN52;
+    int five = GP_KERNEL_MARKOV_ORDER(p.kind) == 2;
     m.n = five ? 3 : 2;
     m.lam = (five ? 2.23606797749979 : 1.7320508075688772) / (double)p.length_scale
           * sqrt(dot(gp_aniso(p) * dn, dn));
@@ -457,8 +456,7 @@ inline FsResult fs_markov_free_flight(GpKernel p, __global const MeanNode* mean,
     double fa, x[3], xb[3], mu1;
     int outside, n_old;
     fs_begin(p, mean, mc, prm, ray, v, 0, rng, S, &fa, &outside, &n_old);
-    int with_slope = v.valid && (prm.memory == GPIS_MEMORY_RENEWAL
-                                 || prm.memory == GPIS_MEMORY_RENEWAL_PLUS);
+    int with_slope = v.valid && GPIS_MEMORY_IS_RENEWS(prm.memory);
     double mu = fs_mk_mean(mean, mc, ray, dn, ray.t0, &mu1);
     x[0] = fa - mu;
     if (with_slope) x[1] = S.rows[1].value - mu1;

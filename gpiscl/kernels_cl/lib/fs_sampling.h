@@ -203,12 +203,8 @@ inline double fs_corr(GpKernel p, double3 d, double t)
 /* The lag dt with corr(f(x), f(x + dt d)) = c (stationary kernels: independent of x). */
 inline double fs_step_stationary(GpKernel p, double3 d, double c)
 {
-    double dad = dot(gp_aniso(p) * d, d), l = p.length_scale;
-    if (p.kind == GP_KERNEL_SQUARED_EXPONENTIAL) return l * sqrt(-2.0 * log(c) / dad);
-    if (p.kind == GP_KERNEL_RATIONAL_QUADRATIC) {
-        double a = p.alpha;
-        return l * sqrt(2.0 * a * (pow(c, -1.0 / a) - 1.0) / dad);
-    }
+    double dad = dot(gp_aniso(p) * d, d);
+    if (GP_KERNEL_IS_CORR_LAG(p.kind)) return gp_kernel_corr_lag(p.kind, p, dad, c);
     double3 o = (double3)(0.0);
     double lam = gp_cov(p, o, d, 1, o, d, 1) / gp_kernel_value(p, o);
     double lo = 0.0, hi = sqrt(2.0 * (1.0 - c) / lam);
@@ -490,89 +486,7 @@ inline int fs_isotropic_radial(GpKernel p)
 {
     /* sigma(x), l(x) correlate d_T f(x_h) with the ray's values: no closed form */
     return !gp_kernel_nonstationary(p)
-        && (p.kind == GP_KERNEL_SQUARED_EXPONENTIAL || p.kind == GP_KERNEL_RATIONAL_QUADRATIC
-            || p.kind == GP_KERNEL_THIN_PLATE || p.kind == GP_KERNEL_MATERN32
-            || p.kind == GP_KERNEL_MATERN52)
+        && GP_KERNEL_IS_RADIAL(p.kind)
         && p.aniso.x == p.aniso.y && p.aniso.y == p.aniso.z;
 }
 
-/* Conditioning rows [0, m) of a new ray from vertex v (v.valid == 0: fresh entry); sets
- * the start value, whether the ray starts outside, and how many rows came from the ring. */
-inline int fs_begin(GpKernel p, __global const MeanNode* mean, int mc, FsParams prm,
-                    FsRay ray, FsVertex v, __global const FsObs* ring, FsRng rng,
-                    FsScratch S, double* f0, int* outside, int* n_old)
-{
-    double3 d = ray.d / length(ray.d), g = convert_double3(v.grad.xyz);
-    *n_old = 0;
-    *outside = 1;
-    if (v.valid && prm.memory == GPIS_MEMORY_GLOBAL && v.obs_count > 0 && ring) {
-        int cnt = min(v.obs_count, prm.cap);
-        for (int k = 0; k < cnt; ++k) S.rows[k] = ring[(v.obs_end - cnt + k) % prm.cap];
-        /* a shadow ray of a normal other than the sampled one (fs_normal_pdf.h): the
-         * ring's last two rows are the vertex's tangential derivatives (fs_march.h
-         * appends f = 0, the slope, d_T f, d_B f), which take the implied gradient's
-         * values; the slope row stays (the implied gradient keeps it, g . d = s) */
-        for (int k = max(cnt - 2, 0); v.implied && k < cnt; ++k)
-            S.rows[k].value = dot(g, fs_dir(S.rows + k));
-        *n_old = cnt;
-        *f0 = v.pos.w;
-        *outside = dot(g, d) >= 0.0;
-        return cnt;
-    }
-    if (v.valid && (prm.memory == GPIS_MEMORY_RENEWAL
-                    || prm.memory == GPIS_MEMORY_RENEWAL_PLUS)) {
-        double3 x = convert_double3(v.pos.xyz);
-        double s = dot(g, d);
-        if (prm.memory == GPIS_MEMORY_RENEWAL) {   /* value and slope: independent at a point */
-            double vs, ms = fs_mean_var(p, mean, mc, S, x, d, FS_OBS_DERIV, 1, &vs);
-            /* ... of a stationary prior; observations correlate them, and so does a
-             * sigma(x) field: cov(f(x), d_d f(x)) = m_s(x) (d . grad m_s(x)) k0(0) */
-            if (S.post.n || gp_kernel_nonstationary(p)) {
-                double vf, mf = fs_mean_var(p, mean, mc, S, x, d, FS_OBS_VALUE, 0, &vf);
-                GpFieldsAt fx = fs_fields(p, mean, x);
-                double c = gp_cov_at(p, x, d, 0, fx, x, d, 1, fx)
-                         - fs_post_dot(fs_post_v(S, 0), fs_post_v(S, 1), S.post.n);
-                if (vf > 0.0) {
-                    ms += c / vf * (v.pos.w - mf);
-                    vs = fmax(vs - c * c / vf, 0.0);
-                }
-            }
-            s = fs_truncnorm_pos(ms, sqrt(vs), rng, 0, FS_U_START);
-        }
-        S.rows[0] = fs_obs(x, d, FS_OBS_VALUE, v.pos.w);
-        S.rows[1] = fs_obs(x, d, FS_OBS_DERIV, s);
-        *f0 = v.pos.w;
-        *outside = s >= 0.0;
-        return 2;
-    }
-    double3 x = ray.o + ray.t0 * ray.d;
-    double var, m0 = fs_mean_var(p, mean, mc, S, x, d, FS_OBS_VALUE, 0, &var);
-    *f0 = fs_truncnorm_pos(m0, sqrt(var), rng, 0, FS_U_START);
-    S.rows[0] = fs_obs(x, d, FS_OBS_VALUE, *f0);
-    return 1;
-}
-
-/* The vertex record of a continuation ray's hit. For the global model it appends this
- * ray's observations (values before the crossing, f(x_h) = 0, the three gradient
- * components) to the path's ring of capacity prm.cap. Call only for the continuation
- * ray, after the previous vertex's shadow rays were traced (they read the ring). */
-inline FsVertex fs_vertex_at_hit(FsParams prm, FsRay ray, FsResult r, FsVertex prev,
-                                 __global FsObs* ring, FsScratch S)
-{
-    FsVertex v;
-    v.pos = (float4)(convert_float3(ray.o + r.t * ray.d), 0.0f);
-    v.grad = (float4)(convert_float3(r.grad), 0.0f);
-    v.valid = 1;
-    v.obs_end = prev.valid ? prev.obs_end : 0;
-    v.obs_count = prev.valid ? prev.obs_count : 0;
-    v.implied = 0;
-    if (prm.memory == GPIS_MEMORY_GLOBAL && ring && r.hit) {
-        int k = r.new_end - r.new_first;   /* contiguous: values, bisection, gradient */
-        for (int i = 0; i < k; ++i) {
-            ring[v.obs_end % prm.cap] = S.rows[r.new_first + i];
-            v.obs_end++;
-        }
-        v.obs_count = min(v.obs_count + k, prm.cap);
-    }
-    return v;
-}

@@ -43,69 +43,18 @@ inline GP_REAL3 gp_aniso(GpKernel p)
 /* Radial kernels of s alone: value, 2 k'(s), 4 k''(s), in two halves so that a caller with
  * many lags can take the exps in vector lanes (fs_sampling.h fs_jets: PoCL's double exp
  * runs ~10x faster in double8 than scalar): gp_radial_arg is the exponent x whose exp the
- * kernel takes (0 for the thin plate, which takes none), gp_radial_of the three numbers
- * given e = exp(x). gp_radial is the two in a row: the same operations as one function. */
-/* Matern's c = sqrt(2 nu) / l (kernels.py Matern32/Matern52) */
-inline GP_REAL gp_matern_c(GpKernel p)
-{
-    return (p.kind == GP_KERNEL_MATERN32 ? (GP_REAL)1.7320508075688772
-                                         : (GP_REAL)2.23606797749979) / (GP_REAL)p.length_scale;
-}
-
-inline GP_REAL gp_radial_arg(GpKernel p, GP_REAL s)
-{
-    if (p.kind == GP_KERNEL_THIN_PLATE) return 0;
-    if (p.kind == GP_KERNEL_MATERN32 || p.kind == GP_KERNEL_MATERN52)
-        return -gp_matern_c(p) * sqrt(s);
-    GP_REAL l2 = (GP_REAL)p.length_scale * (GP_REAL)p.length_scale;
-    if (p.kind == GP_KERNEL_RATIONAL_QUADRATIC) {
-        GP_REAL a = (GP_REAL)p.alpha;
-        return -a * log1p(s / (2 * a * l2));   /* log1p: accurate towards the SE limit */
-    }
-    return -s / (2 * l2);
-}
+ * kernel takes (0 for a kernel that takes none), gp_radial_of the three numbers given
+ * e = exp(x). gp_radial is the two in a row: the same operations as one function.
+ * Product kernels k = sigma^2 exp(-h) give h, grad h and diag Hess h (gp_log_terms).
+ * Each kernel's maths is in lib/gp_kernels/<name>.h; the dispatch below is generated
+ * from gpiscl/host/kinds/gp_kernels.py. */
+/* @kinds gp_kernels covariance */
+inline GP_REAL gp_radial_arg(GpKernel p, GP_REAL s) { return gp_kernel_radial_arg(p.kind, p, s); }
 
 inline void gp_radial_of(GpKernel p, GP_REAL s, GP_REAL e, GP_REAL* k, GP_REAL* dk2,
                          GP_REAL* ddk4)
 {
-    GP_REAL v = (GP_REAL)p.sigma2;
-    if (p.kind == GP_KERNEL_THIN_PLATE) {
-        GP_REAL R = (GP_REAL)p.radius, rho = sqrt(s);
-        if (rho >= R) { *k = 0; *dk2 = 0; *ddk4 = 0; return; }  /* C^1 zero extension */
-        /* factored 2 rho^3 - 3 R rho^2 + R^3: no cancellation near rho = R */
-        *k = v * (R - rho) * (R - rho) * (2 * rho + R);
-        *dk2 = 6 * v * (rho - R);
-        /* 6 sigma^2 / rho multiplies (u.Ar)(v.Ar) = O(rho^2): the limit at rho = 0 is 0 */
-        *ddk4 = rho > 0 ? 6 * v / rho : (GP_REAL)0;
-        return;
-    }
-    if (p.kind == GP_KERNEL_MATERN32 || p.kind == GP_KERNEL_MATERN52) {
-        /* kernels.py Matern32/Matern52: c = sqrt(2 nu) / l, rho = sqrt(s), e = exp(-c rho) */
-        GP_REAL rho = sqrt(s);
-        GP_REAL c = gp_matern_c(p);
-        if (p.kind == GP_KERNEL_MATERN32) {
-            *k = v * (1 + c * rho) * e;
-            *dk2 = -v * c * c * e;
-            /* c^3 e / rho multiplies (u.Ar)(v.Ar) = O(rho^2): the limit at rho = 0 is 0 */
-            *ddk4 = rho > 0 ? v * c * c * c * e / rho : (GP_REAL)0;
-        } else {
-            GP_REAL cr = c * rho;
-            *k = v * (1 + cr + cr * cr / 3) * e;
-            *dk2 = -v * c * c * (1 + cr) * e / 3;
-            *ddk4 = v * c * c * c * c * e / 3;
-        }
-        return;
-    }
-    GP_REAL l2 = (GP_REAL)p.length_scale * (GP_REAL)p.length_scale;
-    *k = v * e;
-    if (p.kind == GP_KERNEL_RATIONAL_QUADRATIC) {
-        GP_REAL a = (GP_REAL)p.alpha, base = 1 + s / (2 * a * l2);
-        *dk2 = -*k / (l2 * base);
-        *ddk4 = *k * (a + 1) / (a * l2 * l2 * base * base);
-        return;
-    }
-    *dk2 = -*k / l2;
-    *ddk4 = *k / (l2 * l2);
+    gp_kernel_radial_of(p.kind, p, s, e, k, dk2, ddk4);
 }
 
 inline void gp_radial(GpKernel p, GP_REAL s, GP_REAL* k, GP_REAL* dk2, GP_REAL* ddk4)
@@ -113,31 +62,12 @@ inline void gp_radial(GpKernel p, GP_REAL s, GP_REAL* k, GP_REAL* dk2, GP_REAL* 
     gp_radial_of(p, s, exp(gp_radial_arg(p, s)), k, dk2, ddk4);
 }
 
-/* Product kernels k = sigma^2 exp(-h): h, grad h and diag Hess h (h is separable). */
 inline GP_REAL gp_log_terms(GpKernel p, GP_REAL3 r, GP_REAL3* dh, GP_REAL3* hh)
 {
-    GP_REAL3 A = gp_aniso(p);
-    GP_REAL l2 = (GP_REAL)p.length_scale * (GP_REAL)p.length_scale;
-    GP_REAL3 c = GP_PI * (GP_REAL)p.w * sqrt(A);
-    GP_REAL3 cr = c * r;
-    GP_REAL3 sn = sin(cr), cs = cos(cr);
-    /* sin^2, not (1 - cos)/2: no cancellation at small lags */
-    GP_REAL h = (2 / l2) * dot(sn, sn);
-    *dh = (4 / l2) * c * sn * cs;
-    *hh = (4 / l2) * c * c * (cs * cs - sn * sn);
-    if (p.kind == GP_KERNEL_LOCALLY_PERIODIC) {
-        GP_REAL L2 = (GP_REAL)p.se_length_scale * (GP_REAL)p.se_length_scale;
-        h += dot(A * r, r) / (2 * L2);
-        *dh += A * r / L2;
-        *hh += A / L2;
-    }
-    return h;
+    return gp_kernel_log_terms(p.kind, p, r, dh, hh);
 }
 
-inline int gp_kernel_is_product(GpKernel p)
-{
-    return p.kind == GP_KERNEL_PERIODIC || p.kind == GP_KERNEL_LOCALLY_PERIODIC;
-}
+inline int gp_kernel_is_product(GpKernel p) { return !GP_KERNEL_IS_RADIAL(p.kind); }
 
 inline GP_REAL gp_kernel_value(GpKernel p, GP_REAL3 r)
 {
@@ -233,14 +163,8 @@ inline GP_REAL gp_ps_terms(GpKernel p, GP_REAL3 a, GP_REAL3 u, GpFieldsAt fa,
     GP_REAL s = dot(ar, b - a), l = (GP_REAL)p.length_scale;
     GP_REAL la = l * fa.ml, lb = l * fb.ml;
     GP_REAL3 gla = l * fa.gl, glb = l * fb.gl;
-    GP_REAL S = la * la + lb * lb, beta = 0, psi;
-    if (p.kind == GP_KERNEL_RATIONAL_QUADRATIC) {
-        GP_REAL al = (GP_REAL)p.alpha;
-        beta = 1 / al;
-        psi = -al * log1p(s / (al * S));
-    } else {
-        psi = -s / S;
-    }
+    GP_REAL S = la * la + lb * lb, beta;
+    GP_REAL psi = gp_kernel_ps_exponent(p.kind, p, s, S, &beta);
     GP_REAL P = 2 * la * lb / S;
     GP_REAL k0 = (GP_REAL)p.sigma2 * P * sqrt(P) * exp(psi);
     GP_REAL D = S + beta * s, iD2 = 1 / (D * D), h = (GP_REAL)1.5;

@@ -180,6 +180,10 @@ inline float gp_mean_grid(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* g)
     return r;
 }
 
+/* Each primitive's value and local gradient (lib/gp_means/<name>.h, declared in
+ * gpiscl/host/kinds/means.py): generated. */
+/* @kinds gp_means leaves */
+
 inline float gp_mean_leaf(GP_MEAN_SPACE const MeanNode* n, float3 x, float3* grad)
 {
     float3 r0 = n->row0.xyz, r1 = n->row1.xyz, r2 = n->row2.xyz;
@@ -187,46 +191,7 @@ inline float gp_mean_leaf(GP_MEAN_SPACE const MeanNode* n, float3 x, float3* gra
                         dot(r2, x) + n->row2.w);
     float4 p0 = n->p0, p1 = n->p1;
     float3 g = (float3)(0.0f);
-    float v = 0.0f;
-    switch (n->kind) {
-    case GP_MEAN_CONSTANT:
-        v = p0.x;
-        break;
-    case GP_MEAN_PLANE:
-        v = p0.y * (dot(p1.xyz, y) - p0.x);
-        if (v < p0.z) v = p0.z;          /* clamped: flat */
-        else g = p0.y * p1.xyz;
-        break;
-    case GP_MEAN_SPHERE:
-        v = gp_norm_dir3(y, &g) - p0.x;
-        break;
-    case GP_MEAN_BOX:
-        v = gp_sd_box(y, p1.xyz, &g);
-        break;
-    case GP_MEAN_ROUNDED_BOX:
-        v = gp_sd_box(y, p1.xyz - p0.x, &g) - p0.x;
-        break;
-    case GP_MEAN_TORUS: {
-        float2 radial, qd;
-        float rho = gp_norm_dir2(y.xz, &radial);
-        v = gp_norm_dir2((float2)(rho - p0.x, y.y), &qd) - p0.y;
-        g = (float3)(qd.x * radial.x, qd.y, qd.x * radial.y);
-        break;
-    }
-    case GP_MEAN_CAPSULE: {
-        float3 pa = y - p0.xyz, ba = p1.xyz - p0.xyz;
-        /* the closest-point parameter is stationary: it adds no gradient term */
-        float bb = dot(ba, ba);      /* a == b degenerates to a sphere */
-        float h = clamp(dot(pa, ba) / (bb > 0.0f ? bb : 1.0f), 0.0f, 1.0f);
-        v = gp_norm_dir3(pa - h * ba, &g) - p0.w;
-        break;
-    }
-    case GP_MEAN_GRID:
-        v = gp_mean_grid(n, y, &g);
-        break;
-    default:
-        v = NAN;
-    }
+    float v = gp_mean_leaf_of(n->kind, n, y, p0, p1, &g);
     *grad = n->scale * (g.x * r0 + g.y * r1 + g.z * r2);
     return n->scale * v;
 }

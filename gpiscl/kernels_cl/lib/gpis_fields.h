@@ -1,6 +1,7 @@
 /* Colour and emission fields of GPIS objects, evaluated at hit points by scatter.cl and
  * emission.cl. gpiscl/host/scene/colour_fields.py is the reference and packs each field into one
- * MeanNode record after the mean programs (kinds below, tested to match FIELD_KINDS):
+ * MeanNode record after the mean programs (kinds GPIS_FIELD_*, generated from
+ * gpiscl/host/kinds/colour_fields.py):
  * row0..row2 map world points to the field's coordinates y, p0 / p1 hold colours a / b;
  *   constant  p0.xyz
  *   checker   y = (x + offset) / scale; a where floor(y) has an even component sum, else b
@@ -8,10 +9,6 @@
  *   grid      y = index coordinates; p1.xyz = sample counts; flags payload records of
  *             interleaved RGB samples follow; trilinear, clamped to the sample box
  * Index 0 means "no field": fields follow every mean program, so none is at index 0. */
-#define GPIS_FIELD_CONSTANT 64
-#define GPIS_FIELD_CHECKER 65
-#define GPIS_FIELD_GRADIENT 66
-#define GPIS_FIELD_GRID 67
 
 /* float q of a grid payload: GP_MEAN_GRID_PAYLOAD_FLOATS per record (row0..p1), past
  * which each record's int tail lies, as in gp_grid_sample */

@@ -244,6 +244,9 @@ inline wsf ws_periodic_order(__global const float* cdf, int count, wsu r, wsu si
 
 /* --- features ---------------------------------------------------------------------------- */
 
+/* Each kernel's frequency law (lib/gp_kernels/<name>.h, spectral part): generated. */
+/* @kinds gp_kernels spectral */
+
 /* Features idx = i0 .. i0 + WS_LANES - 1 of realization `key` of GPIS `object`: frequency
  * theta, phase tau, weight w (w = 0 for idx >= M, so chunks may overrun M). order_cdf /
  * order_count: the object's periodic order table (unused by SE and RQ). The thin-plate
@@ -260,25 +263,11 @@ inline void ws_features(GpKernel k, __global const float* order_cdf, int order_c
     *w = select((wsf)0.0f, wv, idx < M);
     *tau = WS_TWO_PI * ws_u01(ws_low_bytes(r0, r1, r2, r3));
     float3 sa = sqrt(k.aniso.xyz);
-    float scale = 0.0f;
-    if (k.kind == GP_KERNEL_SQUARED_EXPONENTIAL) scale = 1.0f / k.length_scale;
-    else if (k.kind == GP_KERNEL_LOCALLY_PERIODIC) scale = 1.0f / k.se_length_scale;
-    else if (k.kind != GP_KERNEL_RATIONAL_QUADRATIC && k.kind != GP_KERNEL_PERIODIC
-             && k.kind != GP_KERNEL_MATERN32 && k.kind != GP_KERNEL_MATERN52)
-        scale = NAN;
-    wsf s = (wsf)scale;
-    if (k.kind == GP_KERNEL_RATIONAL_QUADRATIC)    /* tau_g ~ Gamma(a, rate a l^2) */
-        s = sqrt(ws_gamma(k.alpha, key, object, idx) / (k.alpha * k.length_scale * k.length_scale));
-    if (k.kind == GP_KERNEL_MATERN32 || k.kind == GP_KERNEL_MATERN52) {
-        /* multivariate Student-t, 2 nu degrees of freedom: sqrt(nu / G) / l, G ~ Gamma(nu, 1)
-         * (spectral.py derives it) */
-        float nu = k.kind == GP_KERNEL_MATERN32 ? 1.5f : 2.5f;
-        s = sqrt(nu / ws_gamma(nu, key, object, idx)) / k.length_scale;
-    }
+    wsf s = gp_kernel_ws_scale(k.kind, k, key, object, idx);   /* NaN: no spectral density */
     *tx = sa.x * s * z0;
     *ty = sa.y * s * z1;
     *tz = sa.z * s * z2;
-    if (k.kind == GP_KERNEL_PERIODIC || k.kind == GP_KERNEL_LOCALLY_PERIODIC) {
+    if (GP_KERNEL_IS_PERIODIC_ORDERS(k.kind)) {
         ws_draw(key, object, idx, WS_CALL_ORDERS, &r0, &r1, &r2, &r3);
         float3 f = (WS_TWO_PI * k.w) * sa;
         *tx += f.x * ws_periodic_order(order_cdf, order_count, r0, r3 & 1u);
@@ -404,19 +393,7 @@ inline float ws_lambda2(GpKernel k, float3 d)
 {
     float3 ad = k.aniso.xyz * d * d;
     float s = ad.x + ad.y + ad.z;
-    if (k.kind == GP_KERNEL_PERIODIC || k.kind == GP_KERNEL_LOCALLY_PERIODIC) {
-        /* per axis E[n^2] = 1/l^2: n is Skellam(z/2, z/2) with z = 1/l^2 */
-        float c = WS_TWO_PI * k.w / k.length_scale;
-        float v = c * c * s;
-        if (k.kind == GP_KERNEL_LOCALLY_PERIODIC)
-            v += s / (k.se_length_scale * k.se_length_scale);
-        return v;
-    }
-    float v = s / (k.length_scale * k.length_scale);   /* SE; RQ too since E[tau_g] = 1/l^2 */
-    /* Matern: E[nu / G] = nu / (nu - 1) for G ~ Gamma(nu, 1) */
-    if (k.kind == GP_KERNEL_MATERN32) v *= 3.0f;
-    if (k.kind == GP_KERNEL_MATERN52) v *= 5.0f / 3.0f;
-    return v;
+    return gp_kernel_ws_lambda2(k.kind, k, s);
 }
 
 inline float ws_amplitude(GpKernel k, int M) { return sqrt(2.0f * k.sigma2 / (float)M); }

@@ -21,9 +21,10 @@ from ..gp.kernels import Kernel
 from ..gp.means import Constant, Mean, Plane
 from ..render.device import Device, shared_device
 from ..render.flight_samples import flights
-from .sample_figures import PLOTS_MISSING, resolve_target
+from .samples import PLOTS_MISSING, resolve_target
 
-MEMORIES = ("none", "renewal", "renewal_plus", "global")
+# the memory models, then the classical medium counterpart (kernels_cl/lib/fs_classical.h)
+MEMORIES = ("none", "renewal", "renewal_plus", "global", "classical_medium")
 
 
 @dataclass

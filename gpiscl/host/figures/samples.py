@@ -24,7 +24,7 @@ from ..gp.kernels import Kernel, covariance_matrix
 from ..scene.proxies import bounding_proxy
 from ..gp.means import Mean
 from ..gp.spectral import RandomFeatures, sample_frequencies
-from ..errors import SceneError
+from ..errors import API_SOURCE, CLI_SOURCE, SceneError
 
 PLOTS_MISSING = ("figures need it, as the optional extra: pip install -e '.[plots]' "
                  "(or pip install matplotlib)")
@@ -53,14 +53,14 @@ def resolve_target(spec: str, obj: int = 0) -> Target:
         try:
             raw = json.loads(spec)
         except json.JSONDecodeError as exc:
-            raise SceneError("<command line>", "kernel", f"invalid JSON ({exc})") from None
-        kdict = KERNELS.resolve(raw, "kernel", Context("<command line>", os.getcwd()))
+            raise SceneError(API_SOURCE, "kernel", f"invalid JSON ({exc})") from None
+        kdict = KERNELS.resolve(raw, "kernel", Context(API_SOURCE, os.getcwd()))
         return Target(kdict["type"], _kernel(build_kernel, kdict), kdict)
     if spec in KERNELS.variants:
-        kdict = KERNELS.resolve({"type": spec}, "kernel", Context("<command line>", os.getcwd()))
+        kdict = KERNELS.resolve({"type": spec}, "kernel", Context(API_SOURCE, os.getcwd()))
         return Target(spec, _kernel(build_kernel, kdict), kdict)
     if not os.path.exists(spec):
-        raise SceneError("<command line>", "KERNEL_OR_SCENE",
+        raise SceneError(CLI_SOURCE, "KERNEL_OR_SCENE",
                          f"not a kernel type ({', '.join(KERNELS.variants)}), a kernel JSON "
                          f"object or an existing scene file (got {spec!r})")
     scene = load_scene(spec)
@@ -68,7 +68,7 @@ def resolve_target(spec: str, obj: int = 0) -> Target:
     if not gpis:
         raise SceneError(spec, "shapes", "has no gpis object to draw")
     if not 0 <= obj < len(gpis):
-        raise SceneError("<command line>", "--object",
+        raise SceneError(CLI_SOURCE, "--object",
                          f"must be in [0, {len(gpis)}) for this scene (got {obj})")
     g = gpis[obj]
     proxy = bounding_proxy(g["proxy"])
@@ -91,7 +91,7 @@ def _kernel(build, kdict) -> Kernel:
     try:
         return build(kdict)
     except ValueError as exc:
-        raise SceneError("<command line>", "kernel", str(exc)) from None
+        raise SceneError(API_SOURCE, "kernel", str(exc)) from None
 
 
 def length_scale(kernel_spec: dict) -> float:
@@ -320,11 +320,11 @@ def write_figures(target: Target, out_dir, features=(10, 100, 1000), realization
     """Every figure for target into out_dir; returns the paths written. With
     observations (posterior.Observations), also the posterior's maps and realizations."""
     if not spectral_ok(target.kernel):
-        raise SceneError("<command line>", "kernel", "thin_plate has no spectral density, "
+        raise SceneError(API_SOURCE, "kernel", "thin_plate has no spectral density, "
                          "so weight-space figures cannot be drawn")
     varying = [k for k in ("sigma_field", "length_scale_field") if target.kernel_spec.get(k)]
     if varying:
-        raise SceneError("<command line>", f"kernel.{varying[0]}", "a spatially varying "
+        raise SceneError(API_SOURCE, f"kernel.{varying[0]}", "a spatially varying "
                          "kernel has no spectral density, so weight-space figures cannot be "
                          "drawn; remove the field to see the stationary kernel")
     _pyplot()   # fail before any work if matplotlib is missing

@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import SceneError
+from ..errors import API_SOURCE, SceneError
 
 try:
     from distributed import Client, KilledWorker, LocalCluster, get_worker, wait
@@ -60,8 +60,9 @@ from ..render.device_bakes import DeviceBakes
 from ..render.integrator import RenderResult, RenderStats, WavefrontIntegrator
 from ..scene.loading import Scene
 from ..compile.scene import compile_scene
-from .uq import (UqRun, UqSums, iter_realizations, prepare_realizations, render_realization,
-                 run_meta)
+from ..uq.files import run_meta
+from ..uq.realizations import UqRun, prepare_realizations, render_realization
+from ..uq.sums import UqSums, iter_realizations
 
 CONNECT_TIMEOUT = 3         # s: a wrong address is a prompt one-line error, not a hang
 UNIT_SECONDS = 2.0          # per unit: long next to Dask's per-task overhead (~ms), short
@@ -492,7 +493,7 @@ class ClusterStats(RenderStats):
 
 def render_on_cluster(cluster, integrator: WavefrontIntegrator, scene: Scene, spp: int,
                       time_limit: float | None = None, progress=None, stop=None,
-                      source: str = "<arguments>", key: str = "cluster",
+                      source: str = API_SOURCE, key: str = "cluster",
                       unit_paths: int | None = None) -> RenderResult:
     """integrator.render(spp, ...) with the paths traced on a Dask cluster: the same
     image, merged into integrator's film. unit_paths caps the paths per unit."""
@@ -529,14 +530,14 @@ def render_on_cluster(cluster, integrator: WavefrontIntegrator, scene: Scene, sp
 
 def uq_on_cluster(cluster, scene, realizations: int, spp: int, seed: int | None = None,
                   first: int = 0, resolution=None, batch_size=None, progress=None,
-                  stop=None, source: str = "<arguments>", key: str = "cluster",
+                  stop=None, source: str = API_SOURCE, key: str = "cluster",
                   unit_realizations: int | None = None) -> UqRun:
     """render_realizations(...) with the realizations rendered on a Dask cluster: the
     same sums. run.cluster is the Outcome (per-worker throughput)."""
     scene, data, seed = prepare_realizations(scene, realizations, spp, seed, first,
                                              resolution)
     w, h = data["camera"]["resolution"]
-    payload = scene_payload(Scene.resolved(data, scene.source, scene.base_dir))
+    payload = scene_payload(scene)
     run = uuid.uuid4().hex[:8]
     merged = RealizationMerge((h, w, 3), progress)
     with connect(cluster, source, key) as client:
@@ -550,7 +551,8 @@ def uq_on_cluster(cluster, scene, realizations: int, spp: int, seed: int | None 
         out = run_units(client, submit, realizations, sizer, InOrder(merged), stop)
         scene_future.release()
     result = UqRun(merged.sums, merged.ids, time.perf_counter() - start, merged.paths,
-                   out.stopped is not None, run_meta(data, seed, spp, first, len(merged.ids)))
+                   out.stopped is not None, run_meta(data, seed, spp, first, len(merged.ids)),
+                   scene)
     result.cluster = out
     return result
 
