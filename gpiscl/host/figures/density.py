@@ -246,7 +246,7 @@ def plot_density(data: dict, title: str, out_dir) -> list:
     if alpha:
         fig, ax = plt.subplots(figsize=(5, 3.8))
         tans = {m: np.sqrt(slopes_at_hits(o[o[:, 0, 0] >= 0, 0, 1:4], ray.direction))
-                for m, o in runs.items()}
+                for m, o in runs.items() if np.any(o[:, 0, 0] >= 0)}
         top = max(np.quantile(v, 0.995) for v in tans.values())
         edges = np.linspace(0.0, top, 60)
         for memory, v in tans.items():
@@ -302,13 +302,17 @@ def plot_limits(medium: dict, surface: dict, path) -> None:
 def write_density(scene: str, obj: int, out_dir, ray: Ray | None = None, paths: int = 20000,
                   bounces: int = 2, seed: int = 1, device: Device | None = None) -> list:
     """Everything `density` writes for GPIS number obj of a scene file: flights.csv,
-    summary.csv, free_flight.png, normals.png (a plane-like mean only). Returns the paths."""
+    summary.csv, free_flight.png, normals.png (a mean with a gradient only). The medium
+    counterpart joins the memory models for a constant mean. Returns the paths."""
     _pyplot()   # fail before any work if matplotlib is missing
     target = resolve_target(scene, obj)
     if target.mean is None:
         raise SceneError("<command line>", "SCENE", "density needs a scene file")
     ray = ray or default_ray(target.mean, target.center, target.half_extent)
-    data = density_data(target.kernel, target.mean, ray, paths, bounces, seed, device=device)
+    # the medium counterpart exists for constant means only (compile/classical.py)
+    memories = MEMORIES if isinstance(target.mean, Constant) else MEMORIES[:-1]
+    data = density_data(target.kernel, target.mean, ray, paths, bounces, seed, memories,
+                        device)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_flights_csv(data["runs"], out / "flights.csv")
