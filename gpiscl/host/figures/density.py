@@ -179,6 +179,33 @@ def surface_limit_series(kernel_of, sigmas, paths: int, seed: int = 1,
     return rows
 
 
+def masking_series(kernel_of, sigmas, paths: int, memories=MEMORIES[:4], seed: int = 1,
+                   device: Device | None = None, smith_draws: int = 2_000_000) -> list:
+    """Plane mean, a ray straight down, then a Lambertian bounce off the first hit's
+    sampled facet: the fraction of paths whose second flight (8 sigma / sqrt(lambda_2), 8 l
+    for SE) meets
+    the surface again, per memory model, against Smith's masking for the same Beckmann
+    alpha (gp/classical.smith_rehit_fraction)."""
+    device = device or shared_device()
+    plane = Plane(point=(0.0, 0.0, 0.0), normal=(0.0, 0.0, 1.0))
+    rng = np.random.default_rng(seed)
+    rows = []
+    for s in sigmas:
+        kernel = kernel_of(s)
+        alpha = C.beckmann_alpha(kernel)
+        row = {"sigma": s, "beckmann_alpha": alpha,
+               "smith": C.smith_rehit_fraction(alpha, smith_draws, rng)}
+        for memory in memories:
+            out = flights(device, kernel, plane, (0, 0, 6 * s), (0, 0, -1), 12 * s, paths,
+                          memory=memory, bounces=2, seed=seed,
+                          later_length=8.0 * s / math.sqrt(C.slope_variance(kernel)))
+            first = out[:, 0, 0] >= 0
+            row[memory] = float(np.mean(out[first, 1, 0] >= 0))
+            row[f"{memory}_paths"] = int(first.sum())
+        rows.append(row)
+    return rows
+
+
 # --- files --------------------------------------------------------------------------------
 
 def write_csv(rows: list, path) -> None:

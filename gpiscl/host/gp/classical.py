@@ -70,6 +70,34 @@ def beckmann_cos_pdf(c, alpha):
     return 2.0 * np.exp(-t2 / (alpha * alpha)) / (alpha * alpha * c ** 3)
 
 
+def smith_lambda(cos_theta, alpha):
+    """Smith's Lambda of the Beckmann distribution for a direction at cos_theta to the
+    macro normal: G1 = 1 / (1 + Lambda)."""
+    c = np.clip(np.asarray(cos_theta, float), 1e-12, 1.0)
+    a = c / np.sqrt(np.maximum(1.0 - c * c, 1e-300)) / alpha
+    erf = np.vectorize(math.erf, otypes=[np.float64])
+    return 0.5 * (erf(a) - 1.0) + np.exp(-a * a) / (2.0 * a * math.sqrt(math.pi))
+
+
+def smith_rehit_fraction(alpha: float, n: int, rng) -> float:
+    """Under Smith's model: the fraction of paths that meet the surface again after a
+    Lambertian bounce off the facet a ray straight down the macro normal hit first (facet
+    normals: Beckmann slopes; below the macro plane: always; above: 1 - G1 = Lambda /
+    (1 + Lambda), since the start height is uniform in its CDF). Monte Carlo, n draws."""
+    slopes = rng.normal(0.0, alpha / math.sqrt(2.0), (n, 2))
+    m = np.c_[-slopes, np.ones(n)]
+    m /= np.linalg.norm(m, axis=1)[:, None]
+    u = rng.random((n, 2))
+    r, phi = np.sqrt(u[:, 0]), 2.0 * math.pi * u[:, 1]
+    helper = np.where(np.abs(m[:, :1]) > 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
+    t = np.cross(m, helper)
+    t /= np.linalg.norm(t, axis=1)[:, None]
+    b = np.cross(m, t)
+    up = (r * np.cos(phi)) * t[:, 2] + (r * np.sin(phi)) * b[:, 2] + np.sqrt(1.0 - u[:, 0]) * m[:, 2]
+    lam = smith_lambda(up, alpha)
+    return float(np.mean(np.where(up <= 0.0, 1.0, lam / (1.0 + lam))))
+
+
 def lambert_sphere_phase(theta):
     """Phase function (per steradian) of a cloud of diffuse spheres, theta the deflection
     angle: the medium counterpart of a diffuse micro-BSDF (Sec. 2.3 of the note)."""

@@ -54,7 +54,7 @@ __kernel void theory_flights(__global const GpKernel* kp, __global const MeanNod
         r.o = r.o + res.t * r.d;
         r.d = rad * cos(phi) * t + rad * sin(phi) * bt + sqrt(fmax(0.0, 1.0 - u.x)) * n;
         r.t0 = 0.0;
-        r.t1 = ray[7];
+        r.t1 = ray[8];
     }
 }
 """
@@ -79,11 +79,12 @@ def _buf(device, a):
 
 def flights(device: Device, kernel, mean, origin, direction, length: float, n: int,
             memory: str = "renewal", bounces: int = 2, seed: int = 1, cap: int = 64,
-            refine: int = 0, tol: float = FL.DEFAULT_MISS_TOLERANCE) -> np.ndarray:
+            refine: int = 0, tol: float = FL.DEFAULT_MISS_TOLERANCE,
+            later_length: float | None = None) -> np.ndarray:
     """(n, bounces, 5): per path and flight the hit distance (-1: none, and every later
     flight -1), the sampled gradient at the hit and the solver status (0: fine). The
     first flight runs along origin + t direction, t in [0, length]; later ones are
-    `length` long from the previous hit."""
+    later_length (default: length) long from the previous hit."""
     if memory not in GPIS_MEMORIES:
         raise ValueError(f"memory must be one of {sorted(GPIS_MEMORIES)}, got {memory!r}")
     if not 1 <= cap <= CAP_MAX:
@@ -91,7 +92,8 @@ def flights(device: Device, kernel, mean, origin, direction, length: float, n: i
     d = np.asarray(direction, float)
     d = d / np.linalg.norm(d)
     q = device.queue
-    ray = _buf(device, np.array([*np.asarray(origin, float), *d, 0.0, float(length)]))
+    later = float(length if later_length is None else later_length)
+    ray = _buf(device, np.array([*np.asarray(origin, float), *d, 0.0, float(length), later]))
     mean_nodes = gp_records.pack_mean(mean)
     kp, mb = _buf(device, gp_records.pack_kernel(kernel)), _buf(device, mean_nodes)
     stride = FL.scratch_doubles(FL.max_rows(WINDOW_MAX, CAP_MAX))
