@@ -132,5 +132,6 @@ def test05_masking_renewal_plus_and_global_are_smith(device, long_run):
         for m in memories:
             if m != "renewal":
                 assert abs(r[m] - r["smith"]) < z * math.hypot(se[m], smith_se), (m, r)
-        assert r["renewal"] - r["renewal_plus"] > z * math.hypot(se["renewal"],
-                                                                  se["renewal_plus"]), r
+        if r["sigma"] >= 0.2:   # below, the gap (~0.0015 at 0.1) is within 4 errors
+            assert r["renewal"] - r["renewal_plus"] > z * math.hypot(se["renewal"],
+                                                                      se["renewal_plus"]), r
