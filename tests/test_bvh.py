@@ -104,7 +104,7 @@ def _intersect(o, d, tri, tmin=1e-9):
 
 
 def _traverse(nodes, order, prim_t, o, d):
-    """Closest hit (primitive, t) by a stack traversal like kernels_cl/bvh.h.
+    """Closest hit (primitive, t) by a stack traversal like kernels_cl/lib/bvh.h.
 
     prim_t: this ray's distance to every primitive (inf: miss), read only for primitives
     in the leaves the traversal reaches, so results depend on the tree's culling alone.

@@ -307,7 +307,7 @@ def test_vdb_grids_convert_with_a_binding_and_refuse_a_negative_sigma(tmp_path, 
     grid that offset and scale make negative is an error at the covariance's key."""
     import types
     from gpiscl.host.io import vdb
-    from test_convert_vdb import FakeGrid
+    from gpiscl.testing.fake_openvdb import FakeGrid
     mean, sd = _assets()
 
     def fake(name, grid):

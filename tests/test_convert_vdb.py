@@ -8,6 +8,7 @@ import pytest
 from gpiscl.host.io import vdb
 from gpiscl.host.errors import SceneError
 from gpiscl.host.io.grids import load_grid
+from gpiscl.testing.fake_openvdb import FakeGrid
 
 
 def test_without_a_binding_the_command_says_how_to_get_one(tmp_path, monkeypatch, capsys):
@@ -17,33 +18,6 @@ def test_without_a_binding_the_command_says_how_to_get_one(tmp_path, monkeypatch
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1
     assert "conda install -c conda-forge openvdb" in err and not (tmp_path / "a.npz").exists()
-
-
-class FakeTransform:
-    def __init__(self, voxel, offset):
-        self.voxel, self.offset = voxel, np.asarray(offset, float)
-
-    def voxelSize(self):
-        return (self.voxel,) * 3
-
-    def indexToWorld(self, ijk):
-        return tuple(self.offset + self.voxel * np.asarray(ijk, float))
-
-
-class FakeGrid:
-    """OpenVDB's FloatGrid surface: sparse voxels, a background, copyToArray."""
-
-    def __init__(self, name, voxels: dict, background, voxel, offset):
-        self.name, self.voxels, self.background = name, voxels, background
-        self.transform = FakeTransform(voxel, offset)
-
-    def evalActiveVoxelBoundingBox(self):
-        ijk = np.array(list(self.voxels))
-        return tuple(ijk.min(0)), tuple(ijk.max(0))
-
-    def copyToArray(self, array, ijk):
-        for (i, j, k), value in self.voxels.items():
-            array[i - ijk[0], j - ijk[1], k - ijk[2]] = value
 
 
 def test_copy_keeps_values_origin_and_voxel_size(tmp_path, monkeypatch):

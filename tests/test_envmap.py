@@ -6,7 +6,7 @@ import pytest
 
 from gpiscl.host.compile.envmap import (build_envmap_tables, direction_to_pixel, envmap_lookup,
                                 envmap_pdf, sample_envmap)
-from stats import ALPHA
+from gpiscl.testing.stats import ALPHA
 
 H, W = 8, 16
 

@@ -12,78 +12,17 @@ import pyopencl as cl
 import pytest
 from scipy import special
 
-from gpiscl.host.compile.gpis import sampler_window
-from gpiscl.host.gp import Constant, Matern32, Matern52, RationalQuadratic, SquaredExponential
+from gpiscl.host.gp import Constant, RationalQuadratic, SquaredExponential
 from gpiscl.host.gp import function_space as FS
 from gpiscl.host.layout import function_space_records as FL
-from gpiscl.host.layout.records import GPIS_MEMORIES
-from stats import z_threshold
-from test_fs_sampling import (CAP_MAX, WINDOW_MAX, _buf, flights, ks_two_sample, prg,  # noqa: F401
-                               sampler_buffers)
+from gpiscl.testing.stats import z_threshold
+from gpiscl.testing.flights import flights, run_crossings
+from gpiscl.testing.oracles import COV_1D, M32, M52, dense_se_paths, expected_crossings
+from gpiscl.testing.stats import ks_two_sample
 
 SE = SquaredExponential(sigma=1.0, length_scale=1.0)
 RQ = RationalQuadratic(sigma=1.0, length_scale=1.0, alpha=1.0)
-# Matern at the l where lambda2 = -k''(0) = 1: 3/l^2 = 1 and 5/(3 l^2) = 1
-M32 = Matern32(sigma=1.0, length_scale=math.sqrt(3.0))
-M52 = Matern52(sigma=1.0, length_scale=math.sqrt(5.0 / 3.0))
-_R3 = math.sqrt(3.0)
-# covariance along a unit ray and its derivative (sigma = 1, lambda2 = 1 for all)
-COV_1D = {"se": (lambda t: np.exp(-0.5 * t * t), lambda t: -t * np.exp(-0.5 * t * t)),
-          "rq": (lambda t: 1.0 / (1.0 + 0.5 * t * t), lambda t: -t / (1.0 + 0.5 * t * t) ** 2),
-          "m32": (lambda t: (1.0 + t) * np.exp(-t), lambda t: -t * np.exp(-t)),
-          "m52": (lambda t: (1.0 + _R3 * t + t * t) * np.exp(-_R3 * t),
-                  lambda t: -t * (1.0 + _R3 * t) * np.exp(-_R3 * t))}
 KERNELS = {"se": SE, "rq": RQ, "m32": M32, "m52": M52}
-
-
-def expected_crossings(kind, mu, L, nt=6000, nz=600):
-    """E[down-crossings of 0 in (0, L]] of f ~ GP(mu, k) on a unit-speed ray given the
-    start condition f(0) >= 0: the integral over t of Rice's rate conditioned on it,
-      nu(t) = p_f(t)(0) E[(-f'(t))+ 1{f(0) >= 0} | f(t) = 0] / P(f(0) >= 0),
-    where given f(t) = 0, f(0) ~ N(mu (1 - k), 1 - k^2) and f'(t) | f(0) is Gaussian with
-    cov(f(0), f'(t)) = k'(t) (cov(f(t), f'(t)) = 0). Tends to Rice's rate as k -> 0."""
-    k, dk = COV_1D[kind]
-    t = (np.arange(nt) + 0.5) * (L / nt)
-    kt, dkt = k(t)[:, None], dk(t)[:, None]
-    ma, va = mu * (1.0 - kt), 1.0 - kt * kt
-    sa = np.sqrt(va)
-    zlo = -ma / sa
-    w = np.linspace(0.0, 1.0, nz)[None, :]
-    z = zlo + (np.maximum(10.0, zlo + 10.0) - zlo) * w     # a = ma + sa z >= 0
-    dz = (np.maximum(10.0, zlo + 10.0) - zlo) / (nz - 1)
-    mc, vc = dkt / sa * z, 1.0 - dkt * dkt / va            # f'(t) | f(0), f(t) = 0
-    sc = np.sqrt(np.maximum(vc, 1e-300))
-    neg = sc * np.exp(-0.5 * (mc / sc) ** 2) / math.sqrt(2 * math.pi) \
-        - mc * 0.5 * special.erfc(mc / sc / math.sqrt(2))   # E[(-c)+], c ~ N(mc, sc^2)
-    g = np.exp(-0.5 * z * z) / math.sqrt(2 * math.pi) * neg
-    inner = np.trapezoid(g, dx=dz, axis=1)
-    p0 = 0.5 * special.erfc(-mu / math.sqrt(2))             # P(f(0) >= 0)
-    nu = math.exp(-0.5 * mu * mu) / math.sqrt(2 * math.pi) * inner / p0
-    return float(nu.sum() * (L / nt))
-
-
-def run_crossings(device, prg, kernel, mu, n, L, memory="global", refine=6, c=0.0,
-                  tol=FL.DEFAULT_MISS_TOLERANCE, seed=1, cap=64, window=None):
-    """Per ray (out of n): hits, sum and sum of squares of slopes after the first hit,
-    GP samples, moment evaluations (crossings wrapper of test_fs_sampling). The window is
-    the one scenes compile for the kernel unless given."""
-    if window is None:
-        window = sampler_window({"type": kernel.kind})
-    q = device.queue
-    rb = _buf(device, np.array([0, 0, 0, 1, 0, 0, 0, L], np.float64))
-    chunk = max(1, min(n, 4096))
-    kp, mb, n_mean, scratch, rings = sampler_buffers(device, kernel, Constant(mu), cap, chunk)
-    out = np.zeros((n, 6))
-    for first in range(0, n, chunk):
-        m = min(chunk, n - first)
-        ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 48 * m)
-        prg["crossings"](q, (m,), None, kp, mb, np.int32(n_mean), np.int32(window),
-                         np.int32(GPIS_MEMORIES[memory]), np.int32(cap), np.int32(refine),
-                         np.float64(c), np.float64(tol), rb, np.uint32(seed), np.int32(first),
-                         scratch, rings, ob)
-        cl.enqueue_copy(q, out[first:first + m], ob)
-    assert np.all(out[:, 5] == 0), f"solver status {np.unique(out[:, 5])}"
-    return out
 
 
 def test01_the_oracle_is_rice_plus_the_start():
@@ -109,7 +48,7 @@ LEVELS = (0.0, 1.0, 2.0, 2.5)
 @pytest.mark.long
 @pytest.mark.parametrize("memory", ["global", "renewal_plus"])
 @pytest.mark.parametrize("kind", ["se", "rq", "m32", "m52"])
-def test02_crossing_rate_matches_rice_at_every_level(device, prg, long_run, kind, memory):
+def test02_crossing_rate_matches_rice_at_every_level(device, flight_prg, long_run, kind, memory):
     """Rays continued through every hit count down-crossings over L; their mean agrees
     with the exact expectation at mu / sigma = 0, 1, 2, 2.5 (z-test, Bonferroni over the
     whole parametrisation). Long form: also within 0.5% where its standard error allows
@@ -117,7 +56,7 @@ def test02_crossing_rate_matches_rice_at_every_level(device, prg, long_run, kind
     n, L = (20000, 100.0) if long_run else (400, 40.0)
     z = z_threshold(2 * len(KERNELS) * len(LEVELS))
     for mu in LEVELS:
-        out = run_crossings(device, prg, KERNELS[kind], mu, n, L, memory=memory, seed=7)
+        out = run_crossings(device, flight_prg, KERNELS[kind], mu, n, L, memory=memory, seed=7)
         cnt = out[:, 0]
         expect = expected_crossings(kind, mu, L)
         se = cnt.std(ddof=1) / math.sqrt(n)
@@ -131,14 +70,14 @@ def test02_crossing_rate_matches_rice_at_every_level(device, prg, long_run, kind
 
 
 @pytest.mark.long
-def test02b_the_rate_at_two_and_a_half_sigma_is_within_half_a_percent(device, prg, long_run):
+def test02b_the_rate_at_two_and_a_half_sigma_is_within_half_a_percent(device, flight_prg, long_run):
     """test02 cannot resolve 0.5% at mu = 2.5 sigma (crossings are rare there: its
     standard error is 0.8%), where the one-node rule this march used before undercounted
     by 1.3 +- 0.4%. Long form: 640,000 rays of 100 l (standard error 0.15%), within
-    0.5% and consistent; short form: 80,000 rays, consistent (z-test)."""
-    n, L, mu = (640000 if long_run else 80000), 100.0, 2.5
+    0.5% and consistent; short form: 20,000 rays, consistent (z-test)."""
+    n, L, mu = (640000 if long_run else 20000), 100.0, 2.5
     expect = expected_crossings("se", mu, L)
-    cnt = run_crossings(device, prg, SE, mu, n, L, memory="renewal_plus", seed=5)[:, 0]
+    cnt = run_crossings(device, flight_prg, SE, mu, n, L, memory="renewal_plus", seed=5)[:, 0]
     se = cnt.std(ddof=1) / math.sqrt(n)
     rel = cnt.mean() / expect - 1
     print(f"mu {mu}: {rel:+.3%} +- {se / expect:.3%}")
@@ -148,7 +87,7 @@ def test02b_the_rate_at_two_and_a_half_sigma_is_within_half_a_percent(device, pr
 
 
 @pytest.mark.parametrize("tol", [3e-2, 3e-3])
-def test03_coarse_tolerances_lose_at_most_their_bound(device, prg, tol):
+def test03_coarse_tolerances_lose_at_most_their_bound(device, flight_prg, tol):
     """A coarse tolerance misses crossings, at most tol per length scale (the bound, the
     expected up-crossings inside accepted steps, is an upper bound on the misses); the
     deficit against the exact expectation must be below it (one-sided z-test). The
@@ -156,14 +95,14 @@ def test03_coarse_tolerances_lose_at_most_their_bound(device, prg, tol):
     show a deficit above 3e-3 at this sample size, so the comparison can fail."""
     n, L, mu = 3000, 40.0, 0.0
     expect = expected_crossings("se", mu, L)
-    out = run_crossings(device, prg, SE, mu, n, L, tol=tol, seed=3)
+    out = run_crossings(device, flight_prg, SE, mu, n, L, tol=tol, seed=3)
     cnt = out[:, 0]
     se = cnt.std(ddof=1) / math.sqrt(n)
     deficit = (expect - cnt.mean()) / L
     print(f"tol {tol}: missed per length {deficit:.5f} +- {se / L:.5f}, "
           f"samples per length {out[:, 3].sum() / (n * L):.2f}")
     assert deficit < tol + z_threshold(2) * se / L
-    coarse = run_crossings(device, prg, SE, mu, 1000, L, c=0.5, seed=3)[:, 0]
+    coarse = run_crossings(device, flight_prg, SE, mu, 1000, L, c=0.5, seed=3)[:, 0]
     se_c = coarse.std(ddof=1) / math.sqrt(len(coarse))
     print(f"uniform c = 0.5: missed per length {(expect - coarse.mean()) / L:.5f} +- {se_c / L:.5f}")
     assert (expect - coarse.mean()) / L > 3e-3 + z_threshold(2) * se_c / L
@@ -171,7 +110,7 @@ def test03_coarse_tolerances_lose_at_most_their_bound(device, prg, tol):
 
 @pytest.mark.long
 @pytest.mark.parametrize("mu", [0.0, 1.0, 2.0])
-def test04_first_passage_matches_a_dense_joint_sample(device, prg, long_run, mu):
+def test04_first_passage_matches_a_dense_joint_sample(device, flight_prg, long_run, mu):
     """First hit along a fresh ray (constant mean mu, SE l = 0.5, length 6) against one
     dense joint sample (numpy Cholesky, 601 points, spacing l / 50): two-sample KS,
     Bonferroni over the levels."""
@@ -180,7 +119,7 @@ def test04_first_passage_matches_a_dense_joint_sample(device, prg, long_run, mu)
     dense = FS.dense_first_hits(kern, Constant(mu), (0, 0, 0), (1, 0, 0), 0.0, 6.0, 601, n,
                                 np.random.default_rng(int(10 * mu) + 1))
     dense = np.where(np.isfinite(dense), dense, -1.0)
-    out = flights(device, prg, kern, Constant(mu), n, memory="global", seed=int(10 * mu) + 2)
+    out = flights(device, flight_prg, kern, Constant(mu), n, memory="global", seed=int(10 * mu) + 2)
     D, crit = ks_two_sample(out[:, 0], dense, 3)
     print(f"mu {mu}: hit fraction {np.mean(out[:, 0] >= 0):.4f} vs {np.mean(dense >= 0):.4f}, "
           f"KS {D:.4f} (critical {crit:.4f})")
@@ -194,12 +133,12 @@ def downcrossing_slope_cdf(y, a):
 
 
 @pytest.mark.parametrize("a", [-40.0, -3.0, 0.0, 2.0, 12.0, 29.0])
-def test05_downcrossing_slope_draws_follow_their_law(device, prg, a):
+def test05_downcrossing_slope_draws_follow_their_law(device, flight_prg, a):
     """fs_downcrossing_slope against the exact CDF of |s| N(s; a sd, sd^2) on s < 0:
     always negative, one-sample KS (Bonferroni over the cases)."""
     n, sd = 50000, 0.7
     buf = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 8 * n)
-    prg["slope_draw"](device.queue, (n,), None, np.float64(a * sd), np.float64(sd),
+    flight_prg["slope_draw"](device.queue, (n,), None, np.float64(a * sd), np.float64(sd),
                       np.uint32(9), buf)
     s = np.empty(n)
     cl.enqueue_copy(device.queue, s, buf)
@@ -212,13 +151,13 @@ def test05_downcrossing_slope_draws_follow_their_law(device, prg, a):
 
 
 @pytest.mark.parametrize("refine", [2, 6, 12, 20])
-def test06_slope_law_at_crossings_does_not_depend_on_refine(device, prg, refine):
+def test06_slope_law_at_crossings_does_not_depend_on_refine(device, flight_prg, refine):
     """Along continued rays (mean 0, SE, global memory) the slopes at down-crossings after
     the first follow Rice's (Palm) law |s| phi(s / sqrt(lambda2)): -s is Rayleigh with
     E[-s] = sqrt(pi / 2) and E[s^2] = 2 for lambda2 = 1, whatever the bracket width (the
     secant of the old sampler tilted it at refine >= 12 through the jitter)."""
     n, L = 1500, 60.0
-    out = run_crossings(device, prg, SE, 0.0, n, L, refine=refine, seed=11)
+    out = run_crossings(device, flight_prg, SE, 0.0, n, L, refine=refine, seed=11)
     M = (out[:, 0] - 1).clip(0)
     z = z_threshold(8)
     for j, sign, expect in ((1, -1.0, math.sqrt(math.pi / 2)), (2, 1.0, 2.0)):
@@ -240,17 +179,20 @@ def dense_se():
     return ts, np.linalg.cholesky(K)
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("tol, mu", [(1e-1, 0.0), (3e-2, 0.0), (1e-2, 0.0), (3e-2, 2.0)])
-def test07_missed_crossings_of_the_same_realizations_stay_below_the_tolerance(dense_se, tol,
-                                                                             mu):
+def test07_missed_crossings_of_the_same_realizations_stay_below_the_tolerance(dense_se, long_run,
+                                                                             tol, mu):
     """The rule (numpy twin of fs_march.h) marched along dense joint samples (spacing
     l / 100) that it reads where it samples: the down-crossings of the dense path that it
     skips, per length scale, stay below the tolerance (one-sided Poisson bound, Bonferroni
-    over the cases); the misses are counted, not inferred from a rate."""
+    over the cases); the misses are counted, not inferred from a rate. Short form: up to
+    150 realizations (the march's Python loop is the cost), long form up to 300."""
     ts, C = dense_se
+    keep = 300 if long_run else 150
     rng = np.random.default_rng(int(1000 * tol) + int(mu))
-    Z = C @ rng.standard_normal((len(ts), 500)) + mu
-    Z = Z[:, Z[0] >= 0.0][:, :300]
+    Z = C @ rng.standard_normal((len(ts), 5 * keep // 3)) + mu
+    Z = Z[:, Z[0] >= 0.0][:, :keep]
     missed = steps = 0
     for F in Z.T:
         idx, m, _ = FS.march_realization(SE, Constant(mu), (0, 0, 0), (1, 0, 0), ts, F, tol)
@@ -262,24 +204,8 @@ def test07_missed_crossings_of_the_same_realizations_stay_below_the_tolerance(de
     assert missed < allowed + z_threshold(4) * math.sqrt(allowed)
 
 
-def dense_se_paths(n, mu, rng, spacing=0.01, L=20.0):
-    """n realizations of SE (l = 1) + mu at the given spacing over [0, L] along a unit ray,
-    each with f(0) >= 0 (the march's start condition): circulant embedding (exact for
-    a period of 8192 spacings: at its half, 41 l, SE's correlation is e^-839)."""
-    N, M = int(round(L / spacing)) + 1, 8192
-    lag = np.minimum(np.arange(M), M - np.arange(M)) * spacing
-    root = np.sqrt(np.clip(np.fft.fft(np.exp(-0.5 * lag * lag)).real, 0.0, None) / M)
-    paths = []
-    while len(paths) < n:
-        z = rng.standard_normal((64, M)) + 1j * rng.standard_normal((64, M))
-        f = np.fft.fft(root * z, axis=1)[:, :N]
-        F = np.concatenate([f.real, f.imag]) + mu
-        paths.extend(F[F[:, 0] >= 0.0])
-    return np.arange(N) * spacing, np.array(paths[:n])
-
-
 @pytest.mark.long
-@pytest.mark.parametrize("mu, n_short", [(0.0, 1500), (2.5, 3000)])
+@pytest.mark.parametrize("mu, n_short", [(0.0, 500), (2.5, 1000)])
 def test07b_the_default_tolerance_misses_under_0p2_percent_of_crossings(long_run, mu,
                                                                      n_short):
     """The default tolerance on dense realizations (spacing l / 100, the march reading
@@ -288,9 +214,9 @@ def test07b_the_default_tolerance_misses_under_0p2_percent_of_crossings(long_run
     Bonferroni over the levels). The one-node Radau rule this replaced skipped 0.13% at
     mu = 0 and 0.84% at mu = 2.5 sigma (2964 crossings; the device's Rice count was low
     by 1.3 +- 0.4% there): its node at 2/3 of the step cannot see a rate that grows
-    steeply toward the step's end, where the dips it missed sat. The long form (4x the
-    realizations, ~2000 crossings at 2.5 sigma) fails on that rule."""
-    n = 4 * n_short if long_run else n_short
+    steeply toward the step's end, where the dips it missed sat. The long form (12x the
+    short form's realizations, ~2000 crossings at 2.5 sigma) fails on that rule."""
+    n = 12 * n_short if long_run else n_short
     ts, Z = dense_se_paths(n, mu, np.random.default_rng(17 + int(10 * mu)))
     dense = int(((Z[:, :-1] >= 0.0) & (Z[:, 1:] < 0.0)).sum())
     missed = steps = evals = 0
@@ -313,7 +239,7 @@ def assert_every_ray_hits_at(out, face: float, within: float):
     assert np.all(np.abs(t - face) < within)
 
 
-def test08_thin_features_of_the_mean_are_not_stepped_over(device, prg):
+def test08_thin_features_of_the_mean_are_not_stepped_over(device, flight_prg):
     """A slab 0.1 thick (mean -5 sigma at its middle) under a smooth, small-sigma kernel
     (l = 1.4, sigma = 0.01, the knob's): the rate's quadrature sees the process only at
     its nodes, so steps of 2 l went over the slab; the mean's Lipschitz cap
@@ -321,11 +247,11 @@ def test08_thin_features_of_the_mean_are_not_stepped_over(device, prg):
     from gpiscl.host.gp import Box
     kern = SquaredExponential(sigma=0.01, length_scale=1.4)
     slab = Box(half_extents=(0.05, 10.0, 10.0), center=(3.0, 0.0, 0.0))
-    out = flights(device, prg, kern, slab, 2000, memory="renewal_plus", t1=6.0, seed=4)
+    out = flights(device, flight_prg, kern, slab, 2000, memory="renewal_plus", t1=6.0, seed=4)
     assert_every_ray_hits_at(out, 2.95, 0.05)
 
 
-def test09_a_grid_means_local_slope_bound_still_sees_thin_features(device, prg):
+def test09_a_grid_means_local_slope_bound_still_sees_thin_features(device, flight_prg):
     """fs_mean_step's cap with a grid mean's slope bound over each try's stretch (its
     bricks) instead of the whole ray's: a grid along x with a gentle slope (0.25) far
     from a thin steep dip (slope 10, -5 sigma deep at x = 3, entry face at 2.95; the
@@ -340,11 +266,11 @@ def test09_a_grid_means_local_slope_bound_still_sees_thin_features(device, prg):
     values = np.repeat(np.repeat(g[:, None, None], 2, axis=1), 2, axis=2)
     grid = GridMean(values, (-0.5, -0.5 * h, -0.5 * h), h)
     kern = SquaredExponential(sigma=0.01, length_scale=1.4)
-    out = flights(device, prg, kern, grid, 2000, memory="renewal_plus", t1=5.5, seed=5)
+    out = flights(device, flight_prg, kern, grid, 2000, memory="renewal_plus", t1=5.5, seed=5)
     assert_every_ray_hits_at(out, 2.95, 0.05)
 
 
-def test10_sphere_tracing_from_ball_to_ball_stops_at_a_thin_feature(device, prg):
+def test10_sphere_tracing_from_ball_to_ball_stops_at_a_thin_feature(device, flight_prg):
     """test08's slab met at 60 degrees (the mean falls at half its slope bound along the
     ray), so fs_mean_step's far-zone balls close in on the slab geometrically instead of
     landing on its FS_MEAN_Z sd level in one: each ball's radius must be its own centre's
@@ -354,6 +280,6 @@ def test10_sphere_tracing_from_ball_to_ball_stops_at_a_thin_feature(device, prg)
     kern = SquaredExponential(sigma=0.01, length_scale=1.4)
     slab = Box(half_extents=(0.05, 10.0, 10.0), center=(3.0, 0.0, 0.0))
     d = (0.5, math.sqrt(0.75), 0.0)
-    out = flights(device, prg, kern, slab, 2000, memory="renewal_plus", d=d, t1=12.0,
+    out = flights(device, flight_prg, kern, slab, 2000, memory="renewal_plus", d=d, t1=12.0,
                   seed=6)
     assert_every_ray_hits_at(out, 5.9, 0.1)

@@ -14,8 +14,9 @@ from gpiscl.host.gp import ThinPlate
 from gpiscl.host.layout import gp_records
 from gpiscl.host.gp import function_space as FS
 from gpiscl.host.layout import function_space_records as FL
-from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_source
-from test_fs_sampling import chi2_threshold
+from gpiscl.host.render.program_sources import fs_sampler_options
+from gpiscl.testing.stats import chi2_threshold
+from gpiscl.testing.wrappers import sampler_program
 
 WRAPPERS = r"""
 /* System s: rows [s * n, s * n + n) of `obs`, the first m observed. Out: conditional
@@ -61,9 +62,7 @@ MEAN = Sphere(center=(0.1, -0.2, 0.3), radius=0.6)
 
 @pytest.fixture(scope="module")
 def prg(device):
-    p = cl.Program(device.ctx, fs_sampler_source(WRAPPERS)).build(
-        options=fs_sampler_options(N_ROWS, 2, 0))
-    return {k.function_name: k for k in p.all_kernels()}
+    return sampler_program(device.ctx, WRAPPERS, fs_sampler_options(N_ROWS, 2, 0))
 
 
 def random_systems(rng, kernel, count):

@@ -5,7 +5,7 @@ unconditioned on the crossing: about one path in 10^4 was killed)."""
 import numpy as np
 import pytest
 
-from test_fs_render import MEMORIES, fs, gpis_scene, run
+from gpiscl.testing.scenes import MEMORIES, function_space_sampler, gpis_scene, render_checked
 
 ENV = [{"type": "environment", "radiance": 1.0}]
 
@@ -13,9 +13,9 @@ ENV = [{"type": "environment", "radiance": 1.0}]
 @pytest.mark.parametrize("memory", MEMORIES)
 def test_rough_conductor_paths_are_never_killed(device, memory):
     metal = {"type": "rough_conductor", "material": "Au", "roughness": 0.3}
-    scene = gpis_scene(fs(memory), "diffuse", 1.0, ENV, spp=16)
+    scene = gpis_scene(function_space_sampler(memory), "diffuse", 1.0, ENV, spp=16)
     scene["shapes"][0]["bsdf"] = metal
-    res = run(scene, device)
+    res = render_checked(scene, device)
     assert res.stats.killed_paths == 0, res.stats.summary()
     assert res.stats.rays > 1.5 * res.stats.paths
 
@@ -23,7 +23,8 @@ def test_rough_conductor_paths_are_never_killed(device, memory):
 def test_global_mirror_furnace_at_many_hits(device):
     """~3 10^4 GPIS hits under global memory (the old rate would kill ~3 paths): exactly
     1 per path, nothing killed."""
-    res = run(gpis_scene(fs("global"), "mirror", 1.0, ENV, spp=128), device)
+    scene = gpis_scene(function_space_sampler("global"), "mirror", 1.0, ENV, spp=128)
+    res = render_checked(scene, device)
     assert res.stats.killed_paths == 0, res.stats.summary()
     assert res.stats.rays > 1.8 * res.stats.paths
     np.testing.assert_allclose(res.image.mean, 1.0, rtol=1e-6)

@@ -16,9 +16,8 @@ from gpiscl.host.gp import Constant, Matern32, Matern52
 from gpiscl.host.gp import function_space as FS
 from gpiscl.host.gp.kernels import covariance_matrix
 from markov_wrappers import bridge, flights, paths, rule_ratios, transition
-from stats import assert_agree, z_threshold
-from test_fs_adaptive import M32, M52, expected_crossings
-from test_fs_sampling import ks_two_sample
+from gpiscl.testing.stats import assert_agree, ks_two_sample, z_threshold
+from gpiscl.testing.oracles import M32, M52, expected_crossings
 
 getcontext().prec = 40
 
@@ -322,7 +321,7 @@ LEVELS = (0.0, 1.0, 2.0)
 def test05_rice_crossing_rate_with_renewal_plus(device, long_run, name):
     """Rays continued through every hit under renewal_plus count down-crossings of 0 over
     L; the mean agrees with the exact expectation (Rice's rate plus the start condition,
-    test_fs_adaptive.expected_crossings) at mu / sigma = 0, 1, 2 (z-test, Bonferroni).
+    oracles.expected_crossings) at mu / sigma = 0, 1, 2 (z-test, Bonferroni).
     renewal_plus is the exact state for 3/2; for 5/2 f'' is redrawn from its stationary
     law given (f, f'), which is its Palm law at a crossing, so the chain of crossing states
     stays stationary and the expected count is still exact. At mu = 0 the slopes at
@@ -358,8 +357,8 @@ def test05_rice_crossing_rate_with_renewal_plus(device, long_run, name):
 
 # The renders: test_fs_render's rough ball with a Matern kernel
 def matern_scene(kernel, memory, bsdf, spp, seed=3, lights=None):
-    from test_fs_render import fs, gpis_scene
-    scene = gpis_scene(fs(memory), bsdf, 1.0 if bsdf == "mirror" else 0.9,
+    from gpiscl.testing.scenes import function_space_sampler, gpis_scene
+    scene = gpis_scene(function_space_sampler(memory), bsdf, 1.0 if bsdf == "mirror" else 0.9,
                        lights or [{"type": "environment", "radiance": 1.0}], spp, seed=seed)
     scene["shapes"][0]["kernel"] = {"type": kernel, "sigma": 0.3, "length_scale": 0.25}
     return scene

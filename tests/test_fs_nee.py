@@ -1,7 +1,6 @@
 """Next-event estimation at function-space GPIS hits (fs_normal_pdf.h): the density of the
 sampled normal, p_Omega(n) = N2(q(n); m_q, S_q) s^2 / |n.d|^3, against quadrature and
 against normals the device draws; renders with NEE + MIS against BSDF sampling alone."""
-import functools
 
 import numpy as np
 import pyopencl as cl
@@ -10,10 +9,11 @@ import pytest
 from gpiscl.host.gp import Constant, Matern32, Plane, SquaredExponential
 from gpiscl.host.gp import function_space as FS
 from gpiscl.host.layout.records import GPIS_MEMORIES
-from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_source
-from stats import assert_agree, image_mean_se
-from test_fs_render import fs, run
-from test_fs_sampling import CAP_MAX, WINDOW_MAX, _buf, chi2_threshold, sampler_buffers
+from gpiscl.host.render.program_sources import fs_sampler_options
+from gpiscl.testing.stats import assert_agree, chi2_threshold, image_mean_se
+from gpiscl.testing.scenes import function_space_sampler, gpis_scene, render_checked
+from gpiscl.testing.flights import CAP_MAX, WINDOW_MAX, sampler_buffers
+from gpiscl.testing.wrappers import buffer, sampler_program
 
 LAW = r"""
 /* A ray along a line that goes straight on through `restarts` hits (continuations from
@@ -99,11 +99,8 @@ __kernel void implied_rows(__global const GpKernel* kp, __global const MeanNode*
 """
 
 
-@functools.lru_cache(maxsize=None)
 def _programs(ctx):
-    p = cl.Program(ctx, fs_sampler_source(LAW + IMPLIED)).build(
-        options=fs_sampler_options(WINDOW_MAX, CAP_MAX))
-    return {k.function_name: k for k in p.all_kernels()}
+    return sampler_program(ctx, LAW + IMPLIED, fs_sampler_options(WINDOW_MAX, CAP_MAX))
 
 
 def _program(ctx):
@@ -136,7 +133,7 @@ def normal_laws(device, case, n, seed=5):
     q = device.queue
     chunk = min(n, 1024)
     kp, mb, n_mean, scratch, rings = sampler_buffers(device, kernel, mean, CAP_MAX, chunk)
-    rb = _buf(device, np.array([0, 0, 0, *D, 0.0, 30.0], np.float64))
+    rb = buffer(device, np.array([0, 0, 0, *D, 0.0, 30.0], np.float64))
     out = np.empty((n, 16))
     for first in range(0, n, chunk):
         m = min(chunk, n - first)
@@ -185,7 +182,7 @@ def test_shadow_rays_condition_on_the_implied_gradient(device, memory):
     kernel, mean = SquaredExponential(sigma=1.0, length_scale=1.0), Constant(0.3)
     cap = 64
     kp, mb, n_mean, scratch, rings = sampler_buffers(device, kernel, mean, cap, 1)
-    rb = _buf(device, np.array([0, 0, 0, *D, 0.0, 30.0], np.float64))
+    rb = buffer(device, np.array([0, 0, 0, *D, 0.0, 30.0], np.float64))
     dnew = np.array([0.2, 0.9, 0.4]) / np.linalg.norm([0.2, 0.9, 0.4])
     size = 4 + 2 * (2 + 5 * cap)
     checked = 0
@@ -194,7 +191,7 @@ def test_shadow_rays_condition_on_the_implied_gradient(device, memory):
         _programs(device.ctx)["implied_rows"](
             device.queue, (1,), None, kp, mb, np.int32(n_mean),
             np.int32(GPIS_MEMORIES[memory]), np.int32(cap), rb, np.uint32(seed),
-            _buf(device, np.array([0.3, -0.2, 0.1])), _buf(device, dnew), scratch, rings, ob)
+            buffer(device, np.array([0.3, -0.2, 0.1])), buffer(device, dnew), scratch, rings, ob)
         out = np.empty(size)
         cl.enqueue_copy(device.queue, out, ob)
         if not out[0]:
@@ -295,10 +292,9 @@ def test_sampled_normals_match_the_pdf(device, case):
 def lit_scene(memory, bsdf, spp, nee, seed, radius=0.3, kernel=None):
     """The rough GPIS ball of test_fs_render under a sphere light (radius 0.3 at distance
     2.4: small), nothing else: every pixel is light reflected by the micro-BSDF."""
-    from test_fs_render import gpis_scene
     light = [{"type": "sphere", "center": [1.2, 1.4, 1.6], "radius": radius,
               "radiance": 12.0 * (0.3 / radius) ** 2}]
-    scene = gpis_scene(fs(memory), "mirror", 1.0, light, spp=spp, seed=seed,
+    scene = gpis_scene(function_space_sampler(memory), "mirror", 1.0, light, spp=spp, seed=seed,
                        max_depth=64, rr_start=3)
     scene["shapes"][0]["bsdf"] = bsdf
     if kernel:
@@ -332,8 +328,8 @@ def test_nee_with_mis_equals_bsdf_sampling(device, bsdf, memory, radius, kernel)
     samples meet the light often, fails (image z 12.8) when BSDF sampling's weight
     ignores the lobe strategy's density (fs_conductor_light_pdf without q)."""
     spp = 256
-    a = run(lit_scene(memory, bsdf, spp, True, seed=21, radius=radius, kernel=kernel), device)
-    b = run(lit_scene(memory, bsdf, spp, False, seed=22, radius=radius, kernel=kernel), device)
+    a = render_checked(lit_scene(memory, bsdf, spp, True, seed=21, radius=radius, kernel=kernel), device)
+    b = render_checked(lit_scene(memory, bsdf, spp, False, seed=22, radius=radius, kernel=kernel), device)
     assert a.stats.killed_paths == 0 and b.stats.killed_paths == 0
     assert b.image.mean.max() > 0.05, "the light is seen through the ball"
     assert_agree(a.image.mean, a.image.stderr, b.image.mean, b.image.stderr, block=4,

@@ -15,17 +15,17 @@ from gpiscl.host.gp import Sphere
 from gpiscl.host.gp import SquaredExponential
 from gpiscl.host.layout import gp_records
 from gpiscl.host.layout import function_space_records as FL
-from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_source
+from gpiscl.host.render.program_sources import fs_sampler_options
 from gpiscl.host.gp.kernels import (GridField, LinearField, LocallyPeriodic, NonStationary,
                                     Periodic, RadialField, ThinPlate, covariance_matrix)
 from gpiscl.host.compile.gpis import build_kernel
 from gpiscl.host.errors import SceneError
 from gpiscl.host.scene.loading import load_scene
-from stats import assert_agree, z_threshold
-from test_gp_device import COV_WRAPPER
-from test_fs_sampling import CAP_MAX, WINDOW_MAX, WRAPPERS, flights
+from gpiscl.testing.stats import assert_agree, z_threshold
+from gpiscl.testing.flights import CAP_MAX, FLIGHT_WRAPPERS, WINDOW_MAX, flights
+from gpiscl.testing.wrappers import GP_COVARIANCE_WRAPPER, sampler_program
 
-EXTRA = COV_WRAPPER + r"""
+EXTRA = GP_COVARIANCE_WRAPPER + r"""
 /* One joint draw per item of n fixed observations (values and derivatives) through the
  * free-flight sampler's factor and row sampler. */
 __kernel void joint(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
@@ -124,9 +124,8 @@ def _points(rng, n):
 
 @pytest.fixture(scope="module")
 def prg(device):
-    p = cl.Program(device.ctx, fs_sampler_source(WRAPPERS + EXTRA)).build(
-        options=fs_sampler_options(WINDOW_MAX, CAP_MAX))
-    return {k.function_name: k for k in p.all_kernels()}
+    return sampler_program(device.ctx, FLIGHT_WRAPPERS + EXTRA,
+                           fs_sampler_options(WINDOW_MAX, CAP_MAX))
 
 
 def _buf(device, a):

@@ -5,37 +5,9 @@ import numpy as np
 import pytest
 
 from gpiscl import render_result
-from stats import assert_agree, image_mean_se, z_threshold
-
-MEMORIES = ("none", "renewal", "renewal_plus", "global")
-
-
-def gpis_scene(sampler, bsdf, albedo, lights, spp, seed=3, max_depth=256, rr_start=100000):
-    """A rough GPIS ball (sigma comparable to the mean's curvature, l small): concave
-    pockets make paths scatter several times inside the proxy."""
-    return {"camera": {"position": [0, 0, 3.0], "look_at": [0, 0, 0], "up": [0, 1, 0],
-                       "fov": 40, "resolution": [16, 16]},
-            "render": {"spp": spp, "seed": seed, "max_depth": max_depth,
-                       "russian_roulette": {"start_depth": rr_start}},
-            "shapes": [{"type": "gpis", "proxy": {"type": "box", "min": [-1.1] * 3,
-                                                  "max": [1.1] * 3},
-                        "mean": {"type": "sphere", "radius": 0.7},
-                        "kernel": {"type": "squared_exponential", "sigma": 0.3,
-                                   "length_scale": 0.2},
-                        "sampler": sampler, "bsdf": {"type": bsdf, "albedo": albedo}}],
-            "lights": lights}
-
-
-def fs(memory, **kw):
-    return {"type": "function_space", "memory": memory, "memory_cap": 48, **kw}
-
-
-def run(scene, device, **kw):
-    res = render_result(scene, device=device, **kw)
-    st = res.stats
-    assert st.nan_paths == 0 and st.gpis_failed == 0 and st.truncated_paths == 0, st.summary()
-    return res
-
+from gpiscl.testing.scenes import (MEMORIES, SUN_AND_SKY, function_space_sampler, gpis_scene,
+                                   render_checked)
+from gpiscl.testing.stats import assert_agree, image_mean_se, z_threshold
 
 @pytest.mark.parametrize("bsdf", ["mirror", "diffuse"])
 @pytest.mark.parametrize("memory", MEMORIES)
@@ -45,7 +17,7 @@ def test01_white_furnace(device, memory, bsdf):
     uses NEE + MIS, so it also checks that a shadow ray's 0/1 visibility has the same law
     as the escape of a continuation ray from the same vertex record."""
     env = [{"type": "environment", "radiance": 1.0}]
-    res = run(gpis_scene(fs(memory), bsdf, 1.0, env, spp=16), device)
+    res = render_checked(gpis_scene(function_space_sampler(memory), bsdf, 1.0, env, spp=16), device)
     img = res.image
     assert res.stats.killed_paths == 0, res.stats.summary()
     assert res.stats.rays > 1.5 * res.stats.paths   # the ball is hit, often repeatedly
@@ -55,15 +27,13 @@ def test01_white_furnace(device, memory, bsdf):
 
 
 def test02_image_does_not_depend_on_the_batch_size(device):
-    scene = gpis_scene(fs("global"), "diffuse", 0.8,
+    scene = gpis_scene(function_space_sampler("global"), "diffuse", 0.8,
                        [{"type": "environment", "radiance": 1.0}], spp=4)
-    a = run(scene, device).image.mean
-    b = run(scene, device, batch_size=333).image.mean
+    a = render_checked(scene, device).image.mean
+    b = render_checked(scene, device, batch_size=333).image.mean
     np.testing.assert_array_equal(a, b)
 
 
-LIGHTS = [{"type": "directional", "direction": [-0.3, -1, -0.4], "irradiance": 3.0},
-          {"type": "environment", "radiance": 0.3}]
 
 
 def test03_global_memory_agrees_with_weight_space(device):
@@ -75,10 +45,13 @@ def test03_global_memory_agrees_with_weight_space(device):
     taken as correlated: stats.image_mean_se). Renewal and renewal_plus forget the path
     between vertices: their difference is printed (1-2% here, see issue 4's note)."""
     spp = 32
-    ws = run(gpis_scene({"type": "weight_space", "features": 256}, "diffuse", 0.9, LIGHTS,
-                        spp, seed=7, max_depth=64, rr_start=8), device).image
-    imgs = {m: run(gpis_scene(fs(m, memory_cap=64), "diffuse", 0.9, LIGHTS, spp, seed=7,
-                              max_depth=64, rr_start=8), device).image
+
+    def image(sampler):
+        return render_checked(gpis_scene(sampler, "diffuse", 0.9, SUN_AND_SKY, spp, seed=7,
+                                         max_depth=64, rr_start=8), device).image
+
+    ws = image({"type": "weight_space", "features": 256})
+    imgs = {m: image(function_space_sampler(m, memory_cap=64))
             for m in ("global", "renewal_plus", "renewal")}
     g = imgs["global"]
     assert_agree(g.mean, g.stderr, ws.mean, ws.stderr, what="global vs weight space")
@@ -100,13 +73,13 @@ def test03b_matern_global_memory_agrees_with_weight_space(device, kernel):
     k = {"type": kernel, "sigma": 0.3, "length_scale": 0.25}
 
     def render(sampler):
-        scene = gpis_scene(sampler, "diffuse", 0.9, LIGHTS, spp, seed=7, max_depth=64,
+        scene = gpis_scene(sampler, "diffuse", 0.9, SUN_AND_SKY, spp, seed=7, max_depth=64,
                            rr_start=8)
         scene["shapes"][0]["kernel"] = k
-        return run(scene, device).image
+        return render_checked(scene, device).image
 
     ws = render({"type": "weight_space", "features": 1024})
-    g = render(fs("global", memory_cap=64))
+    g = render(function_space_sampler("global", memory_cap=64))
     assert_agree(g.mean, g.stderr, ws.mean, ws.stderr, what=f"{kernel} global vs weight space")
     diff = g.mean.mean() - ws.mean.mean()
     se = image_mean_se(g.stderr, ws.stderr)
@@ -119,7 +92,7 @@ def test04_failed_free_flights_are_counted_and_reported(device):
     """A length scale far below the proxy size needs more than FS_MAX_STEPS steps (at
     most 2 length scales each, fs_march.h): each such ray is counted in gpis_failed and
     the summary says so."""
-    scene = gpis_scene(fs("renewal_plus"), "diffuse", 0.8,
+    scene = gpis_scene(function_space_sampler("renewal_plus"), "diffuse", 0.8,
                        [{"type": "environment", "radiance": 1.0}], spp=1)
     g = scene["shapes"][0]
     g["kernel"]["length_scale"] = 1e-5
@@ -148,10 +121,10 @@ KERNELS = {"thin_plate": {"type": "thin_plate", "sigma": 0.04, "radius": 4.0},
 def test05_mirror_furnace_for_every_kernel(device, kernel, memory):
     """Anisotropic and product kernels take the general gradient conditional (no closed
     form), thin-plate the bisection step rule: still exactly 1 per path."""
-    scene = gpis_scene(fs(memory), "mirror", 1.0, [{"type": "environment", "radiance": 1.0}],
-                       spp=4)
+    scene = gpis_scene(function_space_sampler(memory), "mirror", 1.0,
+                       [{"type": "environment", "radiance": 1.0}], spp=4)
     scene["shapes"][0]["kernel"] = KERNELS[kernel]
-    res = run(scene, device)
+    res = render_checked(scene, device)
     assert res.stats.killed_paths == 0 and res.stats.rays > 1.2 * res.stats.paths
     np.testing.assert_allclose(res.image.mean, 1.0, rtol=1e-6)
 
@@ -162,13 +135,13 @@ def test06_furnace_with_overlapping_objects_and_a_surface_inside(device, bsdf):
     inside a proxy: memory resets at other events, per-object random streams, and the
     two scratch slices that keep the winning object's rows (global ring)."""
     env = [{"type": "environment", "radiance": 1.0}]
-    scene = gpis_scene(fs("global"), bsdf, 1.0, env, spp=16)
-    second = dict(scene["shapes"][0], sampler=fs("renewal"))
+    scene = gpis_scene(function_space_sampler("global"), bsdf, 1.0, env, spp=16)
+    second = dict(scene["shapes"][0], sampler=function_space_sampler("renewal"))
     second["proxy"] = {"type": "sphere", "center": [0.6, 0.3, 0.0], "radius": 0.8}
     second["mean"] = {"type": "sphere", "center": [0.6, 0.3, 0.0], "radius": 0.4}
     scene["shapes"] += [second, {"type": "sphere", "center": [-0.5, -0.6, 0.4], "radius": 0.3,
                                  "bsdf": {"type": bsdf, "albedo": 1.0}}]
-    res = run(scene, device)
+    res = render_checked(scene, device)
     img = res.image
     assert res.stats.killed_paths == 0
     assert_agree(img.mean, img.stderr, np.ones_like(img.mean), block=4, what="furnace")

@@ -6,7 +6,6 @@ there follow one dense joint sample along the ray, and on the device's own fligh
 point is the twin's function of values drawn before it and every value is whitened
 N(0, 1) by numpy's exact conditional (breaking checks: a choice that peeks at the value it
 is about to draw fails test05; dropping the ITP projection fails test02)."""
-import functools
 import math
 
 import numpy as np
@@ -17,9 +16,11 @@ from gpiscl.host.gp import Constant, SquaredExponential
 from gpiscl.host.gp import function_space as FS
 from gpiscl.host.layout import function_space_records as FL
 from gpiscl.host.layout import gp_records
-from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_source
-from stats import z_threshold
-from test_fs_sampling import flights, ks_two_sample, prg  # noqa: F401 (fixture)
+from gpiscl.host.render.program_sources import fs_sampler_options
+from gpiscl.testing.stats import z_threshold
+from gpiscl.testing.flights import flights
+from gpiscl.testing.stats import ks_two_sample
+from gpiscl.testing.wrappers import sampler_program
 
 WRAPPER = r"""
 /* per item: the point for bracket q[0..3] = (ta, tb, fa, fb), width q[4], index q[5],
@@ -59,11 +60,10 @@ __kernel void flight_rows(__global const GpKernel* kp, __global const MeanNode* 
 ROWS_OUT = 40
 
 
-@functools.lru_cache(maxsize=None)
 def _program(ctx):
     opts = fs_sampler_options(16, 64) + [f"-DROWS_OUT={ROWS_OUT}",
                                          f"-DFS_DEFAULT_TOL={FL.DEFAULT_MISS_TOLERANCE!r}"]
-    return cl.Program(ctx, fs_sampler_source(WRAPPER)).build(options=opts)
+    return sampler_program(ctx, WRAPPER, opts)
 
 
 def random_brackets(rng, n):
@@ -85,7 +85,7 @@ def test01_device_point_choice_is_the_twins(device):
     out = np.empty((len(q), 2))
     qb = cl.Buffer(device.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=q)
     ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
-    _program(device.ctx).root_point(device.queue, (len(q),), None, qb, ob)
+    _program(device.ctx)["root_point"](device.queue, (len(q),), None, qb, ob)
     cl.enqueue_copy(device.queue, out, ob)
     budget = np.array([FS.root_budget(b[1] - b[0], b[4]) for b in q])
     np.testing.assert_array_equal(out[:, 1], budget)
@@ -141,7 +141,7 @@ def test03_smooth_paths_take_about_half_of_bisections_points():
 
 
 @pytest.mark.parametrize("mu", [0.0, 1.5])
-def test04_first_hit_and_its_slope_match_a_dense_joint_sample(device, prg, mu):
+def test04_first_hit_and_its_slope_match_a_dense_joint_sample(device, flight_prg, mu):
     """At the default refine (0: the root width alone stops the search, so every point is
     the new choice's), first hits along a fresh ray (SE l = 0.5, 6 long, global memory)
     and the slope drawn there against one dense joint sample (numpy Cholesky, 1201
@@ -157,7 +157,7 @@ def test04_first_hit_and_its_slope_match_a_dense_joint_sample(device, prg, mu):
     th, sh = FS.dense_first_hits(kern, Constant(mu), (0, 0, 0), (1, 0, 0), 0.0, 6.0, 1201, n,
                                  np.random.default_rng(seed), slopes=True)
     th = np.where(np.isfinite(th), th, -1.0)
-    out = flights(device, prg, kern, Constant(mu), n, memory="global", refine=FL.DEFAULT_REFINE,
+    out = flights(device, flight_prg, kern, Constant(mu), n, memory="global", refine=FL.DEFAULT_REFINE,
                   seed=seed + 1)
     hit = out[:, 0] >= 0
     D, crit = ks_two_sample(out[:, 0], th, 4)
@@ -188,7 +188,7 @@ def test05_each_point_is_chosen_from_values_drawn_before_it(device):
     scratch = cl.Buffer(device.ctx, mf.READ_WRITE, 8 * FL.scratch_doubles(FL.max_rows(16, 64)) * n)
     out = np.empty((n, 3 + 2 * ROWS_OUT))
     ob = cl.Buffer(device.ctx, mf.WRITE_ONLY, out.nbytes)
-    _program(device.ctx).flight_rows(device.queue, (n,), None, kp, mb, np.int32(len(nodes)),
+    _program(device.ctx)["flight_rows"](device.queue, (n,), None, kp, mb, np.int32(len(nodes)),
                                      np.float64(6.0), np.uint32(17), scratch, ob)
     cl.enqueue_copy(device.queue, out, ob)
     assert np.all(out[:, 0] >= 0)

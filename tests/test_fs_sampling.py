@@ -1,201 +1,32 @@
-"""fs_sampling.h on the device: truncated normal, step rule, free flight and normals
-against analytic laws, dense joint samples and the numpy reference."""
-import functools
+"""fs_sampling.h on the device: the truncated normal against its analytic law and the step
+rule against the numpy reference (the free-flight harness: gpiscl/testing/flights.py)."""
 import math
-from statistics import NormalDist
 
 import numpy as np
 import pyopencl as cl
 import pytest
 
-from gpiscl.host.gp import Constant
-from gpiscl.host.gp import Plane
 from gpiscl.host.gp import RationalQuadratic
 from gpiscl.host.gp import SquaredExponential
 from gpiscl.host.gp import ThinPlate
 from gpiscl.host.gp import Periodic
 from gpiscl.host.layout import gp_records
 from gpiscl.host.gp import function_space as FS
-from gpiscl.host.layout import function_space_records as FL
-from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_source
-from gpiscl.host.layout.records import GPIS_MEMORIES
-from tests.stats import z_threshold
+from gpiscl.testing.stats import chi2_threshold, z_threshold
+from gpiscl.testing.wrappers import buffer
 
-WRAPPERS = r"""
-__kernel void tn_draw(double mu, double s, uint seed, __global double* out)
-{
-    int i = get_global_id(0);
-    FsRng rng = {seed, (uint)i, 0u, 0u, 0u};
-    out[i] = fs_truncnorm_pos(mu, s, rng, 0u, FS_U_START);
-}
 
-/* the step of the ray segment o + t d, t in [0, 1] (ray: o then d) */
-__kernel void step_rule(__global const GpKernel* kp, __global const double* ray, double c,
-                   __global double* out)
-{
-    FsRay r = {vload3(0, ray), vload3(1, ray), 0.0, 1.0};
-    out[0] = fs_step(kp[0], r, c);
-}
-
-/* Rays along one line, one per item; after a hit the ray goes straight on from the hit
- * (a continuation with the vertex record) up to `restarts` times. */
-__kernel void flight(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
-                     int window, int memory, int cap, int refine, double c, double tol,
-                     __global const double* ray, uint seed, int first, int restarts,
-                     __global double* scratch, __global FsObs* rings, __global double* out)
-{
-    int i = get_global_id(0);
-    FsScratch S = fs_scratch(scratch, i);
-    FsParams prm = {window, memory, cap, refine, c, tol};
-    FsRay r = {vload3(0, ray), vload3(1, ray), ray[6], ray[7]};
-    FsRng rng = {seed, (uint)(first + i), 0u, 0u, 0u};
-    FsVertex v = {0};
-    __global double* o = out + 8 * i;
-    o[0] = -1.0; o[1] = o[2] = o[3] = 0.0; o[4] = 0.0; o[5] = 0.0; o[6] = 0.0; o[7] = 0.0;
-    for (int b = 0; b <= restarts; ++b) {
-        rng.bounce = (uint)b;
-        FsResult res = fs_free_flight(kp[0], mean, mc, prm, r, v, rings + (size_t)i * cap,
-                                      rng, S);
-        o[7] += res.samples;
-        if (res.status) { o[5] = res.status; break; }
-        if (!res.hit) break;
-        if (b == 0) { o[0] = res.t; vstore3(res.grad, 0, o + 1); o[6] = res.samples; }
-        o[4] += 1.0;
-        v = fs_vertex_at_hit(prm, r, res, v, rings + (size_t)i * cap, S);
-        r.o = r.o + res.t * r.d;
-        r.t1 -= res.t;
-        r.t0 = 0.0;
-    }
-}
-
-/* The slope at a down-crossing (fs_march.h), one draw per item. */
-__kernel void slope_draw(double mean, double sd, uint seed, __global double* out)
-{
-    int i = get_global_id(0);
-    FsRng rng = {seed, (uint)i, 0u, 0u, 0u};
-    out[i] = fs_downcrossing_slope(mean, sd, fs_uniform2(rng, 0u, FS_U_SLOPE));
-}
-
-/* A ray going straight on through every hit (continuations from the vertex record) over
- * [0, ray[7]]: per item hits, the sums of the along-ray slope and its square over hits
- * after the first (far from the start condition), GP samples, moment evaluations and
- * the status. */
-__kernel void crossings(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
-                        int window, int memory, int cap, int refine, double c, double tol,
-                        __global const double* ray, uint seed, int first,
-                        __global double* scratch, __global FsObs* rings, __global double* out)
-{
-    int i = get_global_id(0);
-    FsScratch S = fs_scratch(scratch, i);
-    FsParams prm = {window, memory, cap, refine, c, tol};
-    FsRay r = {vload3(0, ray), vload3(1, ray), 0.0, ray[7]};
-    FsRng rng = {seed, (uint)(first + i), 0u, 0u, 0u};
-    FsVertex v = {0};
-    __global double* o = out + 6 * i;
-    for (int k = 0; k < 6; ++k) o[k] = 0.0;
-    for (int b = 0; b < 100000; ++b) {
-        rng.bounce = (uint)b;
-        FsResult res = fs_free_flight(kp[0], mean, mc, prm, r, v, rings + (size_t)i * cap,
-                                      rng, S);
-        o[3] += res.samples;
-        o[4] += res.evals;
-        if (res.status) { o[5] = res.status; break; }
-        if (!res.hit) break;
-        o[0] += 1.0;
-        double s = dot(res.grad, r.d) / length(r.d);
-        if (b > 0) { o[1] += s; o[2] += s * s; }
-        v = fs_vertex_at_hit(prm, r, res, v, rings + (size_t)i * cap, S);
-        r.o = r.o + res.t * r.d;
-        r.t1 -= res.t;
-        r.t0 = 0.0;
-    }
-}
-"""
-
-CAP_MAX, WINDOW_MAX = 128, 32
 SE = SquaredExponential(sigma=1.0, length_scale=1.0)
 RQ = RationalQuadratic(sigma=1.0, length_scale=1.0, alpha=1.0)
 
 
-@functools.lru_cache(maxsize=None)
-def _program(ctx):
-    p = cl.Program(ctx, fs_sampler_source(WRAPPERS)).build(
-        options=fs_sampler_options(WINDOW_MAX, CAP_MAX))
-    return {k.function_name: k for k in p.all_kernels()}
-
-
-@pytest.fixture(scope="module")
-def prg(device):
-    """The sampler with WRAPPERS, built once per context for every module importing it."""
-    return _program(device.ctx)
-
-
-def _buf(device, a, rw=False):
-    flags = (cl.mem_flags.READ_WRITE if rw else cl.mem_flags.READ_ONLY)
-    return cl.Buffer(device.ctx, flags | cl.mem_flags.COPY_HOST_PTR,
-                     hostbuf=np.ascontiguousarray(a))
-
-
-def sampler_buffers(device, kernel, mean, cap, chunk):
-    """The kernel, mean program, per-work-item scratch and global-memory rings of a
-    function-space wrapper launched `chunk` rays at a time: (kp, mb, mean count, scratch,
-    rings)."""
-    mean_nodes = gp_records.pack_mean(mean)
-    kp, mb = _buf(device, gp_records.pack_kernel(kernel)), _buf(device, mean_nodes)
-    stride = FL.scratch_doubles(FL.max_rows(WINDOW_MAX, CAP_MAX))
-    scratch = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, 8 * stride * chunk)
-    rings = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, FL.FS_OBS.dtype.itemsize * cap * chunk)
-    return kp, mb, len(mean_nodes), scratch, rings
-
-
-def flights(device, prg, kernel, mean, n, memory="global", window=0, cap=64, refine=6,
-            c=0.0, tol=FL.DEFAULT_MISS_TOLERANCE, o=(0, 0, 0), d=(1, 0, 0), t0=0.0, t1=6.0,
-            seed=1, restarts=0):
-    """Per ray: first-hit t (-1: none), gradient, hits, status, GP samples drawn on the
-    first flight, on all flights. c > 0: the uniform baseline step (correlation c),
-    else the adaptive rule with tolerance tol; window 0: the default."""
-    q = device.queue
-    rb = _buf(device, np.array([*o, *d, t0, t1], np.float64))
-    stride = FL.scratch_doubles(FL.max_rows(WINDOW_MAX, CAP_MAX))
-    chunk = max(1, min(n, (256 << 20) // (8 * stride)))
-    kp, mb, n_mean, scratch, rings = sampler_buffers(device, kernel, mean, cap, chunk)
-    out = np.zeros((n, 8))
-    for first in range(0, n, chunk):
-        m = min(chunk, n - first)
-        ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 64 * m)
-        prg["flight"](q, (m,), None, kp, mb, np.int32(n_mean), np.int32(window),
-                      np.int32(GPIS_MEMORIES[memory]), np.int32(cap), np.int32(refine),
-                      np.float64(c), np.float64(tol), rb, np.uint32(seed), np.int32(first), np.int32(restarts),
-                      scratch, rings, ob)
-        cl.enqueue_copy(q, out[first:first + m], ob)
-    assert np.all(out[:, 5] == 0), f"solver status {np.unique(out[:, 5])}"
-    return out
-
-
-def ks_two_sample(a, b, num_tests):
-    """Two-sample Kolmogorov-Smirnov: statistic and its Bonferroni critical value
-    (asymptotic, c(alpha) = sqrt(-ln(alpha / 2) / 2))."""
-    a, b = np.sort(a), np.sort(b)
-    grid = np.concatenate([a, b])
-    D = np.max(np.abs(np.searchsorted(a, grid, "right") / len(a)
-                      - np.searchsorted(b, grid, "right") / len(b)))
-    alpha = 1e-3 / num_tests
-    return D, math.sqrt(-math.log(alpha / 2) / 2) * math.sqrt((len(a) + len(b)) / (len(a) * len(b)))
-
-
-def chi2_threshold(df, num_tests=1):
-    """Upper chi-square quantile by Wilson-Hilferty (accurate to <1% for df >= 5)."""
-    z = NormalDist().inv_cdf(1.0 - 1e-3 / num_tests)
-    return df * (1.0 - 2.0 / (9 * df) + z * math.sqrt(2.0 / (9 * df))) ** 3
-
-
 @pytest.mark.parametrize("a", [-1.5, 0.0, 3.0, 12.0, 40.0])
-def test_truncated_normal_matches_analytic_law(device, prg, a):
+def test_truncated_normal_matches_analytic_law(device, flight_prg, a):
     """a = -mu/s standard deviations of truncation; 40 exercises the rejection tail."""
     n, s = 200_000, 0.7
     mu = -a * s
     buf = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 8 * n)
-    prg["tn_draw"](device.queue, (n,), None, np.float64(mu), np.float64(s), np.uint32(3), buf)
+    flight_prg["tn_draw"](device.queue, (n,), None, np.float64(mu), np.float64(s), np.uint32(3), buf)
     x = np.empty(n)
     cl.enqueue_copy(device.queue, x, buf)
     assert np.all(x >= 0.0)
@@ -215,12 +46,12 @@ def test_truncated_normal_matches_analytic_law(device, prg, a):
 @pytest.mark.parametrize("kernel", [SE, RQ, RationalQuadratic(0.5, 2.0, 0.375, (1, 0.5, 2)),
                                     ThinPlate(1.0, 3.0), Periodic(1.0, 2.0, 0.25)],
                          ids=["se", "rq", "rq-aniso", "thin_plate", "periodic"])
-def test_step_rule(device, prg, kernel):
+def test_step_rule(device, flight_prg, kernel):
     d = np.array([0.6, 0.0, 0.8]) * 1.5
     out = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 8)
     for c in (0.5, 0.9, 0.99):
-        prg["step_rule"](device.queue, (1,), None, _buf(device, gp_records.pack_kernel(kernel)),
-                         _buf(device, np.r_[np.zeros(3), d]), np.float64(c), out)
+        flight_prg["step_rule"](device.queue, (1,), None, buffer(device, gp_records.pack_kernel(kernel)),
+                         buffer(device, np.r_[np.zeros(3), d]), np.float64(c), out)
         dt = np.empty(1)
         cl.enqueue_copy(device.queue, dt, out)
         assert abs(FS.correlation(kernel, d, dt[0]) - c) < 1e-9

@@ -3,10 +3,11 @@ weight-space realization is (nearly) Gaussian, and its first root and normal mus
 the law of the function-space free flight with the same start condition f(t0) >= 0."""
 import numpy as np
 
-from test_fs_free_flight import RAMP, SE
-from test_fs_sampling import flights, ks_two_sample
-from test_fs_sampling import prg  # noqa: F401 (fixture)
-from test_ws_features import build, buf, gp_args, keys_for, run
+from gpiscl.host.gp import Plane, SquaredExponential
+from gpiscl.testing.flights import flights
+from gpiscl.testing.stats import ks_two_sample
+from gpiscl.testing.weight_space import build, gp_args, keys_for, run
+from gpiscl.testing.wrappers import buffer
 
 WS_FRESH = r"""
 /* f(t0) (the start condition is applied on the host by rejection) and the first root. */
@@ -24,20 +25,23 @@ __kernel void ws_fresh(__global const GpKernel* kp, __global const MeanNode* mea
 }
 """
 M_FEATURES, N = 1024, 10_000
+SE = SquaredExponential(sigma=1.0, length_scale=0.5)
+# mean 3 - x along the ray (0,0,0) + t (1,0,0): the surface sits near t = 3
+RAMP = Plane(point=(3.0, 0.0, 0.0), normal=(-1.0, 0.0, 0.0))
 
 
-def test01_first_hit_and_normal_match_weight_space(device, prg):
+def test01_first_hit_and_normal_match_weight_space(device, flight_prg):
     """Two-sample KS on the hit distance and the three normal components (Bonferroni over
     4), global memory at the default adaptive step against M = 1024 features; a window
     of 6 samples (at least 3 kept) so that most rays slide it."""
     ws = build(device, WS_FRESH)
     f0, hit = run(device, ws["ws_fresh"], N, *gp_args(device, SE, RAMP), np.int32(M_FEATURES),
-                  buf(device, keys_for(N, 31)), np.float32(0.0), np.float32(6.0),
+                  buffer(device, keys_for(N, 31)), np.float32(0.0), np.float32(6.0),
                   np.float32(1e-5), out_shapes=[((N,), np.float32), ((N, 4), np.float32)])
     assert not np.isnan(hit).any(), "weight-space root search failed"
     keep = f0 >= 0.0
     t_ws = np.where(hit[keep, 3] < 1e29, hit[keep, 3], -1.0)
-    out = flights(device, prg, SE, RAMP, N, memory="global", window=6, cap=64, seed=33)
+    out = flights(device, flight_prg, SE, RAMP, N, memory="global", window=6, cap=64, seed=33)
     print(f"rays sliding the window: {np.mean(out[:, 6] - 6 > 6):.3f}")
     assert np.mean(out[:, 6] - 6 > 6) > 0.3, "most hits should slide the window"
     t_fs = out[:, 0]

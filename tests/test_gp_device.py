@@ -10,39 +10,10 @@ from gpiscl.host.gp import (Box, Capsule, Constant, Difference, Intersection,
                             Transform, Union)
 from gpiscl.host.layout import gp_records
 from gpiscl.host.render.program_sources import kernel_source
+from gpiscl.testing.wrappers import GP_COVARIANCE_WRAPPER, GP_MEAN_WRAPPER
 
 
-COV_WRAPPER = r"""
-__kernel void covariances(__global const GpKernel* kp, __global const GP_REAL* a,
-                          __global const GP_REAL* u, __global const GP_REAL* b,
-                          __global const GP_REAL* v, __global GP_REAL* out)
-{
-    int i = get_global_id(0);
-    GpKernel p = kp[0];
-    GP_REAL3 A = vload3(i, a), U = vload3(i, u), B = vload3(i, b), V = vload3(i, v);
-    __global GP_REAL* o = out + 8 * i;
-    o[0] = gp_cov_vv(p, A, B);
-    o[1] = gp_cov_dv(p, A, U, B);
-    o[2] = gp_cov_vd(p, A, B, V);
-    o[3] = gp_cov_dd(p, A, U, B, V);
-    o[4] = gp_cov(p, A, U, 0, B, V, 0);
-    o[5] = gp_cov(p, A, U, 1, B, V, 0);
-    o[6] = gp_cov(p, A, U, 0, B, V, 1);
-    o[7] = gp_cov(p, A, U, 1, B, V, 1);
-}
-"""
-
-MEAN_WRAPPER = r"""
-__kernel void mean_eval(__global const MeanNode* nodes, int count, __global const float* x,
-                        __global float4* out)
-{
-    int i = get_global_id(0);
-    float3 g;
-    float value = gp_mean_eval(nodes, count, vload3(i, x), &g);
-    out[i] = (float4)(g, value);
-}
-"""
-WRAPPERS = COV_WRAPPER + MEAN_WRAPPER
+WRAPPERS = GP_COVARIANCE_WRAPPER + GP_MEAN_WRAPPER
 
 # Parameters are exact in float32 so the double build can be compared tightly.
 ANISO = (1.0, 0.5, 2.0)

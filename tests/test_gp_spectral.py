@@ -5,7 +5,7 @@ import pytest
 from gpiscl.host.gp import (LocallyPeriodic, Matern32, Matern52, Periodic, RandomFeatures, RationalQuadratic,
                             SquaredExponential, ThinPlate, periodic_order_weights,
                             sample_frequencies)
-from stats import z_threshold
+from gpiscl.testing.stats import z_threshold
 
 ANISO = (1.0, 0.5, 2.0)
 KERNELS = [

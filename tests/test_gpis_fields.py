@@ -12,8 +12,8 @@ from gpiscl.host.scene.colour_fields import evaluate
 from gpiscl.host.io.grids import save_rgb_grid
 from gpiscl.host.compile.colour_fields import pack_field
 from gpiscl.host.errors import SceneError
-from reference import hit_sphere, pixel_rays
-from stats import z_threshold
+from gpiscl.testing.reference.camera import hit_sphere, pixel_rays
+from gpiscl.testing.stats import z_threshold
 
 
 WRAPPER = r"""

@@ -23,11 +23,10 @@ from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_so
 from gpiscl.host.schema import Context, Field, Number
 from gpiscl.host.scene.colour_fields import COLOR, EMISSION
 from gpiscl.host.scene.gpis import GPIS, KERNELS, MEANS
-from stats import image_mean_se, z_threshold
-from test_fs_adaptive import run_crossings
-from test_fs_sampling import CAP_MAX, WINDOW_MAX, WRAPPERS as FS_WRAPPERS
-from test_render_weight_space import camera
-from test_ws_features import build as ws_build, dump
+from gpiscl.testing.flights import CAP_MAX, FLIGHT_WRAPPERS as FS_WRAPPERS, WINDOW_MAX, run_crossings
+from gpiscl.testing.scenes import camera
+from gpiscl.testing.stats import image_mean_se, z_threshold
+from gpiscl.testing.weight_space import build as ws_build, dump
 
 CTX = Context("<test>", ".")
 

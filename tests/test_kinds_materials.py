@@ -16,8 +16,8 @@ from gpiscl.host.kinds.table import Kind, KindTable
 from gpiscl.host.kinds.values import ALBEDO, RGB
 from gpiscl.host.layout import records as layouts
 from gpiscl.host.schema import Context, Field, Record
-from stats import assert_agree, image_mean_se, z_threshold
-from test_fs_render import gpis_scene
+from gpiscl.testing.scenes import gpis_scene
+from gpiscl.testing.stats import assert_agree, image_mean_se, z_threshold
 
 ROOT = Path(__file__).resolve().parent.parent
 TOY_KINDS = ROOT / "tests" / "data" / "kinds"

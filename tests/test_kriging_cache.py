@@ -8,7 +8,7 @@ from gpiscl.host.compile.scene import compile_scene
 from gpiscl.host.render import kriging_cache as KC, program_sources
 from gpiscl.host.render.integrator import WavefrontIntegrator
 from gpiscl.host.scene.loading import load_scene
-from test_posterior_render import fibonacci_sphere
+from gpiscl.testing.scenes import fibonacci_sphere
 
 SIGMA = 0.06
 

@@ -13,23 +13,7 @@ import pytest
 from gpiscl import render_result
 from gpiscl.host.render.batching import MAX_GROWTH, BatchSizer
 from gpiscl.host.render.progress import SppBar
-
-
-def slow_scene(resolution=(12, 12), spp=1_000_000):
-    return {
-        "camera": {"position": [0, 0.3, 4], "look_at": [0, 0, 0], "resolution": list(resolution)},
-        "render": {"spp": spp},
-        "shapes": [
-            {"type": "rectangle", "center": [0, -1, 0], "u": [6, 0, 0], "v": [0, 0, -6],
-             "bsdf": {"type": "diffuse", "albedo": 0.5}},
-            {"type": "gpis", "proxy": {"type": "sphere", "radius": 1.4},
-             "mean": {"type": "sphere", "radius": 0.8},
-             "kernel": {"type": "rational_quadratic", "sigma": 0.06, "length_scale": 0.15,
-                        "alpha": 0.5},
-             "sampler": {"type": "weight_space", "features": 4096}}],
-        "lights": [{"type": "environment", "radiance": 0.6},
-                   {"type": "directional", "direction": [0.3, 1, 0.4], "irradiance": 2.0}],
-    }
+from gpiscl.testing.scenes import slow_scene
 
 
 def test_batch_sizer_aims_at_the_target_time_and_grows_gradually():

@@ -19,10 +19,10 @@ from gpiscl.host.layout.gp_records import (GRID_BRICK, GRID_PAYLOAD_FLOATS, MEAN
 from gpiscl.host.gp.means import (Box, Difference, GridMean, Sphere, Transform, Union)
 from gpiscl.host.compile import sdf_bake
 from gpiscl.host.errors import SceneError
-from stats import assert_agree
-from test_gp_device import MEAN_WRAPPER
+from gpiscl.testing.stats import assert_agree
+from gpiscl.testing.wrappers import GP_MEAN_WRAPPER, program
 
-KERNELS = MEAN_WRAPPER + r"""
+KERNELS = GP_MEAN_WRAPPER + r"""
 
 __kernel void lipschitz(__global const MeanNode* nodes, int count, __global float* out)
 {
@@ -44,8 +44,7 @@ ROT = np.array([[0.36, 0.48, -0.8], [-0.8, 0.6, 0.0], [0.48, 0.64, 0.6]])
 def prg(device):
     src = join_sources(
         (), ("ws_features.h", "ws_posterior.h", "ws_intersect.h")) + KERNELS
-    p = cl.Program(device.ctx, src).build(options=[f"-I{PYOPENCL_CL_DIR}", "-DWS_LANES=8"])
-    return {k.function_name: k for k in p.all_kernels()}
+    return program(device.ctx, src, [f"-I{PYOPENCL_CL_DIR}", "-DWS_LANES=8"])
 
 
 @pytest.fixture(autouse=True)
@@ -530,9 +529,8 @@ def test11_mesh_mean_render_agrees_with_the_analytic_sphere(device, tmp_path):
 
 @pytest.fixture(scope="module")
 def ws_prg(device):
-    from test_ws_features import build
-    from test_ws_intersect import EXTRA
-    return build(device, EXTRA)
+    from gpiscl.testing.weight_space import WS_BOUND_WRAPPERS, build
+    return build(device, WS_BOUND_WRAPPERS)
 
 
 def _sphere_grid(tmp_path, interp="linear"):
@@ -547,9 +545,9 @@ def test12_bounds_and_first_roots_hold_with_a_grid_mean(device, ws_prg, tmp_path
     evaluation of f over random intervals (the grid's Lipschitz bound is what makes the
     mean's cones valid), and its first roots miss no crossing a dense float64 scan finds."""
     from gpiscl.host.gp import SquaredExponential
-    from test_ws_features import buf, dump, gp_args, keys_for, run
-    from test_ws_intersect import (assert_tents_contain, host_values, random_rays,
-                                   roots_and_scan)
+    from gpiscl.testing.weight_space import (assert_tents_contain, dump, gp_args, host_values,
+                                             keys_for, random_rays, roots_and_scan, run)
+    from gpiscl.testing.wrappers import buffer
     kernel = SquaredExponential(sigma=0.1, length_scale=0.25)
     mean = _sphere_grid(tmp_path, interp)
     rng = np.random.default_rng(12)
@@ -561,8 +559,8 @@ def test12_bounds_and_first_roots_hold_with_a_grid_mean(device, ws_prg, tmp_path
     ab = np.stack([a, a + 2 * half], -1).astype(np.float32)
     keys = keys_for(n, 91)
     tents, vals = run(device, ws_prg["ws_tents_k"], n, *gp_args(device, kernel, mean),
-                      np.int32(m), buf(device, keys), buf(device, o), buf(device, d),
-                      buf(device, ab), np.int32(npts),
+                      np.int32(m), buffer(device, keys), buffer(device, o), buffer(device, d),
+                      buffer(device, ab), np.int32(npts),
                       out_shapes=[((n, 9), np.float32), ((n, npts, 2), np.float32)])
     theta, tau, w = dump(device, ws_prg, kernel, keys, m)
     t = vals[..., 0].astype(float)

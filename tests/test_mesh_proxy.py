@@ -15,8 +15,8 @@ from gpiscl.host.scene.proxies import analyse
 from gpiscl.host.compile.gpis import pack_planes
 from gpiscl.host.errors import SceneError
 from gpiscl.host.scene.transforms import euler_matrix
-from stats import assert_agree
-from test_occupancy import CLIP_KERNEL
+from gpiscl.testing.stats import assert_agree
+from gpiscl.testing.wrappers import OCCUPANCY_CLIP_WRAPPER, program
 
 ROTATE, TRANSLATE, EXTENT = [20.0, -35.0, 10.0], [0.3, -0.2, 0.5], [1.2, 0.8, 1.6]
 
@@ -56,8 +56,8 @@ def test_device_clip_is_the_slab_interval_of_the_rotated_box(device, tmp_path):
     o[: n // 8] = rng.uniform(-0.3, 0.3, (n // 8, 3)) + TRANSLATE  # some start inside
     target = np.asarray(TRANSLATE) + rng.uniform(-1.2, 1.2, (n, 3))
     d = (target - o) * rng.uniform(0.5, 2.0, (n, 1))   # t need not be arc length
-    src = join_sources((), ("gpis_proxy.h",)) + CLIP_KERNEL
-    kern = cl.Program(device.ctx, src).build(options=[f"-I{PYOPENCL_CL_DIR}"]).occ_clip_k
+    src = join_sources((), ("gpis_proxy.h",)) + OCCUPANCY_CLIP_WRAPPER
+    kern = program(device.ctx, src, [f"-I{PYOPENCL_CL_DIR}"])["occ_clip_k"]
     mf = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
     bufs = [cl.Buffer(device.ctx, mf, hostbuf=np.ascontiguousarray(a))
             for a in (g, nodes, o.astype(np.float32), d.astype(np.float32))]

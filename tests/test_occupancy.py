@@ -17,7 +17,8 @@ from gpiscl.host.gp import means as M
 from gpiscl.host.layout.gp_records import pack_mean
 from gpiscl.host.gp.spectral import RandomFeatures
 from gpiscl.host.compile.gpis import build_kernel, occupancy_level
-from stats import assert_agree, image_mean_se, z_threshold
+from gpiscl.testing.wrappers import OCCUPANCY_CLIP_WRAPPER, program
+from gpiscl.testing.stats import assert_agree, image_mean_se, z_threshold
 
 PHI = NormalDist().cdf
 ROT = np.array([[0.36, 0.48, -0.8], [-0.8, 0.6, 0.0], [0.48, 0.64, 0.6]])
@@ -80,22 +81,6 @@ def test02_union_of_independent_objects():
 
 # --- the device clip ---------------------------------------------------------------------
 
-CLIP_KERNEL = r"""
-__kernel void occ_clip_k(__global const GpisObject* g, __global const MeanNode* means,
-                         __global const float* o, __global const float* d, int clip_start,
-                         __global float4* out)
-{
-    int r = get_global_id(0);
-    float3 O = vload3(r, o), D = vload3(r, d);
-    float t0 = 0.0f, t1 = 1e30f;
-    int in_proxy = gpis_proxy_clip(g, means, O, D, &t0, &t1);
-    float p0 = t0, p1 = t1;
-    int keep = in_proxy && gpis_occupancy_clip(g, means, O, D, &t0, &t1, clip_start);
-    out[r] = (float4)(p0, p1, keep ? t0 : NAN, keep ? t1 : NAN);
-    if (!in_proxy) out[r] = (float4)(NAN);
-}
-"""
-
 GRID = M.GridMean(values=np.fromfunction(
     lambda i, j, k: np.sqrt((i - 4.0) ** 2 + (j - 3.5) ** 2 + (k - 4.5) ** 2) * 0.2 - 0.6,
     (9, 8, 10)), origin=(-0.8, -0.7, -0.9), voxel_size=0.2)
@@ -134,9 +119,8 @@ def sigma_at(kernel, x):
 
 @pytest.fixture(scope="module")
 def clip_prg(device):
-    src = join_sources((), ("gpis_proxy.h",)) + CLIP_KERNEL
-    prg = cl.Program(device.ctx, src).build(options=[f"-I{PYOPENCL_CL_DIR}"])
-    return prg.occ_clip_k
+    src = join_sources((), ("gpis_proxy.h",)) + OCCUPANCY_CLIP_WRAPPER
+    return program(device.ctx, src, [f"-I{PYOPENCL_CL_DIR}"])["occ_clip_k"]
 
 
 def device_clip(device, kern, mean, level, o, d, clip_start=1, step=0.0):

@@ -11,7 +11,8 @@ from gpiscl.host.gp.posterior import (Observations, Posterior, solve_triangular,
                                       surface_observations)
 from gpiscl.host.gp.spectral import RandomFeatures
 
-from stats import z_threshold
+from gpiscl.testing.oracles import dense_reference
+from gpiscl.testing.stats import z_threshold
 
 KERNELS = [SquaredExponential(sigma=0.5, length_scale=0.6),
            RationalQuadratic(sigma=0.4, length_scale=0.5, alpha=1.5, aniso=(1.0, 0.5, 2.0))]
@@ -22,30 +23,6 @@ def sphere_points(n, radius, rng):
     d = rng.standard_normal((n, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     return radius * d, d
-
-
-def dense_reference(kernel, mean, obs, probes):
-    """Posterior mean and variance from an explicit K built pair by pair."""
-    def cov(xa, ua, xb, ub):
-        if ua is None and ub is None:
-            return kernel.cov(xa, xb)
-        if ub is None:
-            return kernel.cov_dv(xa, ua, xb)
-        if ua is None:
-            return kernel.cov_vd(xa, xb, ub)
-        return kernel.cov_dd(xa, ua, xb, ub)
-
-    us = [None if np.isnan(u).any() else u for u in obs.u]
-    n = len(obs)
-    K = np.array([[cov(obs.x[i], us[i], obs.x[j], us[j]) for j in range(n)] for i in range(n)])
-    K += np.diag(obs.noise)
-    prior = np.array([mean.value(x[None])[0] if u is None else u @ mean.gradient(x[None])[0]
-                      for x, u in zip(obs.x, us)])
-    k = np.array([[cov(p, None, obs.x[j], us[j]) for j in range(n)] for p in probes])
-    Kinv = np.linalg.inv(K)
-    mu = mean.value(probes) + k @ Kinv @ (obs.y - prior)
-    var = kernel.variance - np.einsum("ij,jk,ik->i", k, Kinv, k)
-    return mu, var
 
 
 def test01_blocked_triangular_solve_matches_numpy():

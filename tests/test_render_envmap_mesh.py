@@ -5,7 +5,7 @@ import numpy as np
 
 from gpiscl import render_result
 from gpiscl.host.io.images import write_exr
-from stats import assert_agree
+from gpiscl.testing.stats import assert_agree
 
 
 def _scene(lights, shapes, res=24, spp=64, nee=True):

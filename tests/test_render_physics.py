@@ -1,6 +1,6 @@
 """Renders of scenes whose answer is known in closed form or computed independently.
 
-Every tolerance is a z-test against the film's own standard errors (tests/stats.py).
+Every tolerance is a z-test against the film's own standard errors (gpiscl/testing/stats.py).
 """
 import math
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from gpiscl import render_result
-from stats import assert_agree
-from reference import hit_plane_y, hit_sphere, pixel_rays
+from gpiscl.testing.stats import assert_agree
+from gpiscl.testing.reference.camera import hit_plane_y, hit_sphere, pixel_rays
 
 
 def camera(position, look_at, res=32, fov=40.0):

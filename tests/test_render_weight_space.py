@@ -2,7 +2,7 @@
 against a numpy ray cast of the same features, and the surface-type slope law.
 
 Tolerances are z-tests against the films' own standard errors or the sample counts
-(tests/stats.py); seeds are fixed so the tests repeat exactly.
+(gpiscl/testing/stats.py); seeds are fixed so the tests repeat exactly.
 """
 import math
 
@@ -14,9 +14,11 @@ from gpiscl import render_result
 from gpiscl.host.gp import Matern52, Plane, Sphere, SquaredExponential
 from gpiscl.host.gp import weight_space as ws
 from gpiscl.host.layout.gp_records import pack_kernel, pack_mean
-from reference import pixel_rays
-from stats import assert_agree, image_mean_se, z_threshold
-from test_ws_features import build, buf
+from gpiscl.testing.reference.camera import pixel_rays
+from gpiscl.testing.stats import assert_agree, image_mean_se, z_threshold
+from gpiscl.testing.scenes import camera
+from gpiscl.testing.weight_space import build
+from gpiscl.testing.wrappers import buffer
 
 KERNELS = {
     "squared_exponential": {"sigma": 0.1, "length_scale": 0.2},
@@ -26,11 +28,6 @@ KERNELS = {
     "matern32": {"sigma": 0.1, "length_scale": 0.2},
     "matern52": {"sigma": 0.1, "length_scale": 0.2},
 }
-
-
-def camera(res, position=(0, 0, 4), fov=36.0):
-    return {"position": list(position), "look_at": [0, 0, 0], "up": [0, 1, 0], "fov": fov,
-            "resolution": [res, res]}
 
 
 def gpis(kernel, bsdf, albedo, sigma=None, features=64, radius=1.0):
@@ -116,11 +113,13 @@ def _numpy_escape_fraction(kernel, key, m, cam, sub, proxy_radius, mean):
     return 1.0 - hit.reshape(h, wd, sub * sub).mean(axis=2)
 
 
-def test_fixed_realization_matches_a_numpy_ray_cast(device):
+@pytest.mark.long
+def test_fixed_realization_matches_a_numpy_ray_cast(device, long_run):
     """--realization R: every pixel sees the same geometry, the realization the numpy twin
     regenerates from key (R, 0xffffffff); a black GPIS in a unit environment shows its
-    silhouette, i.e. the escape fraction of each pixel."""
-    res_px, spp, sub, m, R = 16, 64, 6, 64, 11
+    silhouette, i.e. the escape fraction of each pixel. The short form casts 12x12 pixels
+    (the numpy cast is the cost), the long form 16x16."""
+    res_px, spp, sub, m, R = (16 if long_run else 12), 64, 6, 64, 11
     kernel = SquaredExponential(sigma=0.15, length_scale=0.25)
     cam = camera(res_px)
     scene = {"camera": cam, "lights": [{"type": "environment", "radiance": 1.0}],
@@ -177,9 +176,9 @@ def test_surface_type_slopes_follow_the_beckmann_law(device, kind):
     cdf = ws.order_table(kernel)
     out = np.empty((n, 4), np.float32)
     out_buf = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
-    prg["first_hit_normals"](device.queue, (n,), None, buf(device, pack_kernel(kernel)),
-                             buf(device, nodes), np.int32(len(nodes)), buf(device, cdf),
-                             np.int32(len(cdf)), np.int32(m), buf(device, o.astype(np.float32)),
+    prg["first_hit_normals"](device.queue, (n,), None, buffer(device, pack_kernel(kernel)),
+                             buffer(device, nodes), np.int32(len(nodes)), buffer(device, cdf),
+                             np.int32(len(cdf)), np.int32(m), buffer(device, o.astype(np.float32)),
                              np.float32(1e-5), out_buf)
     cl.enqueue_copy(device.queue, out, out_buf)
     t = out[:, 3]

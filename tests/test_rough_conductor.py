@@ -8,10 +8,11 @@ import pyopencl as cl
 import pytest
 
 from gpiscl import render_result
-from gpiscl.host.render import rough_conductor as RC
+from gpiscl.testing.reference import rough_conductor as RC
 from gpiscl.host.kinds.conductors import CONDUCTORS
 from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, join_sources
-from stats import assert_agree, z_threshold
+from gpiscl.testing.wrappers import program
+from gpiscl.testing.stats import assert_agree, z_threshold
 
 WRAPPER = r"""
 __kernel void rc_eval(__global const float* p, __global const float* n,
@@ -50,9 +51,7 @@ CU = CONDUCTORS["Cu"]
 @pytest.fixture(scope="module")
 def prg(device):
     # the renderer's headers, then the wrappers (Program puts extra C before them)
-    p = cl.Program(device.ctx, join_sources([]) + WRAPPER).build(
-        options=[f"-I{PYOPENCL_CL_DIR}"])
-    return {k.function_name: k for k in p.all_kernels()}
+    return program(device.ctx, join_sources([]) + WRAPPER, [f"-I{PYOPENCL_CL_DIR}"])
 
 
 def _params(alpha, albedo=(1.0, 1.0, 1.0), eta_k=CU):

@@ -17,7 +17,7 @@ from gpiscl.host.figures.samples import (PLOTS_MISSING, empirical_covariance, ex
                                         weight_space_samples, write_figures)
 from gpiscl.host.errors import SceneError
 
-from stats import z_threshold
+from gpiscl.testing.stats import z_threshold
 
 KERNELS = [SquaredExponential(sigma=1.5, length_scale=0.5),
            RationalQuadratic(sigma=0.75, length_scale=0.4, alpha=0.5)]

@@ -1,16 +1,16 @@
 """ws_features.h: weight-space realizations on the device against numpy and the GP kernels."""
 import numpy as np
-import pyopencl as cl
 import pytest
 
-from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, join_sources
-from gpiscl.host.gp import (Box, Constant, LocallyPeriodic, Matern32, Matern52, Periodic, RationalQuadratic, Sphere,
+from gpiscl.host.gp import (Box, LocallyPeriodic, Matern32, Matern52, Periodic, RationalQuadratic, Sphere,
                             SquaredExponential, Transform, Union)
 from gpiscl.host.gp import weight_space as ws
-from gpiscl.host.layout.gp_records import pack_kernel, pack_mean
-from stats import z_threshold
+from gpiscl.host.layout.gp_records import pack_kernel
+from gpiscl.testing.stats import z_threshold
+from gpiscl.testing.weight_space import (EPS, ROT, build, dump, eval_tolerance, gp_args, keys_for,
+                                         run)
+from gpiscl.testing.wrappers import buffer
 
-EPS = float(np.finfo(np.float32).eps)
 ANISO = (1.0, 0.5, 2.0)
 KERNELS = [
     SquaredExponential(sigma=1.25, length_scale=0.5, aniso=ANISO),
@@ -20,123 +20,8 @@ KERNELS = [
     Matern32(sigma=1.0, length_scale=0.625, aniso=ANISO),    # Student-t, 3 dof
     Matern52(sigma=0.875, length_scale=0.75, aniso=ANISO),   # Student-t, 5 dof
 ]
-ROT = np.array([[0.36, 0.48, -0.8], [-0.8, 0.6, 0.0], [0.48, 0.64, 0.6]])
 MEAN = Union(Transform(Sphere(radius=0.75), np.concatenate([ROT, [[0.5], [0.0], [-0.25]]], 1)),
              Box(half_extents=(0.5, 0.25, 0.75), center=(-0.5, 0.25, 0.0)))
-
-WRAPPERS = r"""
-__kernel void ws_dump(__global const GpKernel* kp, __global const float* cdf, int nc, int M,
-                      __global const uint2* keys, int object, __global float* out)
-{
-    int r = get_global_id(0);
-    for (int i = 0; i < M; ++i) {
-        float3 th;
-        float tau, w;
-        ws_feature(kp[0], cdf, nc, keys[r], object, i, &th, &tau, &w);
-        vstore3(th, 0, out + 5 * (r * M + i));
-        out[5 * (r * M + i) + 3] = tau;
-        out[5 * (r * M + i) + 4] = w;
-    }
-}
-
-__kernel void ws_eval_points(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
-                             __global const float* cdf, int nc, int M, __global const uint2* keys,
-                             int object, int per_key, __global const float* x,
-                             __global float4* out)
-{
-    int i = get_global_id(0);
-    float3 g;
-    float v = ws_eval(kp[0], mean, mc, cdf, nc, M, keys[i / per_key], object, vload3(i, x), &g);
-    out[i] = (float4)(g, v);
-}
-
-__kernel void ws_philox_check(__global const uint2* keys, int object, uint call,
-                              __global uint4* mine, __global uint4* random123)
-{
-    int i = get_global_id(0);
-    wsu r0, r1, r2, r3;
-    ws_draw(keys[i], object, (wsi)i, call, &r0, &r1, &r2, &r3);
-    mine[i] = (uint4)(ws_lane0(r0), ws_lane0(r1), ws_lane0(r2), ws_lane0(r3));
-    philox4x32_ctr_t c = {{keys[i].x, keys[i].y, (uint)object, (uint)i}};
-    philox4x32_key_t k = {{call, WS_PHILOX_KEY1}};
-    philox4x32_ctr_t r = philox4x32(c, k);
-    random123[i] = (uint4)(r.v[0], r.v[1], r.v[2], r.v[3]);
-}
-
-__kernel void ws_sincos_k(__global const float* x, __global float2* out)
-{
-    int i = get_global_id(0);
-    wsf c, s = ws_sincos((wsf)x[i], &c);
-    out[i] = (float2)(ws_lane0(s), ws_lane0(c));
-}
-
-/* ws_affine over [tm - h, tm + h] from regenerated features and from a filled cache */
-__kernel void ws_affine_both(__global const GpKernel* kp, __global const float* cdf, int nc,
-                             int M, __global const uint2* keys, __global const float* o,
-                             __global const float* d, __global const float2* tmh,
-                             __global float4* regen, __global float4* cached)
-{
-    int r = get_global_id(0);
-    float cache[WS_CACHE_FLOATS];
-    ws_fill_cache(kp[0], cdf, nc, keys[r], 0, M, cache);
-    float3 O = vload3(r, o), D = vload3(r, d);
-    WsAffine a = ws_affine(0, kp[0], cdf, nc, M, keys[r], 0, O, D, tmh[r].x, tmh[r].y);
-    WsAffine b = ws_affine(cache, kp[0], cdf, nc, M, keys[r], 0, O, D, tmh[r].x, tmh[r].y);
-    regen[r] = (float4)(a.f0, a.f1, a.err, a.round);
-    cached[r] = (float4)(b.f0, b.f1, b.err, b.round);
-}
-
-__kernel void ws_lambda2_k(__global const GpKernel* kp, __global const float* d,
-                           __global float* out)
-{
-    out[get_global_id(0)] = ws_lambda2(kp[0], vload3(get_global_id(0), d));
-}
-"""
-
-
-def build(device, extra="", options=(), lanes=8):
-    """The ws headers, WRAPPERS and extra kernels as one program: name -> kernel."""
-    src = join_sources(
-        (), ("ws_features.h", "ws_posterior.h", "ws_intersect.h")) + WRAPPERS + extra
-    prg = cl.Program(device.ctx, src).build(
-        options=[f"-I{PYOPENCL_CL_DIR}", f"-DWS_LANES={lanes}", *options])
-    return {k.function_name: k for k in prg.all_kernels()}
-
-
-def buf(device, array):
-    return cl.Buffer(device.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                     hostbuf=np.ascontiguousarray(array))
-
-
-def run(device, kernel, n, *args, out_shapes):
-    """Launch kernel over n items with args, then output buffers; returns the outputs."""
-    outs = [np.empty(s, dt) for s, dt in out_shapes]
-    bufs = [cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, o.nbytes) for o in outs]
-    kernel(device.queue, (n,), None, *args, *bufs)
-    for o, b in zip(outs, bufs):
-        cl.enqueue_copy(device.queue, o, b)
-    return outs
-
-
-def keys_for(n, stream=7):
-    return np.stack([np.arange(n), np.full(n, stream)], -1).astype(np.uint32)
-
-
-def gp_args(device, kernel, mean=Constant(0.0)):
-    """Device arguments (kernel, mean nodes, count, order table, count) of a GPIS."""
-    nodes, cdf = pack_mean(mean), ws.order_table(kernel)
-    return (buf(device, pack_kernel(kernel)), buf(device, nodes), np.int32(len(nodes)),
-            buf(device, cdf), np.int32(len(cdf)))
-
-
-def dump(device, prg, kernel, keys, m, obj=0):
-    """theta (R, M, 3), tau (R, M), w (R, M) of realizations keys, as the device draws them."""
-    kp, _, _, cdf, nc = gp_args(device, kernel)
-    (out,) = run(device, prg["ws_dump"], len(keys), kp, cdf, nc, np.int32(m), buf(device, keys),
-                 np.int32(obj), out_shapes=[((len(keys), m, 5), np.float32)])
-    out = out.astype(np.float64)
-    return out[..., :3], out[..., 3], out[..., 4]
-
 
 @pytest.fixture(scope="module")
 def prg(device):
@@ -147,7 +32,7 @@ def test_philox_lanes_match_random123(device, prg):
     """The vector Philox equals pyopencl's philox.cl and the numpy twin, bit for bit."""
     keys = np.random.default_rng(3).integers(0, 2**32, (300, 2), dtype=np.uint32)
     for call in (0, 1, 7):
-        mine, ref = run(device, prg["ws_philox_check"], 300, buf(device, keys), np.int32(5),
+        mine, ref = run(device, prg["ws_philox_check"], 300, buffer(device, keys), np.int32(5),
                         np.uint32(call), out_shapes=[((300, 4), np.uint32)] * 2)
         np.testing.assert_array_equal(mine, ref)
         ctr = np.stack([keys[:, 0], keys[:, 1], np.full(300, 5), np.arange(300)], -1)
@@ -171,20 +56,6 @@ def test_features_match_numpy_streams(device, prg, kernel):
         assert np.all(np.abs(w[r] - w2) <= 8 * EPS * (np.abs(w2) + 6))
 
 
-def eval_tolerance(theta, tau, w, variance, x):
-    """Float32 error bound of ws_eval: phase = 3 products + 3 sums (gamma_6 of its absolute
-    terms), cos/sin polynomials ~4 eps absolute, M-term summation gamma_M."""
-    m = theta.shape[-2]
-    amp = np.sqrt(2 * variance / m)
-    phase_terms = np.abs(x[:, None, :] * theta[None]).sum(-1) + tau[None]       # (P, M)
-    e = 6 * EPS * phase_terms + 4 * EPS
-    aw = np.abs(w)[None]
-    value = amp * (aw * e).sum(-1) + amp * m * EPS * aw.sum(-1)
-    grad = amp * (aw * e * np.linalg.norm(theta, axis=-1)[None]).sum(-1) * (1 + m * EPS)
-    mean = 8 * EPS * (2 + np.abs(x).sum(-1))     # float distance of O(1) means at |x|
-    return value + mean, grad + 4 * mean
-
-
 @pytest.mark.parametrize("kernel", KERNELS, ids=lambda k: k.kind)
 def test_eval_matches_numpy(device, prg, kernel):
     m, per_key = 37, 64                        # 37: a partial last chunk of lanes
@@ -195,7 +66,7 @@ def test_eval_matches_numpy(device, prg, kernel):
     x[:per_key] *= 10                          # |x| ~ 20: larger phases
     x = x.astype(np.float32)
     (out,) = run(device, prg["ws_eval_points"], len(x), *gp_args(device, kernel, MEAN),
-                 np.int32(m), buf(device, keys), np.int32(0), np.int32(per_key), buf(device, x),
+                 np.int32(m), buffer(device, keys), np.int32(0), np.int32(per_key), buffer(device, x),
                  out_shapes=[((len(x), 4), np.float32)])
     for r in range(len(keys)):
         xs = x[r * per_key:(r + 1) * per_key].astype(np.float64)
@@ -219,8 +90,8 @@ def test_realizations_have_the_kernel_covariances(device, prg, kernel):
     mean = Sphere(radius=0.5)
     x = np.tile(np.stack([A, B]), (N_REALIZATIONS, 1)).astype(np.float32)
     (out,) = run(device, prg["ws_eval_points"], len(x), *gp_args(device, kernel, mean),
-                 np.int32(24), buf(device, keys_for(N_REALIZATIONS, 11)), np.int32(2),
-                 np.int32(2), buf(device, x), out_shapes=[((len(x), 4), np.float32)])
+                 np.int32(24), buffer(device, keys_for(N_REALIZATIONS, 11)), np.int32(2),
+                 np.int32(2), buffer(device, x), out_shapes=[((len(x), 4), np.float32)])
     out = out.astype(np.float64).reshape(N_REALIZATIONS, 2, 4)
     mv, mg = mean.value_and_gradient(np.stack([A, B]))
     fa, fb = out[:, 0, 3] - mv[0], out[:, 1, 3] - mv[1]
@@ -242,7 +113,7 @@ def test_lanes_do_not_change_the_realization(device, prg):
     x = np.random.default_rng(4).uniform(-2, 2, (3 * 8, 3)).astype(np.float32)
     def values(p):
         return run(device, p["ws_eval_points"], len(x), *gp_args(device, kernel, MEAN),
-                   np.int32(m), buf(device, keys), np.int32(0), np.int32(8), buf(device, x),
+                   np.int32(m), buffer(device, keys), np.int32(0), np.int32(8), buffer(device, x),
                    out_shapes=[((len(x), 4), np.float32)])[0]
     v8 = values(prg)
     for lanes in (1, 16):
@@ -256,8 +127,8 @@ def test_lanes_do_not_change_the_realization(device, prg):
 def test_lambda2_is_the_spectral_second_moment(device, prg):
     d = np.random.default_rng(1).normal(size=(16, 3)).astype(np.float32)
     for kernel in KERNELS:
-        (out,) = run(device, prg["ws_lambda2_k"], 16, buf(device, pack_kernel(kernel)),
-                     buf(device, d), out_shapes=[((16,), np.float32)])
+        (out,) = run(device, prg["ws_lambda2_k"], 16, buffer(device, pack_kernel(kernel)),
+                     buffer(device, d), out_shapes=[((16,), np.float32)])
         ref = [ws.spectral_moment2(kernel, di) for di in d.astype(np.float64)]
         np.testing.assert_allclose(out, ref, rtol=8 * EPS)
 
@@ -305,7 +176,7 @@ def test_sincos_error_is_within_its_bound(device, prg):
     rng = np.random.default_rng(8)
     x = np.concatenate([rng.uniform(-7, 7, 1 << 16), rng.uniform(-2.0**15, 2.0**15, 1 << 16),
                         np.arange(-64, 65) * np.pi / 4]).astype(np.float32)
-    (out,) = run(device, prg["ws_sincos_k"], len(x), buf(device, x),
+    (out,) = run(device, prg["ws_sincos_k"], len(x), buffer(device, x),
                  out_shapes=[((len(x), 2), np.float32)])
     xd = x.astype(np.float64)
     # the reduction's last part rounds at eps |x| 2^-24 (exact parts above it)
@@ -324,8 +195,8 @@ def test_cached_affine_equals_regenerated(device, prg, kernel):
     d = rng.normal(size=(n, 3)).astype(np.float32)
     tmh = np.stack([rng.uniform(0, 2, n), 10.0 ** rng.uniform(-4, 0.5, n)], -1)
     a, b = run(device, prg["ws_affine_both"], n, *gp_args(device, kernel)[:1],
-               *gp_args(device, kernel)[3:], np.int32(m), buf(device, keys_for(n)),
-               buf(device, o), buf(device, d), buf(device, tmh.astype(np.float32)),
+               *gp_args(device, kernel)[3:], np.int32(m), buffer(device, keys_for(n)),
+               buffer(device, o), buffer(device, d), buffer(device, tmh.astype(np.float32)),
                out_shapes=[((n, 4), np.float32)] * 2)
     np.testing.assert_array_equal(a, b)
     assert np.all(np.isfinite(a)) or kernel.kind == "thin_plate"

@@ -9,96 +9,12 @@ from gpiscl.host.gp import (Box, Constant, LocallyPeriodic, Matern32, Matern52, 
                             sample_frequencies)
 from gpiscl.host.gp import weight_space as ws
 from gpiscl.host.layout.gp_records import pack_mean
-from stats import z_threshold
-from test_ws_features import ROT, build, buf, dump, eval_tolerance, gp_args, keys_for, run
+from gpiscl.testing.stats import z_threshold
+from gpiscl.testing.weight_space import (ROT, WS_BOUND_WRAPPERS, assert_tents_contain, build, dump,
+                                         eval_tolerance, gp_args, host_values, keys_for,
+                                         random_rays, roots_and_scan, run)
+from gpiscl.testing.wrappers import buffer
 
-EXTRA = r"""
-__kernel void ws_tents_k(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
-                         __global const float* cdf, int nc, int M, __global const uint2* keys,
-                         __global const float* o, __global const float* d,
-                         __global const float2* ab, int npts, __global float* tents,
-                         __global float2* vals)
-{
-    int r = get_global_id(0);
-    float3 O = vload3(r, o), D = vload3(r, d), g;
-    float a = ab[r].x, b = ab[r].y;
-    WsTents T = ws_tents(kp[0], mean, mc, cdf, nc, M, keys[r], 0, O, D, a, b,
-                         ws_mean_lipschitz(mean, mc));
-    float t9[9] = {T.lo_k, T.lo_a, T.lo_m, T.lo_b, T.hi_k, T.hi_a, T.hi_m, T.hi_b, T.round};
-    for (int j = 0; j < 9; ++j) tents[9 * r + j] = t9[j];
-    for (int j = 0; j < npts; ++j) {
-        float t = j == npts - 1 ? b : a + (b - a) * ((float)j / (float)(npts - 1));
-        vals[r * npts + j] = (float2)(t, ws_eval(kp[0], mean, mc, cdf, nc, M, keys[r], 0,
-                                                 O + t * D, &g));
-    }
-}
-
-__kernel void ws_roots_k(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
-                         __global const float* cdf, int nc, int M, __global const uint2* keys,
-                         __global const float* o, __global const float* d, float t0, float t1,
-                         float tol, __global float4* hit, __global int2* st)
-{
-    int r = get_global_id(0), status, its;
-    float3 n;
-    float t = ws_first_root_counted(kp[0], mean, mc, cdf, nc, M, keys[r], 0, vload3(r, o),
-                                    vload3(r, d), t0, t1, tol, &n, &status, &its);
-    hit[r] = (float4)(n, t);
-    st[r] = (int2)(status, its);
-}
-
-/* every hit along (t0, t1]: each search restarts at the last hit, where f < 0 */
-__kernel void ws_count_k(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
-                         __global const float* cdf, int nc, int M, __global const uint2* keys,
-                         __global const float* o, __global const float* d, float t1, float tol,
-                         __global int2* out)
-{
-    int r = get_global_id(0), n = 0, status = 0;
-    float t = 0.0f;
-    float3 nrm;
-    for (;;) {
-        t = ws_first_root(kp[0], mean, mc, cdf, nc, M, keys[r], 0, vload3(r, o), vload3(r, d),
-                          t, t1, tol, &nrm, &status);
-        if (status != WS_STATUS_OK || t >= T_INFINITY) break;
-        ++n;
-    }
-    out[r] = (int2)(n, status);
-}
-
-/* a first root from outside, then a second search leaving it: origin x = root - inset n,
- * direction at cos(angle) u.x to the normal n, azimuth 2 pi u.y, length u.w */
-__kernel void ws_restart_k(__global const GpKernel* kp, __global const MeanNode* mean, int mc,
-                           __global const float* cdf, int nc, int M, __global const uint2* keys,
-                           __global const float* o, __global const float* d, float t1, float tol,
-                           __global const float4* u, __global float* x_out,
-                           __global float* d_out, __global float* hit, __global int4* st)
-{
-    int r = get_global_id(0), status, status2 = 0, evals2 = 0;
-    float3 n, n2;
-    float t = ws_first_root(kp[0], mean, mc, cdf, nc, M, keys[r], 0, vload3(r, o),
-                           vload3(r, d), 0.0f, t1, tol, &n, &status);
-    float3 x = vload3(r, o) + t * vload3(r, d), dir = n;
-    float t2 = T_INFINITY;
-    if (status == WS_STATUS_OK && t < T_INFINITY) {
-        float4 ur = u[r];
-        float3 e1 = normalize(cross(fabs(n.x) > 0.5f ? (float3)(0, 1, 0) : (float3)(1, 0, 0), n));
-        float3 e2 = cross(n, e1);
-        float s = sqrt(fmax(1.0f - ur.x * ur.x, 0.0f)), phi = 6.28318531f * ur.y;
-        dir = ur.x * n + s * (cos(phi) * e1 + sin(phi) * e2);
-        x -= ur.z * n;
-        t2 = ws_first_root_counted(kp[0], mean, mc, cdf, nc, M, keys[r], 0, x, dir, 0.0f, ur.w,
-                                   tol, &n2, &status2, &evals2);
-    }
-    vstore3(x, r, x_out);
-    vstore3(dir, r, d_out);
-    hit[r] = t2;
-    st[r] = (int4)(status, t < T_INFINITY, status2, evals2);
-}
-
-__kernel void ws_lipschitz_k(__global const MeanNode* mean, int mc, __global float* out)
-{
-    out[0] = ws_mean_lipschitz(mean, mc);
-}
-"""
 KERNELS = [SquaredExponential(sigma=0.5, length_scale=0.5, aniso=(1.0, 0.5, 2.0)),
            RationalQuadratic(sigma=0.75, length_scale=0.625, alpha=0.75),
            Periodic(sigma=0.5, length_scale=1.0, w=0.375),
@@ -110,34 +26,9 @@ MEANS = [Transform(Sphere(radius=1.0), RIGID), Constant(0.3),
                Transform(Torus(major=0.75, minor=0.25), np.diag([1.5, 1.0, 0.75, 1.0])))]
 
 
-def assert_tents_contain(tents, ab, t, *values):
-    """Each ray's piecewise-linear bounds (ws_tents_k's 9 numbers on [a, b]) contain every
-    one of the given value arrays (rays x points at parameters t)."""
-    for r in range(len(tents)):
-        (lk, la, lm, lb, hk, ha, hm, hb, _), (a_, b_) = tents[r].astype(float), ab[r]
-        lo = np.interp(t[r], [a_, lk, b_], [la, lm, lb])
-        hi = np.interp(t[r], [a_, hk, b_], [ha, hm, hb])
-        for v in values:
-            assert np.all((lo <= v[r]) & (v[r] <= hi)), (r, np.min(v[r] - lo), np.min(hi - v[r]))
-
-
 @pytest.fixture(scope="module")
 def prg(device):
-    return build(device, EXTRA)
-
-
-def random_rays(rng, n, spread=2.0):
-    o = rng.uniform(-spread, spread, (n, 3))
-    d = rng.normal(size=(n, 3))
-    return o.astype(np.float32), (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
-
-
-def host_values(theta, tau, w, kernel, mean, o, d, t):
-    """f in float64 along rays: (R, T) values at parameters t (R, T) or (T,)."""
-    t = np.broadcast_to(t, (len(o), np.shape(t)[-1]))
-    x = o[:, None, :].astype(float) + t[..., None] * d[:, None, :].astype(float)
-    return np.stack([ws.evaluate(theta[r], tau[r], w[r], kernel.variance, x[r], mean)[0]
-                     for r in range(len(o))])
+    return build(device, WS_BOUND_WRAPPERS)
 
 
 @pytest.mark.parametrize("case", range(len(KERNELS) * len(MEANS)))
@@ -156,7 +47,7 @@ def test_bounds_contain_every_point_evaluation(device, prg, case):
     ab = np.stack([a, a + 2 * half], -1).astype(np.float32)
     keys = keys_for(n, 21 + case)
     tents, vals = run(device, prg["ws_tents_k"], n, *gp_args(device, kernel, mean), np.int32(m),
-                      buf(device, keys), buf(device, o), buf(device, d), buf(device, ab),
+                      buffer(device, keys), buffer(device, o), buffer(device, d), buffer(device, ab),
                       np.int32(npts), out_shapes=[((n, 9), np.float32), ((n, npts, 2), np.float32)])
     theta, tau, w = dump(device, prg, kernel, keys, m)
     t = vals[..., 0].astype(float)
@@ -170,28 +61,13 @@ ROOT_CASES = [(KERNELS[0], MEANS[0], 512), (KERNELS[1], MEANS[1], 256),
               (Matern52(sigma=0.5, length_scale=0.5), MEANS[1], 128)]
 
 
-def roots_and_scan(device, prg, kernel, mean, o, d, keys, m, t0, t1, tol):
-    """The device's first roots of realizations `keys` along rays o + t d, t in [t0, t1]
-    (every search decided), and a dense float64 scan of the same realizations (spacing
-    l / 200): hit (n, 4: normal, t), the scan's brackets t_lo, t_hi, its points ts, and
-    the features (theta, tau, w)."""
-    n = len(o)
-    hit, st = run(device, prg["ws_roots_k"], n, *gp_args(device, kernel, mean), np.int32(m),
-                  buf(device, keys), buf(device, o), buf(device, d), np.float32(t0),
-                  np.float32(t1), np.float32(tol),
-                  out_shapes=[((n, 4), np.float32), ((n, 2), np.int32)])
-    assert np.all(st[:, 0] == 0)
-    theta, tau, w = dump(device, prg, kernel, keys, m)
-    ts = np.linspace(t0, t1, int((t1 - t0) / (kernel.length_scale / 200)) + 1)
-    t_lo, t_hi = ws.dense_scan_first_root(host_values(theta, tau, w, kernel, mean, o, d, ts), ts)
-    return hit, t_lo, t_hi, ts, (theta, tau, w)
-
-
 @pytest.mark.parametrize("case", range(len(ROOT_CASES)))
-def test_first_roots_match_a_dense_scan(device, prg, case):
+@pytest.mark.long
+def test_first_roots_match_a_dense_scan(device, prg, long_run, case):
     """No crossing that a dense float64 scan finds is ever skipped, and every reported
     root is a genuine >= 0 -> < 0 crossing within tol of the scan's bracket."""
     kernel, mean, n = ROOT_CASES[case]
+    n = n if long_run else n // 4   # the dense scans are the cost
     rng = np.random.default_rng(7 + case)
     m, t0, t1 = 64, 0.0, 4.0
     tol = 1e-4 * kernel.length_scale
@@ -255,8 +131,8 @@ def test_crossing_rate_matches_rice(device, prg, case):
     o = rng.uniform(-3, 3, (n, 3)).astype(np.float32)
     dirs = np.tile(d, (n, 1)).astype(np.float32)
     (out,) = run(device, prg["ws_count_k"], n, *gp_args(device, kernel, Constant(u)),
-                 np.int32(m), buf(device, keys_for(n, 90 + case)), buf(device, o),
-                 buf(device, dirs), np.float32(length), np.float32(1e-4 * kernel.length_scale),
+                 np.int32(m), buffer(device, keys_for(n, 90 + case)), buffer(device, o),
+                 buffer(device, dirs), np.float32(length), np.float32(1e-4 * kernel.length_scale),
                  out_shapes=[((n, 2), np.int32)])
     assert np.all(out[:, 1] == 0)
     rate, rate_se = out[:, 0].mean() / length, out[:, 0].std(ddof=1) / np.sqrt(n) / length
@@ -270,7 +146,8 @@ def test_crossing_rate_matches_rice(device, prg, case):
     assert z < z_threshold(len(RICE_CASES)), (rate, target, closed, z)
 
 
-def test_searches_leaving_a_root_decide_and_match_a_dense_scan(device, prg):
+@pytest.mark.long
+def test_searches_leaving_a_root_decide_and_match_a_dense_scan(device, prg, long_run):
     """Regression: bounce and shadow rays start exactly at a previous root (f < 0 within
     rounding of 0) and leave outwards, often grazing, where |f| stays within the bound's
     rounding floor for many tol; the search once shrank its step there below tol and hit
@@ -278,7 +155,7 @@ def test_searches_leaving_a_root_decide_and_match_a_dense_scan(device, prg):
     scan. Leaving the inside needs f above rounding noise (ws_first_root_counted), so a
     bump above zero no higher than the evaluation error may be stepped over."""
     kernel, mean = SquaredExponential(sigma=0.1, length_scale=0.1), Sphere(radius=1.0)
-    m, n = 64, 256
+    m, n = 64, (256 if long_run else 64)   # the dense scans are the cost
     rng = np.random.default_rng(17)
     tol, length = 1e-4 * kernel.length_scale, 2.5
     o = rng.normal(size=(n, 3))
@@ -293,9 +170,9 @@ def test_searches_leaving_a_root_decide_and_match_a_dense_scan(device, prg):
     u = np.stack([cos, rng.uniform(size=n), inset, np.full(n, length)], -1).astype(np.float32)
     keys = keys_for(n, 77)
     x, dirs, hit, st = run(device, prg["ws_restart_k"], n, *gp_args(device, kernel, mean),
-                           np.int32(m), buf(device, keys), buf(device, o.astype(np.float32)),
-                           buf(device, d.astype(np.float32)), np.float32(5.0), np.float32(tol),
-                           buf(device, u), out_shapes=[((n, 3), np.float32), ((n, 3), np.float32),
+                           np.int32(m), buffer(device, keys), buffer(device, o.astype(np.float32)),
+                           buffer(device, d.astype(np.float32)), np.float32(5.0), np.float32(tol),
+                           buffer(device, u), out_shapes=[((n, 3), np.float32), ((n, 3), np.float32),
                                                        ((n,), np.float32), ((n, 4), np.int32)])
     assert np.all(st[:, 0] == 0) and np.mean(st[:, 1]) > 0.9
     assert np.all(st[:, 2] == 0), f"{np.sum(st[:, 2] != 0)} undecided"
@@ -325,7 +202,7 @@ def test_lipschitz_of_packed_means(device, prg):
                            (Transform(Sphere(), np.diag([2.0, 2.0, 2.0, 1.0])), 1.0),
                            (MEANS[3], None)]:
         nodes = pack_mean(mean)
-        (lip,) = run(device, prg["ws_lipschitz_k"], 1, buf(device, nodes), np.int32(len(nodes)),
+        (lip,) = run(device, prg["ws_lipschitz_k"], 1, buffer(device, nodes), np.int32(len(nodes)),
                      out_shapes=[((1,), np.float32)])
         grads = mean.value_and_gradient(rng.uniform(-3, 3, (4000, 3)))[1]
         assert np.max(np.linalg.norm(grads, axis=1)) <= lip[0] * (1 + 1e-6)
@@ -336,13 +213,13 @@ def test_lipschitz_of_packed_means(device, prg):
 def test_failures_are_reported(device, prg):
     o, d = random_rays(np.random.default_rng(1), 8)
     keys = keys_for(8)
-    args = (np.int32(16), buf(device, keys), buf(device, o), buf(device, d), np.float32(0),
+    args = (np.int32(16), buffer(device, keys), buffer(device, o), buffer(device, d), np.float32(0),
             np.float32(50), np.float32(1e-5))
     shapes = [((8, 4), np.float32), ((8, 2), np.int32)]
     hit, st = run(device, prg["ws_roots_k"], 8, *gp_args(device, ThinPlate()), *args,
                   out_shapes=shapes)
     assert np.all(st[:, 0] == 2) and np.all(hit[:, 3] >= 1e30)        # WS_STATUS_NAN
-    capped = build(device, EXTRA, options=["-DWS_MAX_ITER=3"])
+    capped = build(device, WS_BOUND_WRAPPERS, options=["-DWS_MAX_ITER=3"])
     hit, st = run(device, capped["ws_roots_k"], 8, *gp_args(device, KERNELS[0], Constant(2.0)),
                   *args, out_shapes=shapes)
     assert np.all(st[:, 0] == 1) and np.all(hit[:, 3] >= 1e30)        # WS_STATUS_ITER_CAP

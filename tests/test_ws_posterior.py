@@ -10,9 +10,10 @@ from gpiscl.host.gp import RationalQuadratic, Sphere, SquaredExponential
 from gpiscl.host.gp import weight_space as ws
 from gpiscl.host.layout.gp_records import pack_kernel, pack_mean
 from gpiscl.host.gp.posterior import Posterior, solve_triangular, surface_observations
-from stats import assert_agree, z_threshold
-from test_posterior_render import fibonacci_sphere, noisy_sphere_points, run, sphere_scene
-from test_ws_features import build, buf, dump, eval_tolerance, keys_for
+from gpiscl.testing.stats import assert_agree, z_threshold
+from gpiscl.testing.scenes import fibonacci_sphere, noisy_sphere_points, render_checked, sphere_scene
+from gpiscl.testing.weight_space import build, dump, eval_tolerance, keys_for
+from gpiscl.testing.wrappers import buffer
 
 
 def launch(device, kernel, n, *args, out_shapes):
@@ -119,16 +120,16 @@ def device_args(device, kernel, mean, post):
     prog = pack_mean(mean)
     nodes = np.concatenate([other, PC.pack_posterior(post), prog])
     cdf = ws.order_table(kernel)
-    return (buf(device, pack_kernel(kernel)), buf(device, nodes),
-            np.int32(len(nodes) - len(prog)), np.int32(len(prog)), buf(device, cdf),
+    return (buffer(device, pack_kernel(kernel)), buffer(device, nodes),
+            np.int32(len(nodes) - len(prog)), np.int32(len(prog)), buffer(device, cdf),
             np.int32(len(cdf)))
 
 
 def probe(device, prg, args, rows, m, keys, x):
     """f_post (R, P) and gradients (R, P, 3) at x (R, P, 3), and v (R, rows)."""
     r, p = x.shape[:2]
-    out, v = launch(device, prg["post_probe"], r * p, *args, np.int32(m), buf(device, keys),
-                    np.int32(p), buf(device, x.reshape(-1, 3).astype(np.float32)),
+    out, v = launch(device, prg["post_probe"], r * p, *args, np.int32(m), buffer(device, keys),
+                    np.int32(p), buffer(device, x.reshape(-1, 3).astype(np.float32)),
                     out_shapes=[((r * p, 4), np.float32), ((r, rows), np.float64)])
     return out[:, 3].reshape(r, p), out[:, :3].reshape(r, p, 3), v
 
@@ -244,8 +245,8 @@ def test04_bounds_contain_every_point_evaluation(device, prg, kind):
     a = rng.uniform(0.0, 1.0, n)
     ab = np.stack([a, a + 2 * half], -1).astype(np.float32)
     keys = keys_for(n, 41)
-    tents, vals = launch(device, prg["post_tents"], n, *args, np.int32(m), buf(device, keys),
-                         buf(device, o), buf(device, d), buf(device, ab), np.int32(npts),
+    tents, vals = launch(device, prg["post_tents"], n, *args, np.int32(m), buffer(device, keys),
+                         buffer(device, o), buffer(device, d), buffer(device, ab), np.int32(npts),
                          out_shapes=[((n, 9), np.float32), ((n, npts, 2), np.float32)])
     _, _, v = probe(device, prg, args, len(post.obs), m, keys, np.zeros((n, 1, 3), np.float32))
     theta, tau, w = dump(device, prg, kernel, keys, m)
@@ -261,14 +262,15 @@ def test04_bounds_contain_every_point_evaluation(device, prg, kind):
             assert np.all((lo <= val) & (val <= hi)), (r, np.min(val - lo), np.min(hi - val))
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("kind", ["se", "rq"])
-def test05_first_roots_match_a_dense_scan(device, prg, kind):
+def test05_first_roots_match_a_dense_scan(device, prg, long_run, kind):
     """The certified search on posterior realizations misses no crossing that a dense
     float64 scan of the same realization (device features and v) finds, and every root
     it reports is a genuine >= 0 -> < 0 crossing."""
     rng = np.random.default_rng(5)
     kernel, mean, post, args = setup(device, kind, rng)
-    n, m, t0, t1 = 192, 64, 0.0, 5.0
+    n, m, t0, t1 = (192 if long_run else 64), 64, 0.0, 5.0   # the dense scans are the cost
     tol = 1e-4 * kernel.length_scale
     # rays from a shell of radius 2.5 towards points near the sphere (most hit it)
     o = rng.normal(size=(n, 3))
@@ -277,8 +279,8 @@ def test05_first_roots_match_a_dense_scan(device, prg, kind):
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     o, d = o.astype(np.float32), d.astype(np.float32)
     keys = keys_for(n, 60)
-    hit, st = launch(device, prg["post_roots"], n, *args, np.int32(m), buf(device, keys),
-                     buf(device, o), buf(device, d), np.float32(t0), np.float32(t1),
+    hit, st = launch(device, prg["post_roots"], n, *args, np.int32(m), buffer(device, keys),
+                     buffer(device, o), buffer(device, d), np.float32(t0), np.float32(t1),
                      np.float32(tol), out_shapes=[((n, 4), np.float32), ((n, 2), np.int32)])
     assert np.all(st[:, 0] == 0)
     print("evaluations per search: mean", st[:, 1].mean(), "max", st[:, 1].max(),
@@ -332,21 +334,23 @@ def test06_scene_key_accepts_weight_space(tmp_path):
         load_scene(s)
 
 
-def test07_render_agrees_with_function_space(device, tmp_path):
-    """The reconstructed sphere of test_posterior_render.test04 (prior radius 1.2, sigma
+@pytest.mark.long
+def test07_render_agrees_with_function_space(device, tmp_path, long_run):
+    """The reconstructed sphere of test_posterior_render.py (prior radius 1.2, sigma
     0.05, 100 noisy points of the unit sphere): weight space (M = 1024, pathwise) and
     function space (exact conditioning) render the same expected image, per pixel and in
     4x4 blocks; the weight-space prior alone differs measurably (the test has power).
-    Measured max |z|: 3.1 per pixel, 2.2 per block; the prior 6.1 and 5.4."""
-    sigma, spp = 0.05, 32
+    Measured max |z|: 3.1 per pixel, 2.2 per block; the prior 6.1 and 5.4. The short form
+    renders 12x12 pixels instead of 16x16 at the same spp (a pixel's power is unchanged)."""
+    sigma, spp, res = 0.05, 32, (16 if long_run else 12)
     pts = noisy_sphere_points(tmp_path / "pts.xyz", 100, 0.05 * sigma)
     obs = {"file": pts, "noise": 0.05 * sigma}
-    fs = run(sphere_scene(1.2, sigma, spp, obs, seed=3), device)
+    fs = render_checked(sphere_scene(1.2, sigma, spp, obs, seed=3, res=res), device).image
     images = {}
     for name, o in (("posterior", obs), ("prior", None)):
-        s = sphere_scene(1.2, sigma, spp, o, seed=4)
+        s = sphere_scene(1.2, sigma, spp, o, seed=4, res=res)
         s["shapes"][0]["sampler"] = {"type": "weight_space", "features": 1024}
-        images[name] = run(s, device)
+        images[name] = render_checked(s, device).image
     wsi = images["posterior"]
     assert_agree(wsi.mean, wsi.stderr, fs.mean, fs.stderr, what="ws vs fs posterior")
     assert_agree(wsi.mean, wsi.stderr, fs.mean, fs.stderr, block=4,

@@ -217,19 +217,18 @@ def main():
 
     if args.no_render:
         return
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
-    from test_fs_render import LIGHTS, fs, gpis_scene
+    from gpiscl.testing.scenes import SUN_AND_SKY, function_space_sampler, gpis_scene
     from gpiscl import render_result
     print("\nfull render, 32x32 x 16 spp, rough GPIS ball (diffuse 0.9, sun + sky)")
     print(f"{'sampler':>24}{'paths/s':>12}{'rays/path':>11}")
     samplers = [("weight_space M=256", {"type": "weight_space", "features": 256}, None)]
-    samplers += [(f"function_space {m}", fs(m, memory_cap=64), None)
+    samplers += [(f"function_space {m}", function_space_sampler(m, memory_cap=64), None)
                  for m in ("none", "renewal", "renewal_plus", "global")]
     # renewal_plus with sigma(x) and l(x): analytic fields, and the same sampled on grids
-    samplers += [(f"rp {kind} fields", fs("renewal_plus"), fields)
+    samplers += [(f"rp {kind} fields", function_space_sampler("renewal_plus"), fields)
                  for kind, fields in field_variants().items()]
     for name, sampler, fields in samplers:
-        scene = gpis_scene(sampler, "diffuse", 0.9, LIGHTS, 16, seed=7, max_depth=64,
+        scene = gpis_scene(sampler, "diffuse", 0.9, SUN_AND_SKY, 16, seed=7, max_depth=64,
                            rr_start=8)
         scene["camera"]["resolution"] = [32, 32]
         if fields:

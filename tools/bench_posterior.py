@@ -115,12 +115,11 @@ def render_cost(sizes, resolution: int, spp: int, repeats: int):
     (a rough prior of radius 1.2 conditioned on n noisy points of the unit sphere), both
     samplers, and the ratio to each sampler's prior (n = 0), same run."""
     import tempfile
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from bench_occupancy import time_variants
     from gpiscl.host.render.device import Device
     from gpiscl.host.scene.loading import load_scene
-    from test_posterior_render import noisy_sphere_points, sphere_scene
+    from gpiscl.testing.scenes import noisy_sphere_points, sphere_scene
     folder = Path(tempfile.mkdtemp())
     variants = {}
     for n in sizes:

@@ -134,7 +134,7 @@ DEFAULT_SCENES = ("scenes/ws_sphere_se.json", "scenes/ws_sphere_rq.json", "poste
 def posterior_sphere(folder: Path) -> Path:
     """ws_sphere_se with its mean widened to radius 1.1 and conditioned on 100 points of
     the unit sphere (noise 5% of sigma): a weight-space posterior like
-    tests/test_ws_posterior.test07."""
+    tests/test_ws_posterior.py renders."""
     scene = json.loads((ROOT / "scenes/ws_sphere_se.json").read_text())
     g = next(s for s in scene["shapes"] if s["type"] == "gpis")
     n = 100

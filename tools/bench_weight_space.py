@@ -42,7 +42,7 @@ from gpiscl.host.layout.gp_records import pack_kernel, pack_mean  # noqa: E402
 C_SOURCE = Path(__file__).resolve().parent / "ws_feature_loop.c"
 KERNEL = SquaredExponential(sigma=0.1, length_scale=0.1)
 RADIUS, PROXY, TOL = 1.0, 1.6, 1e-4 * 0.1
-# the renderer's fixed work-group size (gpiscl/host/device.py). PoCL replicates
+# the renderer's fixed work-group size (gpiscl/host/render/device.py). PoCL replicates
 # bench_eval_cached's private feature cache per work-item (its loops have uniform trip
 # counts) and overflows the stack from ~512 up; ws_first_root_counted's cache is not.
 LOCAL = 64

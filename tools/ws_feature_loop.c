@@ -9,7 +9,7 @@
  * over chunks of features so that gcc calls glibc's vector sinf/cosf (libmvec): the same
  * arithmetic, ~10x faster on AVX-512.
  *
- * The search mirrors ws_first_root_counted (gpiscl/kernels_cl/ws_intersect.h) for one mean,
+ * The search mirrors ws_first_root_counted (kernels_cl/lib/ws_intersect.h) for one mean,
  * a sphere of radius `radius` at the origin (Lipschitz 1), so that rays per second compare
  * like for like: same bound, same step rules, same evaluation counts up to float rounding.
  */

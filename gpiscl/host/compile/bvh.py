@@ -1,7 +1,7 @@
 """Binned-SAH bounding volume hierarchy over primitive boxes, built breadth first.
 
 All nodes of one tree level are split together with numpy, so the Python loop runs once
-per level rather than once per node. Layout (kernels_cl/bvh.h): node 0 is the root, the
+per level rather than once per node. Layout (kernels_cl/lib/bvh.h): node 0 is the root, the
 two children of an inner node are adjacent, leaves index a contiguous run of `order`.
 """
 from __future__ import annotations

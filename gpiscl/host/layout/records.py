@@ -180,6 +180,12 @@ COUNTERS = {"rays_out": 0, "hits": 1, "escaped": 2, "shadow": 3, "nan_paths": 4,
             # function-space work: flights (one object along one ray), GP values drawn,
             # step-rule moment evaluations (fs_march.h)
             "fs_flights": 8, "fs_samples": 9, "fs_evals": 10}
+# fs_march.h's profile (built with FS_PROFILE only, tools/profile_grid_scenes.py): whole
+# render, int32
+FS_PROFILE_COUNTERS = ("fs_steps", "fs_tries", "fs_cap_mean", "fs_cap_hmax", "fs_cap_grow",
+                       "fs_cap_end", "fs_hops", "fs_lip_scans", "fs_mean_evals",
+                       "fs_near_steps")
+COUNTERS.update({name: len(COUNTERS) + k for k, name in enumerate(FS_PROFILE_COUNTERS)})
 NUM_COUNTERS = len(COUNTERS)
 # Counters the host adds up into Python ints after each bounce and zeroes on the device, so
 # they cannot wrap however long the render (GP values drawn pass 2^31 at ~512^2 x 256 spp).
@@ -195,6 +201,8 @@ def _defines() -> str:
     for prefix, table in (("PRIM", PRIM_KINDS), ("COUNT", COUNTERS),
                           ("GPIS_PROXY", GPIS_PROXIES), ("GPIS_SAMPLER", GPIS_SAMPLERS)):
         lines += [f"#define {prefix}_{k.upper()} {v}" for k, v in table.items()]
+    lines += [f"#define FS_PROF_{k[3:].upper()} {i}" for i, k in enumerate(FS_PROFILE_COUNTERS)]
+    lines += [f"#define FS_PROF_COUNT {len(FS_PROFILE_COUNTERS)}"]
     lines += MEMORY_MODELS.c_enum() + MEMORY_MODELS.c_traits()
     # the kind tables' ids and traits, read at each call: a test's temporary kind shows
     lines += materials.c_declarations() + lights.c_declarations()

@@ -8,6 +8,8 @@ stride over the rays, so its size does not grow with the batch.
 """
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pyopencl as cl
 
@@ -117,6 +119,8 @@ class FunctionSpaceStages:
         self.post_rows = post_rows
         defines = FL.defines(int(fs["window"].max()), rows_cap, int(fs["refine"].max()),
                              post_rows)
+        if os.environ.get("GPISCL_FS_PROFILE"):   # fs_march.h's work counters (off: no code)
+            defines["FS_PROFILE"] = 1
         self.program = Program(self.device, FS_STAGE_FILES, defines=defines,
                                extra_headers=FS_HEADERS, extra_c=FL.c_declarations())
         if self.timings is not None:   # one kernel table for both programs

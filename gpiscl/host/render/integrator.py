@@ -261,7 +261,7 @@ class WavefrontIntegrator:
 
     def batch_radiance(self, n: int) -> np.ndarray:
         """(n, 4) float32: the radiance of the last batch's first n paths, as accumulate
-        reads it (what a cluster worker sends back: commands/cluster.py)."""
+        reads it (what a cluster worker sends back: distributed/cluster.py)."""
         out = np.empty((n, 4), np.float32)
         cl.enqueue_copy(self.device.queue, out, self.paths.buffers["radiance"])
         return out

@@ -1,4 +1,4 @@
-/* BVH traversal over all surface primitives (built on the host by gpiscl/host/bvh.py).
+/* BVH traversal over all surface primitives (built by gpiscl/host/compile/bvh.py).
  * Inner nodes store their two children adjacently; a leaf lists primitives directly
  * (the host reorders the primitive array into leaf order). */
 

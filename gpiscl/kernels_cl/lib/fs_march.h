@@ -32,6 +32,17 @@
 #endif
 #define FS_MEAN_Z 6.0
 #define FS_MEAN_HOPS 8             /* fs_mean_step */
+/* Work counters (FsResult.prof, layout/records.py FS_PROFILE_COUNTERS), compiled in only
+ * with FS_PROFILE (tools/profile_grid_scenes.py): off, no code and no argument at all. */
+#ifdef FS_PROFILE
+#define FS_PROF_ADD(k, v) (prof[FS_PROF_##k] += (v))
+#define FS_PROF_PARAM , int* prof
+#define FS_PROF_PASS , res.prof
+#else
+#define FS_PROF_ADD(k, v)
+#define FS_PROF_PARAM
+#define FS_PROF_PASS
+#endif
 /* FS_WINDOW, FS_H_MAX, FS_H_MIN, FS_ELL_CORR and the step rule's Gauss-Radau quadrature
  * FS_RULE_NODE* / FS_RULE_WEIGHT* (the node nearer the end first, so that most rejected
  * tries stop after one, see "Step rule"): layout/constants.py */
@@ -51,7 +62,21 @@ inline int fs_moments(GpKernel p, __global const MeanNode* mean, int mc, FsScrat
     S.rows[n + 1] = fs_obs(x, dn, FS_OBS_DERIV, 0.0);
     int st;
     if (S.post.n || gp_kernel_nonstationary(p)) {
-        st = fs_factor(p, mean, mc, S, n, n + 2);
+        /* fs_factor's fs_row_prep for both rows, sharing what the point shares: one
+         * mean-program run (value and gradient) and one field evaluation, the same numbers
+         * as two fs_row_prep calls (csg_baked's cubic mean and sigma grid: 2 -> 1 each) */
+        GpFieldsAt fx = fs_fields(p, mean, x);
+        if (gp_kernel_nonstationary(p)) {
+            fs_store_fields(S, n, fx);
+            fs_store_fields(S, n + 1, fx);
+        }
+        float3 gm;
+        S.mu[n] = (double)gp_mean_eval(mean, mc, convert_float3(x), &gm);
+        S.mu[n + 1] = dot(convert_double3(gm), dn);
+        for (int i = n; S.post.n && i < n + 2; ++i)
+            S.mu[i] += fs_post_solve(p, mean, S.post, x, dn, S.rows[i].kind, fx,
+                                     fs_post_v(S, i));
+        st = fs_factor_known(p, mean, S, n, n + 2);
     } else {
         float3 gm;
         S.mu[n] = (double)gp_mean_eval(mean, mc, convert_float3(x), &gm);
@@ -247,7 +272,7 @@ inline double fs_downcrossing_slope(double mean, double sd, double2 u)
  *    mean is the mean. */
 inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
                            FsRay ray, double3 dn, double ta, double hg, double m, double sd,
-                           double lip, int grid)
+                           double lip, int grid FS_PROF_PARAM)
 {
     if (!(lip > 0.0)) return hg;
     double reach = fmax(FS_MEAN_KAPPA * sd, fabs(m) - FS_MEAN_Z * sd), cap = reach / lip;
@@ -255,6 +280,7 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
     double he = fmin(hg, ray.t1 - ta);
     if (cap >= he) return hg;
     if (grid) {
+        FS_PROF_ADD(LIP_SCANS, 1);
         lip = (double)gp_mean_lipschitz_on(mean, mc, convert_float3(ray.o + ta * ray.d),
                                            convert_float3(ray.o + (ta + he) * ray.d))
               * length(ray.d);
@@ -273,6 +299,7 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
             /* converging onto the near zone, or out of hops */
             if (hop < 0.25 * FS_MEAN_KAPPA * sd / lip || k + 1 == FS_MEAN_HOPS) break;
             double mk = fs_prior_mean(mean, mc, ray.o + (ta + s) * ray.d, dn, FS_OBS_VALUE);
+            FS_PROF_ADD(HOPS, 1);
             if (!(mk * m > 0.0) || !(fabs(mk) > FS_MEAN_Z * sd)) break;
             mz = fabs(mk);
         }
@@ -287,7 +314,7 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
  * solve runs again: the same numbers as fs_mean_var's, bit for bit (the same operations
  * on the same point); else fs_mean_var (slot n as its work space). */
 inline double fs_start_mean(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
-                            int fixed, int n, double3 x, double3 dn, double* sd)
+                            int fixed, int n, double3 x, double3 dn, double* sd FS_PROF_PARAM)
 {
     int k = n - 1;
     if (n == fixed) {
@@ -297,6 +324,7 @@ inline double fs_start_mean(GpKernel p, __global const MeanNode* mean, int mc, F
         }
     }
     if (k < 0) {
+        FS_PROF_ADD(MEAN_EVALS, 1);
         double var, m = fs_mean_var(p, mean, mc, S, x, dn, FS_OBS_VALUE, n, &var);
         *sd = sqrt(var);
         return m;
@@ -355,6 +383,9 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
                                __global const FsObs* ring, FsRng rng, FsScratch S)
 {
     FsResult res = {0};
+#ifdef FS_PROFILE
+    int* prof = res.prof;
+#endif
     res.t = ray.t1;
     if (S.post.n > FS_POST_MAX) { res.status = FS_STATUS_ROWS; return res; }   /* no v cache */
     double fa;
@@ -382,6 +413,7 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
         : (double)gp_mean_lipschitz_on(mean, mc, convert_float3(ray.o + ray.t0 * ray.d),
                                        convert_float3(ray.o + ray.t1 * ray.d)) * dlen;
     int grid = lip > 0.0 && gp_mean_has_grid(mean, mc);
+    FS_PROF_ADD(LIP_SCANS, dt > 0.0 ? 0 : 1);
     FsScratch R = fs_rule_scratch(S);
     int nr = 0, r_new = FS_RULE_SAMPLES + 1;   /* rows of R; samples since it was built */
     int step = 0;
@@ -399,9 +431,19 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
             /* the rule on its small system R (see "Step rule"): 1-2 nodes per try */
             /* the mean's cap; its numbers at ta are a row's (fs_start_mean) */
             double sd0 = 0.0, m0 = lip > 0.0
-                ? fs_start_mean(p, mean, mc, S, fixed, n, ray.o + ta * ray.d, dn, &sd0) : 0.0;
-            h = fs_mean_step(p, mean, mc, S, ray, dn, ta, fmin(grow * h, FS_H_MAX * ell),
-                             m0, sd0, lip, grid);
+                ? fs_start_mean(p, mean, mc, S, fixed, n, ray.o + ta * ray.d, dn, &sd0
+                                FS_PROF_PASS) : 0.0;
+            double hg = fmin(grow * h, FS_H_MAX * ell);
+            h = fs_mean_step(p, mean, mc, S, ray, dn, ta, hg, m0, sd0, lip, grid FS_PROF_PASS);
+#ifdef FS_PROFILE
+            /* what set the first try: the ray's end, the mean cap, FS_H_MAX, the growth */
+            if (ta + fmin(h, hg) >= ray.t1) res.prof[FS_PROF_CAP_END]++;
+            else if (h < hg) res.prof[FS_PROF_CAP_MEAN]++;
+            else if (hg == FS_H_MAX * ell) res.prof[FS_PROF_CAP_HMAX]++;
+            else res.prof[FS_PROF_CAP_GROW]++;
+            res.prof[FS_PROF_NEAR_STEPS] += lip > 0.0
+                && fabs(m0) < (FS_MEAN_Z + FS_MEAN_KAPPA) * sd0;
+#endif
             if (r_new > FS_RULE_SAMPLES) {
                 nr = fs_rule_build(p, mean, mc, S, R, fixed, n, ray, ta,
                                    FS_H_MAX * ell, ell, &st);
@@ -414,12 +456,14 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
                  * times l_d (per t), relative to the tolerance; the try stops at the
                  * first node that takes the sum past 1 */
                 double r = 0.0;
+                FS_PROF_ADD(TRIES, 1);
                 for (int q = 0; q < 2 && r <= 1.0; ++q) {
                     FsMoments M;
                     st = fs_moments(p, mean, mc, R, nr, ray, dn,
                                     ta + (q ? FS_RULE_NODE1 : FS_RULE_NODE0) * hs, &M);
                     if (st) break;
                     res.evals++;
+                    FS_PROF_ADD(MEAN_EVALS, 1);
                     r += (q ? FS_RULE_WEIGHT1 : FS_RULE_WEIGHT0) * fs_return_rate(M, outside)
                          * dlen * ell / tol;
                 }
@@ -428,6 +472,7 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
                     tb = clipped ? ray.t1 : ta + hs;
                     /* the next step's first try: grow where the bound is slack */
                     grow = r < 0.05 ? 2.0 : (r < 0.3 ? 1.5 : 1.1);
+                    FS_PROF_ADD(STEPS, 1);
                     break;
                 }
                 h = 0.5 * hs;
@@ -441,6 +486,7 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
         fb = fs_sample_row(S.L, S.e, n, S.mu[n], fs_normal(rng, step, 0));
         S.rows[n].value = fb;
         res.samples++;
+        FS_PROF_ADD(MEAN_EVALS, 1);
         if (isnan(fb)) { res.status = FS_STATUS_NAN; return res; }
         ++n;
         if (outside && fb < 0.0) break;

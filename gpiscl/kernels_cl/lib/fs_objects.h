@@ -45,6 +45,9 @@ inline FsResult fs_object_flight(__constant RenderParams* params,
     atomic_inc(&counters[COUNT_FS_FLIGHTS]);
     atomic_add(&counters[COUNT_FS_SAMPLES], res.samples);
     atomic_add(&counters[COUNT_FS_EVALS], res.evals);
+#ifdef FS_PROFILE
+    for (int q = 0; q < FS_PROF_COUNT; ++q) atomic_add(&counters[COUNT_FS_STEPS + q], res.prof[q]);
+#endif
     if (res.status) {
         atomic_inc(&counters[COUNT_GPIS_FAILED]);
         return none;

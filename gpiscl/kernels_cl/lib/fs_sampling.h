@@ -119,6 +119,9 @@ typedef struct {
     double law_s;
     double3 law_m, law_a, law_b;
     int roots;              /* of `samples`: drawn by the root search at the hit */
+#ifdef FS_PROFILE
+    int prof[FS_PROF_COUNT];   /* fs_march.h's profile counters */
+#endif
 } FsResult;
 
 inline FsScratch fs_scratch(__global double* base, int item)

@@ -7,7 +7,7 @@
  * Sampling draws m from D(m) cos theta_m (Walter et al. 2007) and reflects v about it:
  *   pdf(l) = D(m) cos theta_m / (4 v.m),  weight = albedo F G2 (v.m) / (cos v cos theta_m);
  * reflections below the surface end the path (weight 0), which is how a single-scattering
- * microfacet model loses energy. gpiscl/host/render/rough_conductor.py is the numpy twin. */
+ * microfacet model loses energy. Numpy twin: gpiscl/testing/reference/rough_conductor.py. */
 
 /* exact Fresnel reflectance of a conductor for incidence cosine c (PBRT's FrConductor) */
 inline float3 fresnel_conductor(float c, float3 eta, float3 k)

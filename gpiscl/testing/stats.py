@@ -1,4 +1,5 @@
 """Statistical comparisons with thresholds derived from the number of comparisons."""
+import math
 from statistics import NormalDist
 
 import numpy as np
@@ -56,3 +57,20 @@ def assert_agree(a, se_a, b, se_b=None, block=1, what="images"):
         t = z_threshold(z.size)
         assert z.max() < t, f"{what}: max |z| = {z.max():.2f} over {z.size} tests (threshold {t:.2f})"
     return z
+
+
+def ks_two_sample(a, b, num_tests):
+    """Two-sample Kolmogorov-Smirnov: statistic and its Bonferroni critical value
+    (asymptotic, c(alpha) = sqrt(-ln(alpha / 2) / 2))."""
+    a, b = np.sort(a), np.sort(b)
+    grid = np.concatenate([a, b])
+    D = np.max(np.abs(np.searchsorted(a, grid, "right") / len(a)
+                      - np.searchsorted(b, grid, "right") / len(b)))
+    alpha = ALPHA / num_tests
+    return D, math.sqrt(-math.log(alpha / 2) / 2) * math.sqrt((len(a) + len(b)) / (len(a) * len(b)))
+
+
+def chi2_threshold(df, num_tests=1):
+    """Upper chi-square quantile by Wilson-Hilferty (accurate to <1% for df >= 5)."""
+    z = NormalDist().inv_cdf(1.0 - ALPHA / num_tests)
+    return df * (1.0 - 2.0 / (9 * df) + z * math.sqrt(2.0 / (9 * df))) ** 3
