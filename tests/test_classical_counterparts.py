@@ -14,7 +14,7 @@ from gpiscl.host.errors import SceneError
 from gpiscl.host.gp import SquaredExponential
 from gpiscl.host.gp import classical as C
 from gpiscl.host.scene.loading import load_scene
-from stats import assert_agree, image_mean_se, z_threshold
+from gpiscl.testing.stats import assert_agree, image_mean_se, z_threshold
 
 MIRROR = {"type": "mirror", "albedo": 1.0}
 GOLD = {"type": "rough_conductor", "material": "Au", "roughness": 0.1}

@@ -16,7 +16,7 @@ from gpiscl.host.gp import classical as C
 from gpiscl.host.gp import function_space as FS
 from gpiscl.host.figures.density import (masking_series, medium_limit_series,
                                           surface_limit_series)
-from stats import z_threshold
+from gpiscl.testing.stats import z_threshold
 
 
 def test01_closed_forms():

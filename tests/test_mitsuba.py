@@ -4,7 +4,7 @@ extra: pip install -e '.[mitsuba]'; skipped only when mitsuba cannot be imported
 Both scenes are radially symmetric about the view axis (a directional light shining along
 it), so the renderers' image orientations cannot differ. Mitsuba's per-pixel standard
 errors come from independent renders with different seeds; each 4x4 block is a z-test
-(Bonferroni over all blocks and channels, tests/stats.py).
+(Bonferroni over all blocks and channels, gpiscl/testing/stats.py).
 * medium: the "medium" counterpart of a constant-mean GPIS (Rice's entry rate 2, diffuse
   micro-BSDF 0.8) against Mitsuba's homogeneous medium with sigma_t 2, albedo 0.8 and the
   Lambert-sphere phase function tabulated (docs/design/classical-limits.md, Eq. 4);
@@ -21,7 +21,7 @@ from gpiscl.host.gp import SquaredExponential
 from gpiscl.host.gp import classical as C
 from gpiscl.host.kinds.conductors import eta_k
 from gpiscl.host.scene.loading import load_scene
-from stats import assert_agree
+from gpiscl.testing.stats import assert_agree
 
 mi = pytest.importorskip("mitsuba")
 
