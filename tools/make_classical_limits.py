@@ -4,8 +4,8 @@
                           fixed mu/sigma, and at a fixed Rice mean free path), and of
                           first-hit slopes to Beckmann against alpha (plane mean)
   classical_limits.csv    the numbers of that figure
-  density_volume_*.png    `gpiscl density` of scenes/fs_volume_room_global.json
-  density_plane_*.png     `gpiscl density` of scenes/ws_rough_mirror_plane.json
+  density_volume_free_flight.png   `gpiscl density` of scenes/fs_volume_room_global.json
+  density_plane_normals.png        `gpiscl density` of scenes/ws_rough_mirror_plane.json
 
 Needs matplotlib (pip install -e '.[plots]'). About a minute on a CPU device.
 Usage: python tools/make_classical_limits.py [-o docs/gallery] [--paths 20000]"""
@@ -50,11 +50,13 @@ def main():
     for r in rows:
         print({k: (round(v, 5) if isinstance(v, float) else v) for k, v in r.items()})
 
-    for name, scene in (("volume", "scenes/fs_volume_room_global.json"),
-                        ("plane", "scenes/ws_rough_mirror_plane.json")):
+    # the volume's free flights and the plane's normals (a plane's flights all end near
+    # its mean's zero: nothing to see there)
+    for name, scene, figure in (("volume", "scenes/fs_volume_room_global.json", "free_flight.png"),
+                                ("plane", "scenes/ws_rough_mirror_plane.json", "normals.png")):
         with tempfile.TemporaryDirectory() as tmp:
             for p in write_density(scene, 0, tmp, paths=n):
-                if p.suffix == ".png":
+                if p.name == figure:
                     shutil.copy(p, out / f"density_{name}_{p.name}")
     print("wrote", out)
 

@@ -16,11 +16,12 @@ import numpy as np
 
 from ..errors import SceneError
 from ..gp import classical as C
+from ..kinds.materials import ROUGH_CONDUCTOR
 from ..scene.gpis import FIELD_KEYS
 from .gpis import build_kernel
 
-# rough_conductor's range (kinds/materials.py)
-MIN_ROUGHNESS, MAX_ROUGHNESS = 1e-3, 1.0
+_ROUGHNESS = ROUGH_CONDUCTOR.fields["roughness"].spec     # rough_conductor's range
+MIN_ROUGHNESS, MAX_ROUGHNESS = _ROUGHNESS.ge, _ROUGHNESS.le
 # mirror has no Fresnel term: a conductor with this k reflects 1 - 4/k^2 at every angle
 _MIRROR_K = 1.0e4
 

@@ -206,6 +206,40 @@ def masking_series(kernel_of, sigmas, paths: int, memories=MEMORIES[:4], seed: i
     return rows
 
 
+def brdf_table(kernel: Kernel, theta_i_deg: float, paths: int, memory: str, bins: int = 18,
+               bounces: int = 16, seed: int = 1, device: Device | None = None) -> dict:
+    """Plane mean, a white mirror micro-BSDF, light from theta_i: where the energy leaves
+    (theta_o bins of 90/bins degrees, all phi) after exactly one hit and after several,
+    per path traced by the device sampler (rays reflected about each sampled normal),
+    against rough_conductor's single-scattering Beckmann BRDF with the same alpha."""
+    device = device or shared_device()
+    ti = math.radians(theta_i_deg)
+    d = np.array([-math.sin(ti), 0.0, -math.cos(ti)])
+    s = math.sqrt(kernel.variance)
+    start = -d * 6.0 * s / math.cos(ti)
+    plane = Plane(point=(0.0, 0.0, 0.0), normal=(0.0, 0.0, 1.0))
+    out = flights(device, kernel, plane, start, d, 12.0 * s / math.cos(ti), paths,
+                  memory=memory, bounces=bounces, seed=seed, mirror=True,
+                  later_length=8.0 * s / math.sqrt(C.slope_variance(kernel)))
+    hits = np.sum(out[:, :, 0] >= 0, axis=1)
+    direction = np.tile(d, (paths, 1))
+    for b in range(bounces):                      # replay the reflections on the host
+        hit = out[:, b, 0] >= 0
+        n = out[hit, b, 1:4] / np.linalg.norm(out[hit, b, 1:4], axis=1)[:, None]
+        direction[hit] -= 2.0 * np.sum(direction[hit] * n, axis=1)[:, None] * n
+    edges = np.linspace(0.0, math.pi / 2, bins + 1)
+    theta_o = np.arccos(np.clip(direction[:, 2], -1.0, 1.0))
+    up = direction[:, 2] > 0
+    escaped = up & (hits >= 1) & (hits < bounces)
+    single = np.histogram(theta_o[escaped & (hits == 1)], edges)[0] / paths
+    multiple = np.histogram(theta_o[escaped & (hits > 1)], edges)[0] / paths
+    alpha = C.beckmann_alpha(kernel)
+    return {"theta_i_deg": theta_i_deg, "alpha": alpha, "memory": memory, "paths": paths,
+            "edges_deg": np.degrees(edges), "single": single, "multiple": multiple,
+            "stuck": float(np.mean(hits >= bounces)),
+            "beckmann_single": C.beckmann_single_scatter_bins(ti, alpha, edges)}
+
+
 # --- files --------------------------------------------------------------------------------
 
 def write_csv(rows: list, path) -> None:

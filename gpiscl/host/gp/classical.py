@@ -98,6 +98,30 @@ def smith_rehit_fraction(alpha: float, n: int, rng) -> float:
     return float(np.mean(np.where(up <= 0.0, 1.0, lam / (1.0 + lam))))
 
 
+def beckmann_single_scatter_bins(theta_i: float, alpha: float, edges, n_theta: int = 400,
+                                  n_phi: int = 720) -> np.ndarray:
+    """For a white mirror microsurface (F = 1) lit at theta_i (radians): the fraction of
+    the incident energy the single-scattering Beckmann BRDF with height-correlated Smith
+    G2 = 1 / (1 + Lambda_i + Lambda_o) (rough_conductor's) sends into each bin of
+    theta_o between `edges` (radians), over every phi: the midpoint rule on a grid."""
+    wi = np.array([math.sin(theta_i), 0.0, math.cos(theta_i)])
+    lam_i = smith_lambda(wi[2], alpha)
+    out = []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        th = lo + (np.arange(n_theta) + 0.5) * (hi - lo) / n_theta
+        ph = (np.arange(n_phi) + 0.5) * 2.0 * math.pi / n_phi
+        T, P = np.meshgrid(th, ph, indexing="ij")
+        wo = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], -1)
+        h = wo + wi
+        h /= np.linalg.norm(h, axis=-1)[..., None]
+        c = h[..., 2]
+        d = np.exp(-(1.0 - c * c) / (c * c * alpha * alpha)) / (math.pi * alpha ** 2 * c ** 4)
+        g2 = 1.0 / (1.0 + lam_i + smith_lambda(wo[..., 2], alpha))
+        f_cos = d * g2 / (4.0 * wi[2])                   # f_r cos theta_o
+        out.append(float(np.sum(f_cos * np.sin(T)) * (hi - lo) / n_theta * 2 * math.pi / n_phi))
+    return np.array(out)
+
+
 def lambert_sphere_phase(theta):
     """Phase function (per steradian) of a cloud of diffuse spheres, theta the deflection
     angle: the medium counterpart of a diffuse micro-BSDF (Sec. 2.3 of the note)."""

@@ -1,8 +1,8 @@
 """Many free flights of one GPIS along one ray, drawn by the renderer's own function-space
 sampler (fs_free_flight and fs_vertex_at_hit of kernels_cl/lib): the data of the GPIS
 density (docs/design/classical-limits.md). After each hit the path scatters off a
-Lambertian facet (cosine-weighted about the sampled normal) and flies again from the
-vertex, so the second and later flights show what each memory model remembers. The
+Lambertian facet (cosine-weighted about the sampled normal; or reflects as a mirror) and
+flies again from the vertex, so the second and later flights show what each memory model remembers. The
 "memory" classical_medium runs the medium counterpart's flight (fs_classical.h) instead."""
 from __future__ import annotations
 
@@ -23,6 +23,7 @@ _WRAPPER = r"""
 __kernel void theory_flights(__global const GpKernel* kp, __global const MeanNode* mean,
                              int mc, int window, int memory, int cap, int refine, double tol,
                              __global const double* ray, uint seed, int first, int bounces,
+                             int mirror,
                              __global double* scratch, __global FsObs* rings,
                              __global double* out)
 {
@@ -52,7 +53,8 @@ __kernel void theory_flights(__global const GpKernel* kp, __global const MeanNod
         double2 u = fs_uniform2(turn, 0u, 0u);
         double rad = sqrt(u.x), phi = 2.0 * M_PI * u.y;
         r.o = r.o + res.t * r.d;
-        r.d = rad * cos(phi) * t + rad * sin(phi) * bt + sqrt(fmax(0.0, 1.0 - u.x)) * n;
+        r.d = mirror ? r.d - 2.0 * dot(r.d, n) * n
+                     : rad * cos(phi) * t + rad * sin(phi) * bt + sqrt(fmax(0.0, 1.0 - u.x)) * n;
         r.t0 = 0.0;
         r.t1 = ray[8];
     }
@@ -80,11 +82,12 @@ def _buf(device, a):
 def flights(device: Device, kernel, mean, origin, direction, length: float, n: int,
             memory: str = "renewal", bounces: int = 2, seed: int = 1, cap: int = 64,
             refine: int = 0, tol: float = FL.DEFAULT_MISS_TOLERANCE,
-            later_length: float | None = None) -> np.ndarray:
+            later_length: float | None = None, mirror: bool = False) -> np.ndarray:
     """(n, bounces, 5): per path and flight the hit distance (-1: none, and every later
     flight -1), the sampled gradient at the hit and the solver status (0: fine). The
     first flight runs along origin + t direction, t in [0, length]; later ones are
-    later_length (default: length) long from the previous hit."""
+    later_length (default: length) long from the previous hit. mirror: each hit reflects
+    the ray about its sampled normal instead of the Lambertian turn."""
     if memory not in GPIS_MEMORIES:
         raise ValueError(f"memory must be one of {sorted(GPIS_MEMORIES)}, got {memory!r}")
     if not 1 <= cap <= CAP_MAX:
@@ -109,6 +112,6 @@ def flights(device: Device, kernel, mean, origin, direction, length: float, n: i
         run(q, (m,), None, kp, mb, np.int32(len(mean_nodes)), np.int32(0),
             np.int32(GPIS_MEMORIES[memory]), np.int32(cap), np.int32(refine),
             np.float64(tol), ray, np.uint32(seed), np.int32(first), np.int32(bounces),
-            scratch, rings, ob)
+            np.int32(mirror), scratch, rings, ob)
         cl.enqueue_copy(q, out[first:first + m], ob)
     return out
