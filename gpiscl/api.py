@@ -45,10 +45,13 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
         The most paths traced at once, in [1, 2**24]; batches are sized to take about
         0.5 s each below it (default 16384 on a CPU, 262144 elsewhere).
     time_limit : float, optional
-        Stop after this many seconds of rendering (> 0, finite); holds to within one batch.
+        Stop after this many seconds of rendering, in (0, 1e9]; holds to within one bounce
+        of a batch (the first batch always completes).
     progress : callable or bool, optional
-        progress(paths) after each batch, or True for a progress bar in spp (a notebook
-        widget under Jupyter).
+        progress(paths) after each batch (and progress(0) once the programs are compiled
+        and the clock starts), or True for a progress bar in spp (a notebook widget under
+        Jupyter; where stderr is neither, a plain line every 10 s). On, a compile the
+        driver's cache does not answer prints one line saying so.
     realization : int or 'none', optional
         Render GPIS realization R in [0, 2**31) for every pixel (weight space only);
         'none' averages over realizations whatever the scene says.
@@ -94,28 +97,31 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
     if aovs and cluster is not None:
         # cluster units ship each path's radiance only (distributed/cluster.py)
         raise SceneError(API_SOURCE, "aov", "not available with `cluster` yet")
-    distributed = _dask() if cluster is not None else None
-    integrator, scene = prepare_render(scene, device=device, aov=bool(aovs), **checked)
-    if on_compiled is not None:
-        on_compiled(scene, _where(cluster, integrator.device))
-    spp = scene.data["render"]["spp"]
-    bar = None
-    if progress is True:
-        from .host.render.progress import SppBar
-        w, h = scene.data["camera"]["resolution"]
-        progress = bar = SppBar(spp, w * h, file=sys.stderr, notebook=True)
-    elif progress is False:
-        progress = None
-    try:
-        if distributed is not None:
-            result = distributed.render_on_cluster(cluster, integrator, scene, spp,
-                                                   time_limit, progress, stop)
-        else:
-            result = integrator.render(spp, time_limit=time_limit, progress=progress,
-                                       stop=stop)
-    finally:
-        if bar is not None:
-            bar.close()
+    distributed = _dask(cluster) if cluster is not None else None
+    from .host.render.device import announcing_compiles
+    # with progress on, a cold compile (~20 s) says so rather than sit silent
+    with announcing_compiles(sys.stderr if progress not in (None, False) else None):
+        integrator, scene = prepare_render(scene, device=device, aov=bool(aovs), **checked)
+        if on_compiled is not None:
+            on_compiled(scene, _where(cluster, integrator.device))
+        spp = scene.data["render"]["spp"]
+        bar = None
+        if progress is True:
+            from .host.render.progress import spp_progress
+            w, h = scene.data["camera"]["resolution"]
+            progress = bar = spp_progress(spp, w * h, sys.stderr)
+        elif progress is False:
+            progress = None
+        try:
+            if distributed is not None:
+                result = distributed.render_on_cluster(cluster, integrator, scene, spp,
+                                                       time_limit, progress, stop)
+            else:
+                result = integrator.render(spp, time_limit=time_limit, progress=progress,
+                                           stop=stop)
+        finally:
+            if bar is not None:
+                bar.close()
     # The film is on the host now: drop the integrator, so that its device buffers (the
     # film's sums, the scene's records: on a CPU device the process's own memory, the
     # film's in the malloc heap) are freed and handed back before the output files'
@@ -173,10 +179,12 @@ def _device(device):
     return device if isinstance(device, Device) else shared_device(device)
 
 
-def _dask():
-    """The cluster backend, imported before any work: without Dask, a one-line error."""
-    from .host.distributed import cluster
-    return cluster
+def _dask(cluster):
+    """The cluster backend, imported and cluster's address checked before any work:
+    without Dask, or with too many local workers, a one-line error."""
+    from .host.distributed import cluster as backend
+    backend.local_workers(cluster, API_SOURCE, "cluster")
+    return backend
 
 
 def _where(cluster, device) -> str:
@@ -292,7 +300,8 @@ def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
     cluster : distributed.Client or str, optional
         Render the realizations on a Dask cluster, as for render_result: the same sums.
     progress : callable or bool, optional
-        progress(1) after each realization, or True for a progress bar.
+        progress(1) after each realization, or True for a progress bar (a plain line every
+        10 s where stderr is not a terminal or a notebook).
     on_started : callable, optional
         on_started(scene, where) once the arguments and the scene are checked, before any
         realization is compiled or rendered (as render_result's on_compiled).
@@ -317,7 +326,7 @@ def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
         # ids are distinct only modulo 2^31
         raise SceneError(API_SOURCE, "realizations",
                          "`first` + `realizations` must be <= 2**31")
-    distributed = _dask() if cluster is not None else None
+    distributed = _dask(cluster) if cluster is not None else None
     scene = load_scene(scene)
     check_uq_scene(scene.data, scene.source)
     if output is not None:
@@ -328,21 +337,29 @@ def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
         on_started(scene, _where(cluster, device if distributed is None else None))
     bar = None
     if progress is True:
-        from tqdm.auto import tqdm
-        progress = (bar := tqdm(total=checked["realizations"], unit="realization",
-                                file=sys.stderr, desc="realizations")).update
+        from .host.render.progress import ProgressLines, draws_bars
+        if draws_bars(sys.stderr):
+            from tqdm.auto import tqdm
+            bar = tqdm(total=checked["realizations"], unit="realization", file=sys.stderr,
+                       desc="realizations")
+            progress = bar.update
+        else:
+            progress = bar = ProgressLines("uq", checked["realizations"], "realizations",
+                                           file=sys.stderr)
     elif progress is False:
         progress = None
     kw = dict(seed=checked.get("seed"), first=checked["first"],
               resolution=checked.get("resolution"), batch_size=checked.get("batch_size"),
               progress=progress, stop=stop)
+    from .host.render.device import announcing_compiles
     try:
-        if distributed is not None:
-            run = distributed.uq_on_cluster(cluster, scene, checked["realizations"],
-                                            checked["spp"], **kw)
-        else:
-            run = render_realizations(scene, checked["realizations"], checked["spp"],
-                                      device=device, **kw)
+        with announcing_compiles(sys.stderr if bar is not None else None):
+            if distributed is not None:
+                run = distributed.uq_on_cluster(cluster, scene, checked["realizations"],
+                                                checked["spp"], **kw)
+            else:
+                run = render_realizations(scene, checked["realizations"], checked["spp"],
+                                          device=device, **kw)
     finally:
         if bar is not None:
             bar.close()
@@ -371,14 +388,15 @@ def write_uq(output, run, exposure: float = 0.0) -> dict:
     resolved scene; with one, only NAME.uq.npz (it has no variance yet: merge it with
     other batches, uq_merge). Returns {name: path} of the files written."""
     from .host.io.output_files import write_atomically
-    from .host.uq.files import uq_output_paths, write_uq_outputs
+    from .host.uq.files import uq_output_paths, with_digest, write_uq_outputs
 
     exposure = arguments.check(exposure=exposure)["exposure"]
     if run.sums.n < 1:
         raise SceneError(API_SOURCE, "run", "no realization completed: nothing to write")
     if run.sums.n < 2:
         path = uq_output_paths(output)["sums"]
-        write_atomically(path, lambda tmp: run.sums.save(tmp, run.meta))
+        write_atomically(path, lambda tmp: run.sums.save(tmp, with_digest(run.sums,
+                                                                           run.meta)))
         return {"sums": path}
     return write_uq_outputs(run.sums, run.scene, output, exposure, run.meta)
 

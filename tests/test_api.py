@@ -1,5 +1,6 @@
 """The Python API checks what the command line checks, documents itself, and can write
 images and run uq."""
+import io
 import os
 import subprocess
 import sys
@@ -107,7 +108,17 @@ def test_usage_mistakes_are_one_line():
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--spp" in r.stderr
 
 
-def test_progress_true_draws_a_bar_in_spp(device, capsys):
+class Terminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_progress_true_draws_a_bar_in_spp_on_a_terminal_only(device, monkeypatch, capsys):
+    monkeypatch.setattr(sys, "stderr", Terminal())
     gpiscl.render_result(TINY, device=device, progress=True)
-    err = capsys.readouterr().err
-    assert "spp" in err and "paths/s" in err
+    err = sys.stderr.getvalue()
+    assert "spp" in err and "paths/s" in err and "\r" in err
+    monkeypatch.undo()
+    # elsewhere a line every 10 s (tests/test_batch_costs.py): none for a short render
+    gpiscl.render_result(TINY, device=device, progress=True)
+    assert capsys.readouterr().err == ""

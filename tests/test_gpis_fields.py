@@ -119,12 +119,14 @@ def test03_constant_colour_on_a_convex_object(device, bsdf):
     if bsdf == "mirror":
         np.testing.assert_allclose(img[inside], expect[inside], rtol=1e-5)
     else:
-        z = np.abs(img[inside] - expect[inside]) / np.maximum(se[inside], 1e-12)
+        # float32 rounding floors the error: the sky's hemisphere NEE and the cosine BSDF
+        # sample share one density: a covered pixel is c in every sample
+        z = np.abs(img[inside] - expect[inside]) / np.maximum(se[inside], 1e-6)
         assert z.max() < z_threshold(z.size), z.max()
         # the whole covered region at once: a small bias cannot hide in the noise
         total_se = np.sqrt((se[inside] ** 2).sum(0)) / inside.sum()
         bias = np.abs(img[inside].mean(0) - np.asarray(c))
-        assert np.all(bias < z_threshold(3) * total_se), (bias, total_se)
+        assert np.all(bias < z_threshold(3) * np.maximum(total_se, 1e-6)), (bias, total_se)
 
 
 def test04_grid_colour_equals_its_constant_and_gradient_equivalents(device, tmp_path):

@@ -10,7 +10,7 @@ import pytest
 
 from gpiscl import render_result
 from gpiscl.host.kinds import lights, materials
-from gpiscl.host.kinds.lights import LIGHTS
+from gpiscl.host.kinds.lights import LIGHTS, LightHost
 from gpiscl.host.kinds.materials import MATERIALS, MICRO_BSDFS
 from gpiscl.host.kinds.table import Kind, KindTable
 from gpiscl.host.kinds.values import ALBEDO, RGB
@@ -107,7 +107,8 @@ def sky_dome():
                 str(TOY_KINDS / "sky_dome.h"),
                 {"environment": False, "at_infinity": True, "area": False,
                  "positioned": False},
-                lambda lt: {"radiance": lt["radiance"]})
+                LightHost(lambda lt: {"radiance": lt["radiance"]},
+                          lambda fields, radius: 0.0))   # like a constant environment
 
 
 @pytest.fixture(scope="module")

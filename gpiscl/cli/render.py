@@ -20,8 +20,8 @@ def add_parser(sub):
                    help="render one fixed GPIS realization R for every pixel (weight space); "
                    "'none' averages over realizations whatever the scene says")
     r.add_argument("--time-limit", type=float, metavar="SECONDS",
-                   help="stop after this many seconds of rendering (to within one batch, "
-                   "~0.5 s)")
+                   help="stop after this many seconds of rendering, up to 1e9 (to within "
+                   "one bounce of a batch, well under a second)")
     r.add_argument("--batch-size", type=int, metavar="N",
                    help="the most paths in flight per batch (batches are sized to take "
                    "~0.5 s each below it; default 16384 on a CPU, 262144 elsewhere)")
@@ -49,7 +49,7 @@ def run(a) -> int:
 
         result = api.render_result(
             scene, spp=a.spp, seed=a.seed, resolution=a.resolution, device=a.device,
-            batch_size=a.batch_size, time_limit=a.time_limit, progress=sys.stderr.isatty(),
+            batch_size=a.batch_size, time_limit=a.time_limit, progress=True,
             realization=a.realization, stop=signals.requested, max_memory=a.max_memory,
             aov=a.aov, cluster=a.cluster, on_compiled=banner)
         st, stopped_by = result.stats, signals.received()

@@ -46,7 +46,7 @@ def run(a) -> int:
         run = api.uq(scene, a.realizations, a.spp, seed=a.seed,
                      first=a.first, resolution=a.resolution, device=a.device,
                      batch_size=a.batch_size, exposure=a.exposure, stop=signals.requested,
-                     cluster=a.cluster, progress=sys.stderr.isatty(), on_started=banner)
+                     cluster=a.cluster, progress=True, on_started=banner)
         n, stopped_by = run.sums.n, signals.received()
         code = 0 if stopped_by is None else signals.exit_code(stopped_by)
         if run.interrupted:

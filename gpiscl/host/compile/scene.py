@@ -14,6 +14,7 @@ from .camera import compile_camera
 from .envmap import compile_envmap, no_envmap
 from .classical import with_counterparts
 from .gpis import CompiledGpis, compile_gpis
+from .light_selection import light_choice
 from ..scene.proxies import bounding_proxy
 from ..scene.transforms import mesh_triangles
 from ..errors import SceneError
@@ -27,6 +28,7 @@ class CompiledScene:
     primitives: np.ndarray
     materials: np.ndarray
     lights: np.ndarray
+    light_choice: np.ndarray    # LIGHT_CHOICE: which light NEE picks (light_selection.py)
     bvh_nodes: np.ndarray
     env_texels: np.ndarray      # (H*W, 4) float32, a dummy texel when no map
     env_marginal: np.ndarray
@@ -43,7 +45,8 @@ class CompiledScene:
         the render uploads each once and launches take them by name."""
         pairs = ((stages.CAMERA, self.camera), (stages.NODES, self.bvh_nodes),
                  (stages.PRIMS, self.primitives), (stages.MATERIALS, self.materials),
-                 (stages.LIGHTS, self.lights), (stages.GPIS, self.gpis.objects),
+                 (stages.LIGHTS, self.lights), (stages.LIGHT_CHOICE, self.light_choice),
+                 (stages.GPIS, self.gpis.objects),
                  (stages.KERNELS, self.gpis.kernels), (stages.MEAN_NODES, self.gpis.mean_nodes),
                  (stages.ORDER_TABLE, self.gpis.order_table),
                  *zip(stages.ENV_MAP, (self.env_texels, self.env_marginal,
@@ -54,6 +57,7 @@ class CompiledScene:
 class _Builder:
     def __init__(self):
         self.prims, self.materials, self.lights = [], [], []
+        self.light_fields = []   # each light's packed fields, for its power estimate
         self.black = self.material({"type": "diffuse", "albedo": [0.0, 0.0, 0.0]})
 
     def material(self, bsdf: dict) -> int:
@@ -138,6 +142,7 @@ def _add_shape(b: _Builder, s: dict):
 
 def _add_light(b: _Builder, lt: dict, env: dict):
     packed = dict(LIGHTS[lt["type"]].host(lt))
+    b.light_fields.append((lt["type"], dict(packed)))
     if "environment_file" in packed:
         env["file"] = packed.pop("environment_file")
     carrier = packed.pop("primitive", None)
@@ -240,7 +245,14 @@ def compile_scene(data: dict, source: str = "<scene>", bakes=None) -> CompiledSc
                        if lt["type"] == "environment_map")
             raise SceneError(source, key, str(exc).removeprefix(f"{env['file']}: ")
                              + f": {env['file']}") from None
+        for _, fields in b.light_fields:    # the map's power estimate reads its texels
+            if "environment_file" in fields:
+                w, h = envmap.size
+                fields["environment_rgb"] = envmap.texels.reshape(h, w, 4)[..., :3]
+    lo, hi = scene_box(data, prims)
+    choice = light_choice([f for _, f in b.light_fields], [k for k, _ in b.light_fields],
+                          0.5 * float(np.linalg.norm(hi - lo)))
     return CompiledScene(compile_camera(data["camera"]), prims,
-                         np.array(b.materials, dtype=layouts.MATERIAL.dtype), lights, nodes,
-                         envmap.texels, envmap.marginal, envmap.conditional, envmap.size,
+                         np.array(b.materials, dtype=layouts.MATERIAL.dtype), lights, choice,
+                         nodes, envmap.texels, envmap.marginal, envmap.conditional, envmap.size,
                          gpis)

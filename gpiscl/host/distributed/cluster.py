@@ -77,6 +77,36 @@ LOCAL = re.compile(r"local:(\d+)")
 
 # ---- connecting -------------------------------------------------------------------------
 
+def max_local_workers() -> int:
+    """The most local:N workers: one per CPU this process may use (at least 4, so that a
+    small machine can still test the units' merge order). Each worker is a process with
+    its own OpenCL runtime (~100+ MB) whose kernels already spread over every core, so
+    more only compete for the cores and memory: local:1000 started 1000 of them."""
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cpus = os.cpu_count() or 1
+    return max(4, cpus)
+
+
+def local_workers(cluster, source: str, key: str):
+    """N of a 'local:N' cluster (None for anything else), checked: SceneError naming key
+    for N outside [1, max_local_workers()]. Called before any work (api.py) and again
+    when connecting."""
+    if isinstance(cluster, Client):
+        return None
+    spec = str(cluster).strip()
+    local = LOCAL.fullmatch(spec)
+    if not local:
+        return None
+    n, most = int(local.group(1)), max_local_workers()
+    if not 1 <= n <= most:
+        raise SceneError(source, key, f"local:N needs 1 <= N <= {most}, the CPUs this "
+                         f"process may use (got {spec!r}): each worker is a process with "
+                         "its own OpenCL runtime")
+    return n
+
+
 @contextmanager
 def connect(cluster, source: str, key: str):
     """A Client for cluster: a Client (used as is), 'local:N' (a LocalCluster of N
@@ -85,11 +115,8 @@ def connect(cluster, source: str, key: str):
         yield cluster
         return
     spec = str(cluster).strip()
-    local = LOCAL.fullmatch(spec)
-    if local:
-        n = int(local.group(1))
-        if not 1 <= n <= 1024:
-            raise SceneError(source, key, f"local:N needs 1 <= N <= 1024 (got {spec!r})")
+    n = local_workers(cluster, source, key)
+    if n is not None:
         # one thread each: a worker process runs one unit at a time anyway (_LOCK), and
         # the OpenCL runtime spreads each kernel over the cores itself; the dashboard on
         # any free port (8787 may be another cluster's)

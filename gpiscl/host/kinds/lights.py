@@ -4,16 +4,21 @@
 A kind's packer turns its resolved scene object into Light record fields (layout/records.py
 LIGHT: radiance, p0, p1, p2, area, cos_max), plus "primitive": (primitive kind, p0, p1,
 p2) for a light that rays can hit (compile/scene.py adds a black primitive carrying it),
-and "environment_file" for the one environment map. Traits:
+and "environment_file" for the one environment map (compile/scene.py reads it last and
+gives its texels to the power estimate as "environment_rgb"). Traits:
   environment  fills the scene's one environment slot (at most one per scene); a vertex
                may leave these to BSDF sampling (fs_random_normal.h);
   at_infinity  escaped rays look it up: has <name>_radiance;
   area         carried by a primitive that rays hit: has <name>_area_radiance;
   positioned   the packer's p0 is a point of the scene (its bounding box takes it).
+A kind's host is a LightHost: its packer, and its power estimate, by which next-event
+estimation picks among the scene's lights (compile/light_selection.py).
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -95,6 +100,107 @@ def pack_directional(lt):
             "cos_max": math.cos(theta)}
 
 
+# ---- power estimates: what next-event estimation gains by sampling a light, in one unit
+# for every kind, so that it can pick lights in proportion (compile/light_selection.py;
+# docs/design/light-sampling.md has the derivation and the measurements). Finite lights:
+# the emitted power. Lights at infinity: the greatest irradiance a plane in the scene
+# receives from them, times the scene's cross-section pi R^2 (R: the radius of the
+# scene's bounding sphere), times the chance that BSDF sampling misses them (bsdf_miss):
+# a light that BSDF sampling finds by itself gains little from NEE's choices, which the
+# concentrated lights need (a sun beside a sky: 53x lower variance than by power alone
+# on a diffuse floor). Arguments: the packer's fields and R.
+
+def brightness(rgb) -> float:
+    """The scalar the estimates rank lights by: the mean of the RGB channels."""
+    return float(np.mean(np.asarray(rgb, dtype=np.float64)[:3]))
+
+
+def bsdf_miss(solid_angle: float) -> float:
+    """The chance that a cosine-distributed direction from a surface facing a light of
+    this solid angle (about the normal) misses it: 1 - (its projected solid angle) / pi,
+    taken as 1 - solid_angle / pi, 0 from pi sr on (a constant sky, a wide dome)."""
+    return max(0.0, 1.0 - solid_angle / math.pi)
+
+
+def environment_power(f, radius):
+    """0 (it covers 4 pi sr): BSDF sampling already follows f cos L for a constant L;
+    alone (every estimate 0) it is still chosen: selection_pmf falls back to uniform."""
+    irradiance = math.pi * brightness(f["radiance"])
+    return irradiance * math.pi * radius ** 2 * bsdf_miss(4.0 * math.pi)
+
+
+# the normals over which a map's greatest plane irradiance is sought: the axes and the
+# diagonals (a map's bright spot is at most 55 degrees from one of them: cos >= 0.57)
+_PLANE_NORMALS = np.array([[x, y, z] for x in (-1, 0, 1) for y in (-1, 0, 1)
+                           for z in (-1, 0, 1) if (x, y, z) != (0, 0, 0)], dtype=np.float64)
+_PLANE_NORMALS /= np.linalg.norm(_PLANE_NORMALS, axis=1, keepdims=True)
+
+
+def _coarse_luminance(rgb) -> np.ndarray:
+    """The map's mean of R, G, B over blocks of step^2 pixels (about 128 rows: enough for a
+    choice), a band of rows at a time: an 8k map is never copied whole."""
+    h, w = rgb.shape[:2]
+    step = max(1, h // 128)
+    rows, cols = h // step, w // step
+    out = np.empty((rows, cols))
+    for i in range(rows):
+        band = rgb[i * step:(i + 1) * step, :cols * step, :3]
+        out[i] = band.sum(axis=(0, 2), dtype=np.float64).reshape(cols, step).sum(1)
+    return out / (3 * step * step)
+
+
+def environment_map_power(f, radius):
+    """Its solid angle for bsdf_miss: that of a patch as bright as the map's brightest
+    pixel holding all its radiance (a sun drawn into the map: small; a smooth sky:
+    large)."""
+    lum = _coarse_luminance(f["environment_rgb"])
+    h, w = lum.shape
+    theta = ((np.arange(h) + 0.5) * math.pi / h)[:, None]
+    phi = ((np.arange(w) + 0.5) * 2.0 * math.pi / w)[None, :]
+    # lat-long as lights/environment_map.h reads it (theta from +y); the rotation about y
+    # does not change which plane is best enough to matter for a choice
+    d = np.stack(np.broadcast_arrays(np.sin(theta) * np.cos(phi), np.cos(theta),
+                                     np.sin(theta) * np.sin(phi)), -1).reshape(-1, 3)
+    weight = (lum * np.sin(theta) * (2.0 * math.pi ** 2 / (w * h))).reshape(-1)
+    if not weight.sum() > 0.0:
+        return 0.0
+    irradiance = (np.maximum(d @ _PLANE_NORMALS.T, 0.0) * weight[:, None]).sum(0).max()
+    solid_angle = float(weight.sum() / lum.max())
+    return (brightness(f["radiance"]) * float(irradiance) * math.pi * radius ** 2
+            * bsdf_miss(solid_angle))
+
+
+def point_power(f, radius):
+    return 4.0 * math.pi * brightness(f["radiance"])
+
+
+def sphere_power(f, radius):
+    r = f["p0"][3]
+    return math.pi * brightness(f["radiance"]) * 4.0 * math.pi * r * r
+
+
+def rectangle_power(f, radius):
+    sides = 2.0 if f["p2"][3] else 1.0
+    return math.pi * brightness(f["radiance"]) * f["area"] * sides
+
+
+def directional_power(f, radius):
+    omc = f["p0"][3]   # 1 - cos(angular radius): radiance * pi sin^2 is the irradiance
+    irradiance = brightness(f["radiance"]) * (math.pi * omc * (2.0 - omc) if omc else 1.0)
+    return irradiance * math.pi * radius ** 2 * bsdf_miss(2.0 * math.pi * omc)
+
+
+@dataclass(frozen=True)
+class LightHost:
+    """A light kind's host side. pack: resolved scene object -> Light record fields (see
+    the top); power: (those fields, the scene's radius) -> the power estimate above."""
+    pack: Callable[[dict], dict]
+    power: Callable[[dict, float], float]
+
+    def __call__(self, lt: dict) -> dict:
+        return self.pack(lt)
+
+
 def _traits(environment=False, at_infinity=False, area=False, positioned=False):
     return {"environment": environment, "at_infinity": at_infinity, "area": area,
             "positioned": positioned}
@@ -102,28 +208,31 @@ def _traits(environment=False, at_infinity=False, area=False, positioned=False):
 
 LIGHTS = KindTable("light", "LIGHT", [
     Kind("environment", Record({"radiance": Field(RGB, 1.0)}), "lib/lights/environment.h",
-         _traits(environment=True, at_infinity=True), pack_environment),
+         _traits(environment=True, at_infinity=True),
+         LightHost(pack_environment, environment_power)),
     Kind("environment_map", Record({
         "file": Field(File((".exr", ".hdr"), _envmap_problem)),
         "scale": Field(Number(ge=0), 1.0),
         "rotation": Field(Number(), 0.0),  # degrees about +y
     }), "lib/lights/environment_map.h", _traits(environment=True, at_infinity=True),
-        pack_environment_map),
+        LightHost(pack_environment_map, environment_map_power)),
     Kind("point", Record({"position": Field(VEC3), "intensity": Field(RGB)}),
-         "lib/lights/point.h", _traits(positioned=True), pack_point),
+         "lib/lights/point.h", _traits(positioned=True),
+         LightHost(pack_point, point_power)),
     Kind("sphere", Record({"center": Field(VEC3), "radius": Field(Number(gt=0)),
                            "radiance": Field(RGB)}),
-         "lib/lights/sphere.h", _traits(area=True), pack_sphere),
+         "lib/lights/sphere.h", _traits(area=True), LightHost(pack_sphere, sphere_power)),
     Kind("rectangle", Record({  # emits towards cross(u, v) unless two-sided
         "center": Field(VEC3), "u": Field(NONZERO), "v": Field(NONZERO),
         "radiance": Field(RGB), "two_sided": Field(Bool(), False),
     }, checks=[rectangle_area]), "lib/lights/rectangle.h", _traits(area=True),
-        pack_rectangle),
+        LightHost(pack_rectangle, rectangle_power)),
     Kind("directional", Record({
         "direction": Field(DIRECTION),  # towards the light
         "irradiance": Field(RGB),
         "angular_radius": Field(Number(ge=0, lt=90), 0.265),  # degrees; the sun's is 0.265
-    }), "lib/lights/directional.h", _traits(at_infinity=True), pack_directional),
+    }), "lib/lights/directional.h", _traits(at_infinity=True),
+        LightHost(pack_directional, directional_power)),
 ], traits=("environment", "at_infinity", "area", "positioned"), family="light")
 
 _SAMPLE = "__global const Light* l, EnvMap m, float3 x, float2 u, float3* wi, float* dist, float* pdf"

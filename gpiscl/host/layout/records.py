@@ -58,6 +58,14 @@ LIGHT = Struct("Light", (
     ("float", "cos_max"),    # sun: cos of the angular radius (the device samples by p0.w = 1 - cos)
 ))
 
+# Which light next-event estimation picks (compile/light_selection.py), one per light.
+LIGHT_CHOICE = Struct("LightChoice", (
+    ("float", "pmf"),        # probability of choosing this light
+    ("float", "threshold"),  # alias table: keep this light when the fraction is below
+    ("int", "alias"),        # alias table: the light chosen otherwise
+    ("int", "pad"),
+))
+
 BVH_NODE = Struct("BvhNode", (
     ("float4", "lo"),
     ("float4", "hi"),
@@ -128,8 +136,8 @@ PATH_STATE = Queue("path", (
     ("float4", "beta"),       # throughput
     ("float4", "radiance"),   # radiance gathered so far
     ("float4", "prev_pos"),   # last scattering vertex, for emitter pdfs (w = bsdf pdf, 0 = delta)
-    ("int", "prev_env_nee"),  # 1: that vertex's light sampling covers environment lights
-                              # too (a function-space mirror's does not: scatter.cl)
+    ("int", "prev_env_nee"),  # how that vertex's light sampling treats environments
+                              # (ENV_NEE_*, lib/lights.h; set by scatter.cl)
     # a function-space rough conductor vertex (fs_normal_pdf.h, fs_conductor_light_pdf):
     ("float4", "prev_n"),     # its sampled normal n0, w = p_Omega(n0) (0: any other vertex)
     ("float4", "prev_v"),     # v = -(incoming direction), w = the Beckmann alpha
@@ -211,7 +219,7 @@ def _defines() -> str:
     return "\n".join(lines) + "\n"
 
 
-STRUCTS = (CAMERA, PRIMITIVE, MATERIAL, LIGHT, BVH_NODE, GPIS_OBJECT, RENDER_PARAMS)
+STRUCTS = (CAMERA, PRIMITIVE, MATERIAL, LIGHT, LIGHT_CHOICE, BVH_NODE, GPIS_OBJECT, RENDER_PARAMS)
 # every struct host and device share (tests/test_layouts.py measures each on the device)
 ALL_STRUCTS = STRUCTS + gp_records.STRUCTS + function_space_records.STRUCTS
 

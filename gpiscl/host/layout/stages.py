@@ -103,6 +103,7 @@ NODES = Param("nodes", "__global const BvhNode*")
 PRIMS = Param("prims", "__global const Primitive*")
 MATERIALS = Param("materials", "__global const Material*")
 LIGHTS = Param("lights", "__global const Light*")
+LIGHT_CHOICE = Param("light_choice", "__global const LightChoice*")   # compile/light_selection.py
 ENV_MAP = (Param("env_texels", "__global const float4*"),
            Param("env_marginal", "__global const float*"),
            Param("env_conditional", "__global const float*"))
@@ -147,14 +148,14 @@ QUEUE_HITS = Stage("queue_hits", (
     queue("escaped", INDEX_QUEUE), COUNTERS))
 ESCAPED_RAYS = Stage("escaped_rays", (
     PARAMS, queue("path", PATH_STATE), queue("in", RAY_QUEUE), queue("escaped", INDEX_QUEUE),
-    COUNTERS, LIGHTS, *ENV_MAP))
+    COUNTERS, LIGHTS, *ENV_MAP, LIGHT_CHOICE))
 EMISSION = Stage("emission", (
     PARAMS, queue("path", PATH_STATE), queue("in", RAY_QUEUE), queue("hits", INDEX_QUEUE),
-    COUNTERS, PRIMS, LIGHTS, GPIS, MEAN_NODES))
+    COUNTERS, PRIMS, LIGHTS, GPIS, MEAN_NODES, LIGHT_CHOICE))
 SCATTER = Stage("scatter", (
     PARAMS, queue("path", PATH_STATE), queue("in", RAY_QUEUE), queue("out", RAY_QUEUE),
     queue("hits", INDEX_QUEUE), queue("shadow", SHADOW_QUEUE), COUNTERS, PRIMS, MATERIALS,
-    LIGHTS, *ENV_MAP, GPIS, MEAN_NODES))
+    LIGHTS, *ENV_MAP, GPIS, MEAN_NODES, LIGHT_CHOICE))
 GPIS_SHADOW_WEIGHT_SPACE = Stage("gpis_shadow_weight_space", (
     PARAMS, queue("path", PATH_STATE), queue("shadow", SHADOW_QUEUE), GPIS, KERNELS,
     MEAN_NODES, ORDER_TABLE, COUNTERS, WS_POST_CACHE))

@@ -6,6 +6,7 @@ import functools
 import os
 import sys
 import tempfile
+import threading
 import time
 import warnings
 from collections import defaultdict
@@ -129,13 +130,58 @@ WORK_GROUP = 64
 _BUILT: dict = {}
 
 
+# A build the driver's cache answers takes ~0.1 s; one still running after this compiles
+SLOW_COMPILE_SECONDS = 2.0
+COMPILE_NOTICE = "compiling OpenCL programs (first run only)"
+_notice = {"to": None, "said": False}   # announcing_compiles: where, and whether said
+
+
+@contextlib.contextmanager
+def announcing_compiles(file):
+    """While on (file: a text stream; None: off), a compile that outlasts
+    SLOW_COMPILE_SECONDS prints COMPILE_NOTICE to file, once per process: a cold start is
+    otherwise ~20 s of silence. The command line turns it on, the API only with progress."""
+    previous, _notice["to"] = _notice["to"], file
+    try:
+        yield
+    finally:
+        _notice["to"] = previous
+
+
+@contextlib.contextmanager
+def slow_compile_notice(fd: int | None = None):
+    """Around a build or a program's first launches: COMPILE_NOTICE once they outlast
+    SLOW_COMPILE_SECONDS (the drivers' caches answer well within it). fd: the stderr to
+    write to while file descriptor 2 is redirected (build_quietly)."""
+    file = _notice["to"]
+    if file is None or _notice["said"]:
+        yield
+        return
+
+    def say():
+        _notice["said"] = True
+        if fd is None:
+            print(COMPILE_NOTICE, file=file, flush=True)
+        else:
+            os.write(fd, (COMPILE_NOTICE + "\n").encode())
+
+    timer = threading.Timer(SLOW_COMPILE_SECONDS, say)
+    timer.daemon = True
+    timer.start()
+    try:
+        yield
+    finally:
+        timer.cancel()
+        timer.join()
+
+
 def build_quietly(device: Device, source: str, opts) -> cl.Program:
     """Builds source; a non-empty build log (clang's notes on vector types a CPU lacks, say)
     is not printed: pyopencl would warn (CompilerWarning) on every run. With
     GPISCL_BUILD_LOG=1 the log goes to a temporary file named on stderr."""
     with warnings.catch_warnings(), tempfile.TemporaryFile("w+") as driver_says:
         warnings.simplefilter("ignore", cl.CompilerWarning)
-        with _stderr_into(driver_says):
+        with _stderr_into(driver_says) as stderr, slow_compile_notice(stderr):
             prg = cl.Program(device.ctx, source).build(options=opts)
         driver_says.seek(0)
         said = driver_says.read().strip()
@@ -153,7 +199,7 @@ def _stderr_into(file):
     saved = os.dup(2)
     os.dup2(file.fileno(), 2)
     try:
-        yield
+        yield saved   # the real stderr, meanwhile
     finally:
         os.dup2(saved, 2)
         os.close(saved)

@@ -6,6 +6,7 @@ size the next launches; all other counts stay on the device.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -18,8 +19,8 @@ from . import kriging_cache, memory
 from ..layout import records as layouts
 from ..layout.constants import WS_MAX_LANES
 from ..layout import stages
-from .batching import BatchSizer
-from .device import Device, Program, to_device
+from .batching import BatchSizer, PixelCosts
+from .device import Device, Program, slow_compile_notice, to_device
 from .film import Film, FilmImage
 from .launch import launch
 from .program_sources import GPIS_HEADERS, STAGE_FILES
@@ -31,6 +32,12 @@ from ..compile.scene import CompiledScene
 # and every touched page stays resident, so the cap is the smallest batch that keeps the
 # cores as busy as larger ones (docs/design/batches.md has the measurements).
 DEFAULT_BATCH, CPU_DEFAULT_BATCH = 1 << 18, 1 << 14
+
+
+# Renders whose first batch says they need more than COSTS_AFTER_SECONDS size their batches
+# by what their pixels cost too (batching.PixelCosts; shorter ones, like most uq
+# realizations, are a few batches anyway), probing at most PROBES_PER_BATCH paths ahead
+COSTS_AFTER_SECONDS, PROBES_PER_BATCH, PATHS_PER_PROBE, PROBE_SHARE = 2.0, 32, 4, 0.1
 
 
 # PATH_STATE's first-hit fields (aov.py): one element each when no AOV is asked for, as
@@ -279,12 +286,13 @@ class WavefrontIntegrator:
     # --- the loop -------------------------------------------------------------------
 
     def render_batch(self, sample_base: int, path_base: int, num_paths: int,
-                     stop=None) -> bool:
+                     stop=None, keep: bool = True) -> bool:
         """Trace paths path_base .. path_base+num_paths-1 of samples from sample_base.
 
         stop() is asked between bounces: True abandons the batch (nothing of it reaches the
-        film) so a stop request waits for one bounce, not for the whole batch. Returns
-        whether the batch was completed and accumulated.
+        film) so a stop request waits for one bounce, not for the whole batch. keep=False
+        traces the batch and drops it (a probe: _probe). Returns whether the batch was
+        completed and accumulated.
         """
         queue = self.device.queue
         self._allocate_work()
@@ -321,6 +329,9 @@ class WavefrontIntegrator:
                 return False
         else:
             self.stats.truncated_paths += n
+        if not keep:
+            queue.finish()
+            return False
         self.accumulate()
         queue.finish()   # so the batch's time is measured whole, accumulate included
         self.stats.paths += num_paths
@@ -347,43 +358,107 @@ class WavefrontIntegrator:
         for stat, name in self.DEVICE_TOTALS.items():
             setattr(self.stats, stat, int(self.counters_host[layouts.COUNTERS[name]]))
 
+    def _dropped(self, trace) -> float:
+        """Seconds of trace(), whose batches reach neither the film nor the statistics:
+        the counters the device sums over the render are put back as they were."""
+        queue = self.device.queue
+        saved_stats, saved = dataclasses.replace(self.stats), np.empty_like(self.counters_host)
+        cl.enqueue_copy(queue, saved, self.counters)
+        t0 = time.perf_counter()
+        trace()
+        seconds = time.perf_counter() - t0
+        cl.enqueue_copy(queue, self.counters, saved)
+        queue.finish()
+        self.stats = saved_stats
+        return seconds
+
+    def _warm_up(self) -> None:
+        """A path traced and dropped before the clock starts: PoCL compiles each kernel for
+        its work-group size at its first launch (~8 s cold for the stage program), which
+        counted as rendering (a cold start reported 331 paths/s) and sat at 0 %."""
+        with slow_compile_notice():
+            self._dropped(lambda: self.render_batch(0, 0, 1, keep=False))
+
+    def _shrunk(self, costs: PixelCosts, start: int, n: int) -> int:
+        """n paths from path index start, fewer if the pixels they cover cost more than a
+        batch's time (batching.PixelCosts). Where it covers pixels no batch has yet (the
+        first pass), paths at up to PROBES_PER_BATCH points spread over it (one per
+        PATHS_PER_PROBE, for PROBE_SHARE of a batch's time) are probed first, traced and
+        dropped: sized from sky rows, a batch took 12 s on the object."""
+        n, spent = costs.limit(start, n), 0.0
+        for k in range(PROBES_PER_BATCH):
+            if k >= n // PATHS_PER_PROBE or spent >= PROBE_SHARE * costs.target:
+                break   # the probes take a small share of the batch's paths and time
+            pixel = costs.probe_point(start, n)
+            if costs.known(pixel):
+                continue
+            seconds = self._dropped(lambda: self.render_batch(0, pixel, 1, keep=False))
+            costs.probed(pixel, seconds)
+            spent += seconds
+            n = costs.limit(start, n)
+        return n
+
     def render(self, spp: int, time_limit: float | None = None, progress=None,
                stop=None) -> RenderResult:
         """Render spp samples per pixel, fewer if time_limit (seconds), stop() or Ctrl-C
         ends it early.
 
-        Batches are sized to take about batching.TARGET_SECONDS each, so progress(paths)
-        is called at least about once a second, stop() is asked between bounces and the
-        time limit holds to within one batch. Paths run in pixel order, so a render
-        stopped during its first pass leaves the later pixels with no sample: their film
-        count is 0 (see FilmImage.count).
+        Batches are sized to take about batching.TARGET_SECONDS each (from a probe of the
+        image's costs, batching.py), so progress(paths) is called about once a second or
+        more (progress(0) once when the clock starts, after the programs' first-launch
+        compiles), and stop() and the time limit are asked between bounces: both hold to
+        within one bounce, except that the first batch always completes. Paths run in pixel
+        order, so a render stopped during its first pass leaves the later pixels with no
+        sample: their film count is 0 (see FilmImage.count).
         """
         if time_limit is not None and not (math.isfinite(time_limit) and time_limit > 0):
             raise ValueError(f"time_limit must be a finite number of seconds > 0 "
                              f"(got {time_limit})")
-        start = time.perf_counter()
         total = self.num_pixels * spp
         self.stats.spp_requested = spp
-        sizer = BatchSizer(self.batch)
-        done = 0
+        done, start = 0, time.perf_counter()
         try:
+            self._warm_up()
+            start = time.perf_counter()    # the render alone: not the compiles
+            deadline = None if time_limit is None else start + time_limit
+            if progress is not None:
+                progress(0)
+            sizer, costs = BatchSizer(self.batch), None
+
+            def ended() -> bool:
+                """A stop, or the time limit once there is an image to keep."""
+                if stop is not None and stop():
+                    return True
+                return done > 0 and deadline is not None and time.perf_counter() >= deadline
+
             while done < total:
                 if stop is not None and stop():
                     self.stats.interrupted = True
                     break
-                left = None if time_limit is None else time_limit - (time.perf_counter() - start)
+                left = None if deadline is None else deadline - time.perf_counter()
                 n = sizer.next(total - done, left)
+                if costs is not None and n > 0:
+                    n = self._shrunk(costs, done, n)
                 # the first batch always runs: a limit shorter than one batch still gives
-                # an image (the limit holds to within one batch)
+                # an image
                 if done and (n == 0 or (left is not None and left <= 0)):
                     self.stats.time_limited = True
                     break
                 t0 = time.perf_counter()
                 if not self.render_batch(done // self.num_pixels, done % self.num_pixels, n,
-                                         stop):
-                    self.stats.interrupted = True
+                                         ended):
+                    if stop is not None and stop():
+                        self.stats.interrupted = True
+                    else:
+                        self.stats.time_limited = True
                     break
-                sizer.record(n, time.perf_counter() - t0)
+                seconds = time.perf_counter() - t0
+                sizer.record(n, seconds)
+                if costs is None and sizer.rate is not None and (
+                        total - done - n) / sizer.rate > COSTS_AFTER_SECONDS:
+                    costs = PixelCosts(self.num_pixels)   # a long render
+                if costs is not None:
+                    costs.record(done, n, seconds)
                 done += n
                 if progress is not None:
                     progress(n)

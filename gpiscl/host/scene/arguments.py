@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import re
+from decimal import Decimal
 
 from ..errors import API_SOURCE, CLI_SOURCE  # noqa: F401  (the front ends' sources)
 from .records import CAMERA, MAX_BATCH, RENDER
@@ -18,6 +19,7 @@ from ..schema import Context, Int, ListOf, Nullable, Number
 
 # realization="none": average over realizations whatever the scene says
 NO_REALIZATION = "none"
+MAX_TIME_LIMIT = 1e9   # seconds
 SIZE_UNITS = {"": 1, "k": 1 << 10, "m": 1 << 20, "g": 1 << 30, "t": 1 << 40}
 
 
@@ -26,7 +28,8 @@ def parse_size(text: str) -> int:
     m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*([kmgt]?)(i?b)?\s*", str(text).lower())
     if not m:
         raise ValueError(f"expected a size like 8G, 512M or a number of bytes (got {text!r})")
-    size = int(float(m[1]) * SIZE_UNITS[m[2]])
+    # exact: through a float, 4611686018427387905 rounded to 2**62 and passed its bound
+    size = int(Decimal(m[1]) * SIZE_UNITS[m[2]])
     if size <= 0:
         raise ValueError(f"expected a size > 0 (got {text!r})")
     return size
@@ -66,7 +69,8 @@ SPECS = {
     "resolution": CAMERA.fields["resolution"].spec,
     "realization": Word(NO_REALIZATION, RENDER.fields["realization"].spec),
     "batch_size": Nullable(Int(ge=1, le=MAX_BATCH)),
-    "time_limit": Nullable(Number(gt=0)),
+    # ~31 years: beyond any render, and every deadline stays a float far from overflow
+    "time_limit": Nullable(Number(gt=0, le=MAX_TIME_LIMIT)),
     # stops: 2**exposure must stay a float
     "exposure": Number(ge=-100, le=100),
     "max_memory": Size(Nullable(Int(ge=1, le=2**62))),

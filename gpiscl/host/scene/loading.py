@@ -7,6 +7,7 @@ idempotent, so a written resolved scene loads back to the same data.
 from __future__ import annotations
 
 import copy
+import hashlib
 import json
 import os
 from dataclasses import dataclass, field
@@ -31,13 +32,20 @@ class Scene:
         Where it came from, for error messages.
     base_dir : str
         The folder relative file paths are resolved against.
+
+    data may be edited: load_scene and every render validate it again when it changed.
     """
     data: dict
     source: str = "<dict>"
     base_dir: str = field(default_factory=os.getcwd)
+    # the digest of data as it was validated: data is a plain dict a caller can edit
+    # (scene.data["camera"]["resolution"] = [0, 0] crashed in the film), so checked()
+    # validates it again when it differs
+    validated: str = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self):
         self.data = SCENE.resolve(self.data, "", Context(self.source, self.base_dir))
+        self.validated = _digest(self.data)
 
     @classmethod
     def resolved(cls, data: dict, source: str, base_dir: str) -> "Scene":
@@ -46,13 +54,27 @@ class Scene:
         mesh and image the scene names."""
         scene = object.__new__(cls)
         scene.data, scene.source, scene.base_dir = data, source, base_dir
+        scene.validated = _digest(data)
         return scene
+
+    def checked(self) -> "Scene":
+        """This scene, validated and resolved again (in place) if its data were changed
+        since: SceneError naming the key of a bad edit. What load_scene does with a Scene,
+        so every render and uq call gets only checked data."""
+        digest = _digest(self.data)
+        if digest is None or digest != self.validated:
+            ctx = Context(self.source, self.base_dir)
+            _check_nesting(self.data, ctx)   # first: the resolver recurses
+            self.data = SCENE.resolve(self.data, "", ctx)
+            self.validated = _digest(self.data)
+        return self
 
     def with_overrides(self, spp=None, seed=None, resolution=None, realization=None,
                        tonemap=None) -> "Scene":
         """This scene with the settings given (None: the scene's own), as a new Scene;
         realization='none' averages over realizations whatever the scene says. The values
         are checked by the caller (scene/arguments.py), so the scene is not resolved again."""
+        self.checked()
         render = {k: v for k, v in (("spp", spp), ("seed", seed), ("realization", realization),
                                     ("tonemap", tonemap)) if v is not None}
         if not render and resolution is None:
@@ -68,6 +90,15 @@ class Scene:
     def __repr__(self):
         return (f"Scene(source={self.source!r}, {len(self.data.get('shapes', []))} shapes, "
                 f"{len(self.data.get('lights', []))} lights)")
+
+
+def _digest(data) -> str | None:
+    """sha256 of data as JSON; None for data that is no longer JSON (surely edited)."""
+    try:
+        text = json.dumps(data, sort_keys=True)
+    except (TypeError, ValueError, RecursionError):
+        return None
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 class _JsonObject(dict):
@@ -138,7 +169,7 @@ def load_scene(source) -> Scene:
         dict is never changed.
     """
     if isinstance(source, Scene):
-        return source
+        return source.checked()
     if isinstance(source, dict):
         ctx = Context("<dict>", os.getcwd())
         doc = source

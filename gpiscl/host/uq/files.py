@@ -29,8 +29,36 @@ def scene_digest(data: dict) -> str:
     return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
 
 
+MAX_REALIZATIONS = 2**31   # ids are distinct only modulo 2^31 (sums.realization_ids)
+# sums of non-negative terms in UqSums.merge, so exactly >= 0 in any valid file
+NON_NEGATIVE = ("m2", "u", "uu")
+
+
+def sums_digest(sums: UqSums, meta: dict) -> str:
+    """What binds a file's provenance to its sums: a relabelled copy (the same sums under
+    other ranges) or sums edited by hand no longer match the digest its writer recorded."""
+    h = hashlib.sha256(json.dumps({k: v for k, v in meta.items() if k != "digest"},
+                                  sort_keys=True).encode())
+    h.update(str(int(sums.n)).encode())
+    for f in fields(UqSums)[1:]:
+        h.update(np.ascontiguousarray(getattr(sums, f.name), np.float64).tobytes())
+    return h.hexdigest()[:32]
+
+
+def with_digest(sums: UqSums, meta: dict | None) -> dict | None:
+    """meta as a partial-sums file records it (UqSums.save's caller: write_uq)."""
+    if meta is None:
+        return None
+    meta = {k: v for k, v in meta.items() if k != "digest"}
+    return dict(meta, digest=sums_digest(sums, meta))
+
+
 def load_partial(path):
-    """(UqSums, meta) of a .uq.npz, checked: SceneError naming the file and the problem."""
+    """(UqSums, meta) of a .uq.npz, checked: SceneError naming the file, the field and the
+    problem. Every array must be the (H, W, 3) of the recorded resolution, the ranges
+    disjoint [a, b) with 0 <= a < b <= 2^31 that hold n realizations, the sums possible
+    (no NaN, no negative sum of squares) and the digest the writer recorded must match."""
+    path = str(path)
     try:
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: np.asarray(z[k]) for k in z.files}
@@ -42,29 +70,74 @@ def load_partial(path):
     if missing:
         raise SceneError(path, "", f"not a uq partial-sums file of this version (lacks "
                          f"{', '.join(missing)})")
+    meta = _check_meta(path, arrays["meta"])
     n = arrays["n"]
-    if n.shape != () or n.dtype.kind not in "iu" or int(n) < 1:
-        raise SceneError(path, "n", f"must be one integer >= 1 (got {n.ravel()[:3].tolist()} "
-                         f"of {n.dtype})")
-    shape = arrays["mean"].shape
+    if n.shape != () or n.dtype.kind not in "iu" or not 1 <= int(n) <= MAX_REALIZATIONS:
+        raise SceneError(path, "n", f"must be one integer in [1, 2**31] (got "
+                         f"{n.ravel()[:3].tolist()} of {n.dtype})")
+    held = sum(b - a for a, b in meta["ranges"])
+    if held != int(n):
+        raise SceneError(path, "n", f"{int(n)} realizations, but its ranges hold {held}")
+    w, h = meta["resolution"]
     for k in names[1:]:
         a = arrays[k]
-        if a.shape != shape or len(shape) != 3 or shape[2] != 3 or a.dtype.kind != "f":
-            raise SceneError(path, k, f"must be a float (H, W, 3) array like 'mean' "
-                             f"(got {a.shape} {a.dtype})")
+        if a.shape != (h, w, 3) or a.dtype.kind != "f":
+            raise SceneError(path, k, f"must be a float ({h}, {w}, 3) array, as its recorded "
+                             f"resolution {w}x{h} says (got {a.shape} {a.dtype})")
         if not np.isfinite(a).all():
             raise SceneError(path, k, "has NaN or infinite values")
-    try:
-        meta = json.loads(str(arrays["meta"]))
-        ranges = [(int(a), int(b)) for a, b in meta["ranges"]]
-        assert all(k in meta for k in MATCH)
-    except Exception:
-        raise SceneError(path, "meta", "unreadable provenance") from None
-    if sum(b - a for a, b in ranges) != int(n):
-        raise SceneError(path, "n", f"{int(n)} realizations, but its ranges hold "
-                         f"{sum(b - a for a, b in ranges)}")
+        if k in NON_NEGATIVE and (a < 0).any():
+            raise SceneError(path, k, f"has negative values ({a.min():.3g}): it is a sum of "
+                             "squares, so the file is damaged")
     sums = UqSums(int(n), *(arrays[k].astype(np.float64) for k in names[1:]))
-    return sums, dict(meta, ranges=ranges)
+    if meta.get("digest") != sums_digest(sums, meta):
+        raise SceneError(path, "meta", "its sums do not match the digest recorded with them "
+                         "(the file was edited or relabelled): render that batch again")
+    return sums, dict(meta, ranges=[tuple(r) for r in meta["ranges"]])
+
+
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _check_meta(path: str, stored) -> dict:
+    """The provenance, each field checked: SceneError naming meta.<field>."""
+    try:
+        meta = json.loads(str(stored))
+    except ValueError:
+        meta = None
+    if not isinstance(meta, dict):
+        raise SceneError(path, "meta", "unreadable provenance")
+    for key in MATCH + ("ranges", "digest"):
+        if key not in meta:
+            raise SceneError(path, f"meta.{key}", "missing (not a partial-sums file of "
+                             "this version: render that batch again)")
+    checks = {
+        "scene": (lambda v: isinstance(v, str), "a scene digest string"),
+        "seed": (lambda v: _is_int(v) and 0 <= v < 2**32, "an integer in [0, 2**32)"),
+        "spp": (lambda v: _is_int(v) and 2 <= v < 2**31, "an integer in [2, 2**31)"),
+        "resolution": (lambda v: isinstance(v, list) and len(v) == 2
+                       and all(_is_int(x) and 1 <= x <= 16384 for x in v),
+                       "[width, height], each in [1, 16384]"),
+        "digest": (lambda v: isinstance(v, str), "a digest string"),
+    }
+    for key, (ok, what) in checks.items():
+        if not ok(meta[key]):
+            raise SceneError(path, f"meta.{key}", f"must be {what} (got {meta[key]!r:.60})")
+    ranges = meta["ranges"]
+    if not isinstance(ranges, list) or not ranges:
+        raise SceneError(path, "meta.ranges", f"must be a non-empty list of [first, end) "
+                         f"pairs (got {ranges!r:.60})")
+    for i, r in enumerate(ranges):
+        if not (isinstance(r, list) and len(r) == 2 and all(_is_int(x) for x in r)
+                and 0 <= r[0] < r[1] <= MAX_REALIZATIONS):
+            raise SceneError(path, f"meta.ranges[{i}]", f"must be [a, b) with 0 <= a < b <= "
+                             f"2**31 (got {r!r:.60})")
+    ordered = sorted(ranges)
+    for (a, b), (c, d) in zip(ordered, ordered[1:]):
+        if c < b:
+            raise SceneError(path, "meta.ranges", f"[{a}, {b}) and [{c}, {d}) overlap")
+    return meta
 
 
 def merge_partials(paths):
@@ -124,7 +197,7 @@ def write_uq_outputs(sums: UqSums, scene, exr_path, exposure: float = 0.0,
                      lambda tmp: write_png(tmp, tonemap_srgb8(sums.mean, exposure, curve)))
     write_atomically(paths["std_png"],
                      lambda tmp: write_png(tmp, tonemap_srgb8(sums.std, exposure)))
-    write_atomically(paths["sums"], lambda tmp: sums.save(tmp, meta))
+    write_atomically(paths["sums"], lambda tmp: sums.save(tmp, with_digest(sums, meta)))
     if scene is not None:
         write_atomically(paths["scene"], lambda tmp: write_resolved(scene, tmp))
     else:

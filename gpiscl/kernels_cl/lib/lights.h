@@ -44,3 +44,22 @@ inline bool in_cone(float3 d, float3 axis, float omc)
     return dot(e, e) <= 2.0f * omc;
 }
 
+
+/* The light next-event estimation picks, by the scene's alias table (LightChoice records,
+ * gpiscl/host/compile/light_selection.py): light i with probability choice[i].pmf, in
+ * proportion to its power estimate; u uniform in [0, 1). */
+inline int light_choose(__global const LightChoice* choice, int n, float u)
+{
+    float s = u * n;
+    int i = min((int)s, n - 1);
+    return (s - i < choice[i].threshold) ? i : choice[i].alias;
+}
+
+/* How a vertex's light sampling treats environments (path_prev_env_nee, so that an
+ * escaped ray's MIS weight uses the density NEE used): left to BSDF sampling; sampled
+ * by the kind's own density; or, a constant environment at a vertex whose BSDF vanishes
+ * below its normal (path_prev_n), by the cosine-weighted hemisphere about that normal
+ * (environment_sample_above, lights/environment.h). */
+#define ENV_NEE_NONE 0
+#define ENV_NEE_OWN 1
+#define ENV_NEE_ABOVE 2

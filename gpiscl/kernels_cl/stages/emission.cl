@@ -28,11 +28,12 @@ __kernel void emission(EMISSION_PARAMS)
     float pdf_light;
     float3 Le = light_area_radiance(lights[prim->light].kind, &lights[prim->light], prev.xyz,
                                     x, primitive_normal(prim, x), d, &pdf_light);
-    /* after a random-normal pairs vertex (fs_random_normal.h) the light strategy's
-     * density is that of its (normal, light) pairs (fs_normal_pdf.h) */
+    /* the light strategy's density includes choosing this light (its pmf); after a
+     * random-normal pairs vertex (fs_random_normal.h) it is that of its (normal, light)
+     * pairs (fs_normal_pdf.h) */
     float w = (prev.w > 0.0f && params->nee)
                   ? power_heuristic(prev.w, fs_conductor_light_pdf(
-                        pdf_light / params->num_lights, path_prev_n[p], path_prev_v[p], d))
+                        pdf_light * light_choice[prim->light].pmf, path_prev_n[p], path_prev_v[p], d))
                   : 1.0f;
     path_radiance[p] += (float4)(w * path_beta[p].xyz * Le, 0.0f);
 }

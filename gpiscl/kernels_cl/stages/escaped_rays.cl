@@ -14,13 +14,19 @@ __kernel void escaped_rays(ESCAPED_RAYS_PARAMS)
     for (int k = 0; k < params->num_lights; ++k) {
         float pdf_light;
         float3 Le = light_radiance(lights[k].kind, &lights[k], m, d, &pdf_light);
-        /* a vertex may leave environments to BSDF sampling (path_prev_env_nee,
-         * fs_random_normal.h); after a random-normal pairs vertex the light strategy
-         * samples pairs (normal, light) (fs_normal_pdf.h) */
+        /* the density the previous vertex's NEE gave d (ENV_NEE_*, lights.h): a vertex
+         * may leave environments to BSDF sampling, or sample a constant one by the cosine
+         * hemisphere about its normal; times the light's choice probability. After a
+         * random-normal pairs vertex the light strategy samples pairs (normal, light)
+         * (fs_normal_pdf.h) */
+        int env_nee = path_prev_env_nee[p];
+        if (env_nee == ENV_NEE_ABOVE && lights[k].kind == LIGHT_ENVIRONMENT)
+            pdf_light = environment_pdf_above(path_prev_n[p].xyz, d);
         int env = LIGHT_IS_ENVIRONMENT(lights[k].kind);
-        float w = (pdf_bsdf > 0.0f && params->nee && (path_prev_env_nee[p] || !env))
+        float w = (pdf_bsdf > 0.0f && params->nee && (env_nee != ENV_NEE_NONE || !env))
                       ? power_heuristic(pdf_bsdf, fs_conductor_light_pdf(
-                            pdf_light / params->num_lights, path_prev_n[p], path_prev_v[p], d))
+                            pdf_light * light_choice[k].pmf, path_prev_n[p],
+                            path_prev_v[p], d))
                       : 1.0f;
         L += w * Le;
     }

@@ -76,33 +76,39 @@ __kernel void scatter(SCATTER_PARAMS)
     FsNormalLaw law = fs_normal_law(in_hit_law_m[r], in_hit_law_a[r], in_hit_law_b[r]);
     float4 ub = rng4(params->seed, pixel, sample, bounce, DIM_BSDF);
     /* --- next-event estimation --- */
+    /* environments: left to BSDF sampling where the mode says so (escaped_rays.cl gives
+     * them weight 1 after such a vertex); a constant one by the cosine hemisphere where
+     * the BSDF vanishes below n (diffuse, rough conductor at a fixed normal) */
+    int above = rn == RANDOM_NORMAL_SAMPLED && (mat->kind == MATERIAL_DIFFUSE
+                                                || mat->kind == MATERIAL_ROUGH_CONDUCTOR);
+    int env_nee = !fs_random_normal_env_nee(rn) ? ENV_NEE_NONE
+                  : above ? ENV_NEE_ABOVE : ENV_NEE_OWN;
     if (fs_random_normal_has_density(mat->kind, rn) && params->nee && params->num_lights > 0) {
         float4 ul = rng4(params->seed, pixel, sample, bounce, DIM_LIGHT);
-        int li = min((int)(ul.x * params->num_lights), params->num_lights - 1);
+        int li = light_choose(light_choice, params->num_lights, ul.x);
+        float sel = light_choice[li].pmf;   /* the probability of choosing light li */
         EnvMap m = {env_texels, env_marginal, env_conditional, params->env_width,
                     params->env_height};
         float3 wl;
         float dist, pdf_light;
-        float3 Le = light_sample(lights[li].kind, &lights[li], m, xo, ul.yz, &wl, &dist,
-                                 &pdf_light);
-        /* environments stay with BSDF sampling where the mode says so (escaped_rays.cl
-         * gives them weight 1 after such a vertex) */
-        if (!fs_random_normal_env_nee(rn) && LIGHT_IS_ENVIRONMENT(lights[li].kind))
+        float3 Le = (env_nee == ENV_NEE_ABOVE && lights[li].kind == LIGHT_ENVIRONMENT)
+            ? environment_sample_above(&lights[li], n, ul.yz, &wl, &dist, &pdf_light)
+            : light_sample(lights[li].kind, &lights[li], m, xo, ul.yz, &wl, &dist,
+                           &pdf_light);
+        if (env_nee == ENV_NEE_NONE && LIGHT_IS_ENVIRONMENT(lights[li].kind))
             Le = (float3)(0.0f);
         float pdf_f;
         float4 grad = (float4)(0.0f);   /* the shadow ray keeps the vertex's normal */
         float3 f = fs_random_normal_eval(rn, mat, law, albedo, n, wo, wl, &pdf_f, &grad);
-        /* the light strategy's density includes choosing light li (1 / num_lights),
-         * as the BSDF strategy's weight in emission.cl and escaped_rays.cl does:
-         * the two weights of one direction must sum to 1 */
-        float w = (pdf_light > 0.0f)
-                      ? power_heuristic(pdf_light / params->num_lights, pdf_f) : 1.0f;
+        /* the light strategy's density includes choosing light li (sel), as the BSDF
+         * strategy's weight in emission.cl and escaped_rays.cl does: the two weights of
+         * one direction must sum to 1 */
+        float w = (pdf_light > 0.0f) ? power_heuristic(pdf_light * sel, pdf_f) : 1.0f;
         float inv_pdf = (pdf_light > 0.0f) ? 1.0f / pdf_light : 1.0f;
         if (rn == RANDOM_NORMAL_PAIRS && pdf_light > 0.0f)
-            f = fs_random_normal_pairs(mat, law, albedo, n, wo, wl,
-                                       pdf_light / params->num_lights, ul.w, ub.zw, &pdf_f,
-                                       &grad, &w);
-        float3 c = beta * f * Le * (w * inv_pdf * params->num_lights);
+            f = fs_random_normal_pairs(mat, law, albedo, n, wo, wl, pdf_light * sel, ul.w,
+                                       ub.zw, &pdf_f, &grad, &w);
+        float3 c = beta * f * Le * (w * inv_pdf / sel);
         if (max3(c) > 0.0f) {
             int k = atomic_inc(&counters[COUNT_SHADOW]);
             shadow_o[k] = (float4)(xo, 0.0f);
@@ -127,7 +133,7 @@ __kernel void scatter(SCATTER_PARAMS)
     path_beta[p] = (float4)(beta, 0.0f);
     path_depth[p] = depth;
     path_prev_pos[p] = (float4)(x, pdf_bsdf);
-    path_prev_env_nee[p] = fs_random_normal_env_nee(rn);
+    path_prev_env_nee[p] = env_nee;
     path_prev_n[p] = (float4)(n, p_n0);
     path_prev_v[p] = (float4)(-wo, mat->roughness);
     int k = atomic_inc(&counters[COUNT_RAYS_OUT]);

@@ -1,0 +1,152 @@
+"""Light sampling (docs/design/light-sampling.md) against the last release, same run.
+
+    python tools/bench_light_sampling.py [--baseline /work/wt/baseline] [--resolution 32]
+        [--spp 64] [--reference-spp 2048] [--cornell-spp 16] [scenes...]
+
+Each tree renders in its own process (PYTHONPATH = that tree). Per scene: a converged
+reference (this tree, --reference-spp, its own seed); per tree, at --spp: the per-sample
+variance svar (mean over pixels and channels of stderr^2 * spp), MSE*spp against the
+reference (less the reference's own variance), and paths/s. Ratios are base / new (> 1:
+the new tree is better). The MSE at equal time is MSE*spp times seconds per path, i.e.
+the error each tree reaches in the same time (the renders are too short on this shared
+machine for a fixed time limit to be fair to both). Fireflies: in the default Cornell
+box at its own resolution and --cornell-spp, the share of pixels whose luminance is more
+than 3x the median of their 5x5 neighbourhood. The image means against the reference
+(z, from both standard errors) check that the trees agree.
+Scenes: "cornell" (the built-in default scene), "sun_sky_floor" and "mirror_ball_map"
+(below; the latter not by default), or scene files.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENES = ("cornell", "scenes/fs_sphere_se.json", "scenes/knob.json",
+          "scenes/csg_two_spheres.json", "sun_sky_floor")
+
+
+def sun_sky_floor() -> dict:
+    """A diffuse floor and sphere under a sun and a constant sky (issue 31's case)."""
+    return {"camera": {"position": [0, 2, 4], "look_at": [0, 0, 0], "up": [0, 1, 0],
+                       "fov": 40, "resolution": [32, 32]},
+            "render": {"spp": 64, "seed": 1, "max_depth": 6},
+            "shapes": [{"type": "rectangle", "center": [0, 0, 0], "u": [20, 0, 0],
+                        "v": [0, 0, -20], "bsdf": {"type": "diffuse", "albedo": 0.5}},
+                       {"type": "sphere", "center": [0, 0.5, 0], "radius": 0.5,
+                        "bsdf": {"type": "diffuse", "albedo": 0.8}}],
+            "lights": [{"type": "directional", "direction": [0.3, 1, 0.2],
+                        "irradiance": 3.0},
+                       {"type": "environment", "radiance": 0.5}]}
+
+
+def mirror_ball_map() -> dict:
+    """fs_mirror_ball_sun's function-space mirror ball under the sky map instead."""
+    scene = json.loads((ROOT / "scenes" / "fs_mirror_ball_sun.json").read_text())
+    scene["lights"] = [{"type": "environment_map",
+                        "file": str(ROOT / "scenes" / "assets" / "sky.exr")}]
+    return scene
+
+
+def _scene(name: str):
+    if name == "sun_sky_floor":
+        return sun_sky_floor()
+    if name == "mirror_ball_map":
+        return mirror_ball_map()
+    if name == "cornell":
+        from gpiscl.scenes import default_scene
+        return default_scene()
+    return str(ROOT / name)
+
+
+def worker(args):
+    """In the tree on PYTHONPATH: render and save mean, stderr, seconds, paths."""
+    from gpiscl import render_result
+    res = None if args.full_resolution else (args.resolution, args.resolution)
+    render_result(_scene(args.scene), spp=1, seed=7, resolution=(8, 8))   # compile
+    t = time.perf_counter()
+    r = render_result(_scene(args.scene), spp=args.spp, seed=args.seed, resolution=res)
+    seconds = time.perf_counter() - t
+    np.savez(args.out, mean=r.image.mean, stderr=r.image.stderr, seconds=seconds,
+             paths=r.stats.paths)
+
+
+def _render(tree: Path, scene, spp, seed, resolution, full=False):
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "r.npz"
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", "--scene", scene,
+               "--spp", str(spp), "--seed", str(seed), "--resolution", str(resolution),
+               "--out", str(out)] + (["--full-resolution"] if full else [])
+        env = dict(os.environ, PYTHONPATH=str(tree))
+        subprocess.run(cmd, check=True, env=env, cwd=str(tree))
+        with np.load(out) as z:
+            return {k: z[k] for k in z.files}
+
+
+def fireflies(mean) -> float:
+    lum = mean.mean(axis=2)
+    h, w = lum.shape
+    pad = np.pad(lum, 2, mode="edge")
+    windows = np.stack([pad[i:i + h, j:j + w] for i in range(5) for j in range(5)])
+    med = np.median(windows, axis=0)
+    return float(np.mean(lum > 3.0 * np.maximum(med, 1e-6)))
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("scenes", nargs="*", default=list(SCENES))
+    ap.add_argument("--baseline", default="/work/wt/baseline")
+    ap.add_argument("--resolution", type=int, default=32)
+    ap.add_argument("--spp", type=int, default=64)
+    ap.add_argument("--reference-spp", type=int, default=2048)
+    ap.add_argument("--cornell-spp", type=int, default=16)
+    ap.add_argument("--worker", action="store_true")
+    ap.add_argument("--full-resolution", action="store_true")
+    ap.add_argument("--scene"), ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--out")
+    args = ap.parse_args()
+    if args.worker:
+        return worker(args)
+    trees = {"base": Path(args.baseline), "new": ROOT}
+    rows = []
+    for scene in args.scenes:
+        ref = _render(ROOT, scene, args.reference_spp, 99, args.resolution)
+        row = {"scene": scene}
+        for name, tree in trees.items():
+            r = _render(tree, scene, args.spp, 1, args.resolution)
+            svar = float((r["stderr"] ** 2).mean() * args.spp)
+            mse = float(((r["mean"] - ref["mean"]) ** 2 - ref["stderr"] ** 2).mean())
+            sec_per_path = float(r["seconds"]) / float(r["paths"])
+            diff = float(r["mean"].mean() - ref["mean"].mean())
+            se = float(np.sqrt(((r["stderr"].sum(-1) ** 2).sum()
+                                + (ref["stderr"].sum(-1) ** 2).sum())) / r["mean"].size)
+            row[name] = {"svar": svar, "mse_spp": mse * args.spp,
+                         "paths_s": 1 / sec_per_path,
+                         "mse_time": mse * args.spp * sec_per_path, "z": diff / se}
+        b, n = row["base"], row["new"]
+        row["var_ratio"] = b["svar"] / n["svar"]
+        row["mse_spp_ratio"] = b["mse_spp"] / n["mse_spp"]
+        row["mse_time_ratio"] = b["mse_time"] / n["mse_time"]
+        row["speed_ratio"] = n["paths_s"] / b["paths_s"]
+        rows.append(row)
+        print(f"{scene:30s} var {row['var_ratio']:6.2f}x  MSE@spp {row['mse_spp_ratio']:6.2f}x"
+              f"  MSE@time {row['mse_time_ratio']:7.2f}x  paths/s {row['speed_ratio']:5.2f}"
+              f"  z base {b['z']:+.2f} new {n['z']:+.2f}", flush=True)
+    if "cornell" in args.scenes:
+        for name, tree in trees.items():
+            r = _render(tree, "cornell", args.cornell_spp, 1, 0, full=True)
+            print(f"cornell fireflies ({name}, {args.cornell_spp} spp): "
+                  f"{100 * fireflies(r['mean']):.3f} % of pixels", flush=True)
+    print(json.dumps(rows, indent=1, default=float))
+
+
+if __name__ == "__main__":
+    main()
