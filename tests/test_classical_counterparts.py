@@ -98,14 +98,22 @@ def test03_white_furnace(device):
     assert 1.0 - classic.mean.mean() > z_threshold(1) * image_mean_se(classic.stderr)
 
 
+# the central 12x12 pixels: the sphere (radius 11.4 px) seen at cos theta >= 0.66
+INNER = (slice(10, 22), slice(10, 22))
+
+
 @pytest.mark.parametrize("micro", [MIRROR, GOLD], ids=["mirror", "rough_gold"])
 def test04_counterpart_renders_like_the_gpis(device, micro):
     """A rectangle light and a dim environment: the GPIS (sigma/l = 0.1, weight space) and
-    its counterpart agree per 4x4 block within the films' errors (64 spp)."""
+    its counterpart agree per 4x4 block within the films' errors (64 spp) away from the
+    rim. At the rim they do not: the GPIS keeps the energy its facets pass to each other
+    at grazing angles, the single-scattering counterpart loses ~2% there (mirror: max
+    |z| 6.8 over all 96 blocks, the worst on the rim; see the white furnace above)."""
     a = render_result(sphere_scene(micro), device=device).image
     b = render_result(sphere_scene(micro, classical=True), device=device).image
-    z = assert_agree(a.mean, a.stderr, b.mean, b.stderr, block=4, what="gpis vs counterpart")
-    print(f"max |z| {z.max():.2f} over {z.size} blocks; means {a.mean.mean():.5f} "
+    z = assert_agree(a.mean[INNER], a.stderr[INNER], b.mean[INNER], b.stderr[INNER], block=4,
+                     what="gpis vs counterpart")
+    print(f"max |z| {z.max():.2f} over {z.size} inner blocks; means {a.mean.mean():.5f} "
           f"{b.mean.mean():.5f}")
 
 
@@ -146,7 +154,7 @@ def test06_medium_white_furnace(device):
     l = float(C.entry_rate(SquaredExponential(1.0, 1.0), 2.0)) * 0.5   # mean free path 0.5
     img = render_result(medium_scene(2.0, l, True, 32, 32, "furnace", 1.0), device=device).image
     assert_agree(img.mean, img.stderr, np.ones_like(img.mean), block=4, what="medium furnace")
-    assert abs(img.mean.mean() - 1.0) < 2e-3
+    assert abs(img.mean.mean() - 1.0) < z_threshold(1) * image_mean_se(img.stderr)
 
 
 @pytest.mark.long
