@@ -470,3 +470,23 @@ def convert_tungsten(scene, output, environment=None, grid_dir=None) -> list:
     from .host.scene.tungsten_convert import convert_file, environment_option
     return convert_file(scene, output, environment_option(
         None if environment is None else str(environment)), grid_dir)
+
+
+def density(scene, object: int = 0, output="density", ray=None, paths: int = 20000,
+            bounces: int = 2, seed: int = 1, device=None) -> list:
+    """The GPIS density of GPIS number `object` of a scene file: free flights and first-hit
+    normals of `paths` device flights per memory model and of the classical medium
+    counterpart (docs/design/classical-limits.md), written to the folder `output` as
+    flights.csv, summary.csv, free_flight.png and, for a mean with a gradient along the
+    ray, normals.png. Needs matplotlib (the `plots` extra). ray: 'ox,oy,oz,dx,dy,dz,length'
+    or None (through the proxy's centre, against the mean's gradient there). Returns the
+    paths written."""
+    from .host.figures.density import parse_ray, write_density
+    from .host.schema import Int
+
+    checked = arguments.check({"object": Int(ge=0, lt=2**31), "paths": Int(ge=1, le=10**8),
+                               "bounces": Int(ge=1, le=64), "seed": Int(ge=0, lt=2**32)},
+                              object=object, paths=paths, bounces=bounces, seed=seed)
+    return write_density(str(scene), checked["object"], output,
+                         parse_ray(ray) if ray else None, checked["paths"],
+                         checked["bounces"], checked["seed"], device)

@@ -13,7 +13,8 @@ from ..host.errors import DeviceError, SceneError
 
 # in the order --help lists them; imported by main, after console() installed the signal
 # handlers (gpiscl/signals.py)
-COMMANDS = ("render", "devices", "uq", "sample", "convert_tungsten", "convert_vdb")
+COMMANDS = ("render", "devices", "uq", "sample", "density", "convert_tungsten",
+            "convert_vdb")
 
 
 def main(argv=None) -> int:

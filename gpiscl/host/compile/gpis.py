@@ -186,7 +186,8 @@ def _object_fields(o, g: dict, material_of) -> None:
     o["features"] = g["sampler"].get("features") or 0
     if g["sampler"]["type"] == "function_space":
         fs = g["sampler"]
-        o["memory"] = layouts.GPIS_MEMORIES[fs["memory"]]
+        o["memory"] = layouts.GPIS_MEMORIES[
+            "classical_medium" if g.get("classical") == "medium" else fs["memory"]]
         for key in ("memory_cap", "refine", "miss_tolerance"):
             o[key] = fs[key]
         o["window"] = sampler_window(g["kernel"])

@@ -12,6 +12,7 @@ from ..layout import stages
 from .bvh import build_bvh
 from .camera import compile_camera
 from .envmap import compile_envmap, no_envmap
+from .classical import with_counterparts
 from .gpis import CompiledGpis, compile_gpis
 from .light_selection import light_choice
 from ..scene.proxies import bounding_proxy
@@ -217,6 +218,7 @@ def bound_scene_proxies(data: dict, prims: np.ndarray | None = None) -> list:
 def compile_scene(data: dict, source: str = "<scene>", bakes=None) -> CompiledScene:
     """source: the scene's file, for errors found only while compiling (e.g. a mesh bake);
     bakes: the render device's bakes (render/device_bakes.py), numpy's when None."""
+    data = with_counterparts(data, source)
     b = _Builder()
     env = {}
     for s in data.get("shapes", []):

@@ -33,7 +33,7 @@ GPIS_HEADERS = ("gpis_proxy.h", "ws_features.h", "ws_posterior.h", "ws_intersect
 # The function-space stages (a second program, built only for scenes that use them).
 FS_STAGE_FILES = ("gpis_function_space.cl", "gpis_shadow_function_space.cl")
 FS_HEADERS = ("gpis_proxy.h", "fs_linalg.h", "fs_sampling.h", "fs_memory.h", "fs_march.h",
-              "fs_markov.h", "fs_posterior.h", "fs_objects.h")
+              "fs_markov.h", "fs_posterior.h", "fs_classical.h", "fs_objects.h")
 # Scene preparation on the device (device_bakes.py: built only when a bake is not cached).
 BAKE_FILES = ("bake_procedural.cl", "bake_grid_slopes.cl")
 BAKE_HEADERS = ("knob_sdf.h",)

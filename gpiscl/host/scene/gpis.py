@@ -227,5 +227,9 @@ GPIS = SHAPES.register("gpis", Record({
     # true: the proxy cuts the object on purpose (a medium's container, the authors'
     # wedge prism); false: compile/proxy_cut.py warns where the object reaches it
     "clip": Field(Bool(), False),
+    # render the classical counterpart instead (compile/classical.py and
+    # docs/design/classical-limits.md): "surface", the mean's zero set with the GP's
+    # Beckmann slopes; "medium", exponential flights of Rice's entry rate
+    "classical": Field(Nullable(Enum("surface", "medium")), None),
 }, checks=[mesh_proxy_problem, _weight_space_kernel, _thin_plate_span, _fields_positive,
            observations_problem]))

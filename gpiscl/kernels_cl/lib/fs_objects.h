@@ -36,7 +36,9 @@ inline FsResult fs_object_flight(__constant RenderParams* params,
                  (uint)params->bounce, stream};
     /* Matern 3/2 and 5/2 along a ray without off-ray conditioning: the exact Markov
      * sampler (fs_markov.h); g->general keeps the general one (tests, benchmarks) */
-    FsResult res = !g->general && fs_markov_applies(kernels[k], pr, S)
+    FsResult res = GPIS_MEMORY_IS_EXPONENTIAL(g->memory)
+        ? fs_classical_flight(kernels[k], means + g->mean_first, g->mean_count, r, rng)
+        : !g->general && fs_markov_applies(kernels[k], pr, S)
         ? fs_markov_free_flight(kernels[k], means + g->mean_first, g->mean_count, pr, r, v,
                                 rng, S)
         : fs_free_flight(kernels[k], means + g->mean_first, g->mean_count, pr, r, v,

@@ -1,0 +1,152 @@
+"""Closed forms of a GPIS's classical limits (derived in docs/design/classical-limits.md):
+the participating medium (Rice's entry rate as extinction, the visible-normal phase
+function) and the microfacet surface (Beckmann alpha from the gradient variance).
+
+f = mu + g with the inside at f < 0; levels are the mean's value mu at the point."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from .kernels import Kernel
+
+
+def slope_variance(kernel: Kernel, d=(1.0, 0.0, 0.0)) -> float:
+    """lambda_2 along d: Var(d . grad g) = d' Lambda d for the unit direction d."""
+    d = np.asarray(d, float)
+    d = d / np.linalg.norm(d)
+    lam2 = float(kernel.cov_dd(np.zeros(3), d, np.zeros(3), d))
+    if not math.isfinite(lam2) or lam2 <= 0.0:
+        raise ValueError(f"{kernel.kind}: no finite slope variance (its realizations are "
+                         "not differentiable): no Rice rate and no Beckmann limit")
+    return lam2
+
+
+def _normal_pdf(z):
+    return np.exp(-0.5 * np.square(z)) / math.sqrt(2.0 * math.pi)
+
+
+_erfc = np.vectorize(math.erfc, otypes=[np.float64])
+
+
+def _normal_cdf(z):
+    return 0.5 * _erfc(-np.asarray(z, float) / math.sqrt(2.0))
+
+
+def crossing_rate(kernel: Kernel, level, d=(1.0, 0.0, 0.0), mean_slope=0.0):
+    """Rice: down-crossings (f >= 0 -> f < 0) per unit length along unit d at a point where
+    the mean is `level` and its slope along d is `mean_slope` (Eq. 2 of the note)."""
+    sigma = math.sqrt(kernel.variance)
+    s = math.sqrt(slope_variance(kernel, d))
+    m = np.asarray(mean_slope, float)
+    negative_part = s * _normal_pdf(m / s) - m * _normal_cdf(-m / s)   # E[(-f')^+]
+    return _normal_pdf(np.asarray(level, float) / sigma) / sigma * negative_part
+
+
+def entry_rate(kernel: Kernel, level, d=(1.0, 0.0, 0.0), mean_slope=0.0):
+    """The medium counterpart's extinction: entries per unit length travelled outside,
+    crossing_rate / P(f > 0) (Eq. 3)."""
+    sigma = math.sqrt(kernel.variance)
+    return crossing_rate(kernel, level, d, mean_slope) / _normal_cdf(np.asarray(level) / sigma)
+
+
+def beckmann_alpha(kernel: Kernel, tangent=(1.0, 0.0, 0.0), mean_gradient_norm=1.0) -> float:
+    """The surface counterpart's Beckmann roughness along `tangent`: sqrt(2 lambda_2) / |grad mu|
+    (sqrt(2) sigma / l for SE and RQ, sqrt(6) sigma / l for Matern 3/2, sqrt(10/3) sigma / l
+    for Matern 5/2, at a unit mean slope)."""
+    return math.sqrt(2.0 * slope_variance(kernel, tangent)) / float(mean_gradient_norm)
+
+
+def beckmann_tan2_survival(x, alpha):
+    """P(tan^2 theta_m > x) of the Beckmann normal law D(m) cos theta_m (the visible law at
+    normal incidence): tan^2 theta_m / alpha^2 is exponential with mean 1."""
+    return np.exp(-np.asarray(x, float) / (alpha * alpha))
+
+
+def beckmann_cos_pdf(c, alpha):
+    """Density of cos theta_m under D(m) cos theta_m (isotropic Beckmann), for plots."""
+    c = np.asarray(c, float)
+    t2 = (1.0 - c * c) / (c * c)
+    return 2.0 * np.exp(-t2 / (alpha * alpha)) / (alpha * alpha * c ** 3)
+
+
+def smith_lambda(cos_theta, alpha):
+    """Smith's Lambda of the Beckmann distribution for a direction at cos_theta to the
+    macro normal: G1 = 1 / (1 + Lambda)."""
+    c = np.clip(np.asarray(cos_theta, float), 1e-12, 1.0)
+    a = c / np.sqrt(np.maximum(1.0 - c * c, 1e-300)) / alpha
+    erf = np.vectorize(math.erf, otypes=[np.float64])
+    return 0.5 * (erf(a) - 1.0) + np.exp(-a * a) / (2.0 * a * math.sqrt(math.pi))
+
+
+def smith_rehit_fraction(alpha: float, n: int, rng) -> float:
+    """Under Smith's model: the fraction of paths that meet the surface again after a
+    Lambertian bounce off the facet a ray straight down the macro normal hit first (facet
+    normals: Beckmann slopes; below the macro plane: always; above: 1 - G1 = Lambda /
+    (1 + Lambda), since the start height is uniform in its CDF). Monte Carlo, n draws."""
+    slopes = rng.normal(0.0, alpha / math.sqrt(2.0), (n, 2))
+    m = np.c_[-slopes, np.ones(n)]
+    m /= np.linalg.norm(m, axis=1)[:, None]
+    u = rng.random((n, 2))
+    r, phi = np.sqrt(u[:, 0]), 2.0 * math.pi * u[:, 1]
+    helper = np.where(np.abs(m[:, :1]) > 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
+    t = np.cross(m, helper)
+    t /= np.linalg.norm(t, axis=1)[:, None]
+    b = np.cross(m, t)
+    up = (r * np.cos(phi)) * t[:, 2] + (r * np.sin(phi)) * b[:, 2] + np.sqrt(1.0 - u[:, 0]) * m[:, 2]
+    lam = smith_lambda(up, alpha)
+    return float(np.mean(np.where(up <= 0.0, 1.0, lam / (1.0 + lam))))
+
+
+def beckmann_single_scatter_bins(theta_i: float, alpha: float, edges, n_theta: int = 400,
+                                  n_phi: int = 720) -> np.ndarray:
+    """For a white mirror microsurface (F = 1) lit at theta_i (radians): the fraction of
+    the incident energy the single-scattering Beckmann BRDF with height-correlated Smith
+    G2 = 1 / (1 + Lambda_i + Lambda_o) (rough_conductor's) sends into each bin of
+    theta_o between `edges` (radians), over every phi: the midpoint rule on a grid."""
+    wi = np.array([math.sin(theta_i), 0.0, math.cos(theta_i)])
+    lam_i = smith_lambda(wi[2], alpha)
+    out = []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        th = lo + (np.arange(n_theta) + 0.5) * (hi - lo) / n_theta
+        ph = (np.arange(n_phi) + 0.5) * 2.0 * math.pi / n_phi
+        T, P = np.meshgrid(th, ph, indexing="ij")
+        wo = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], -1)
+        h = wo + wi
+        h /= np.linalg.norm(h, axis=-1)[..., None]
+        c = h[..., 2]
+        d = np.exp(-(1.0 - c * c) / (c * c * alpha * alpha)) / (math.pi * alpha ** 2 * c ** 4)
+        g2 = 1.0 / (1.0 + lam_i + smith_lambda(wo[..., 2], alpha))
+        f_cos = d * g2 / (4.0 * wi[2])                   # f_r cos theta_o
+        out.append(float(np.sum(f_cos * np.sin(T)) * (hi - lo) / n_theta * 2 * math.pi / n_phi))
+    return np.array(out)
+
+
+def lambert_sphere_phase(theta):
+    """Phase function (per steradian) of a cloud of diffuse spheres, theta the deflection
+    angle: the medium counterpart of a diffuse micro-BSDF (Sec. 2.3 of the note)."""
+    theta = np.asarray(theta, float)
+    return 2.0 / (3.0 * math.pi ** 2) * (np.sin(theta) - theta * np.cos(theta))
+
+
+def ks_to_exponential(t, rate) -> float:
+    """One-sample Kolmogorov-Smirnov distance of the samples t to Exp(rate)."""
+    t = np.sort(np.asarray(t, float))
+    n = len(t)
+    cdf = -np.expm1(-rate * t)
+    i = np.arange(1, n + 1)
+    return float(max(np.max(i / n - cdf), np.max(cdf - (i - 1) / n)))
+
+
+def ks_to_cdf(x, cdf) -> float:
+    """One-sample Kolmogorov-Smirnov distance of the samples x to a distribution function."""
+    x = np.sort(np.asarray(x, float))
+    n = len(x)
+    c = cdf(x)
+    i = np.arange(1, n + 1)
+    return float(max(np.max(i / n - c), np.max(c - (i - 1) / n)))
+
+
+def ks_critical(n: int, alpha: float = 1e-3) -> float:
+    """Asymptotic one-sample KS critical value at level alpha."""
+    return math.sqrt(-math.log(alpha / 2.0) / 2.0) / math.sqrt(n)

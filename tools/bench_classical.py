@@ -1,0 +1,65 @@
+"""Paths per second of the classical counterparts against the GPIS they stand for
+(docs/design/classical-limits.md): the medium counterpart of a constant-mean GPIS
+(mu/sigma = 2, Rice mean free path 0.5, function space, renewal) and the surface
+counterpart of a sphere-mean GPIS (sigma/l = 0.1, weight space and function space).
+Each scene renders once to warm the build, then once timed.
+
+Usage: python tools/bench_classical.py [--spp 64] [--resolution 64]"""
+import argparse
+
+from gpiscl import render_result
+from gpiscl.host.gp import SquaredExponential
+from gpiscl.host.gp import classical as C
+
+
+def medium(classical, res, spp):
+    l = float(C.entry_rate(SquaredExponential(1.0, 1.0), 2.0)) * 0.5
+    g = {"type": "gpis", "clip": True,
+         "proxy": {"type": "sphere", "center": [0, 0, 0], "radius": 1.0},
+         "mean": {"type": "constant", "value": 2.0},
+         "kernel": {"type": "squared_exponential", "sigma": 1.0, "length_scale": l},
+         "sampler": {"type": "function_space", "memory": "renewal"},
+         "bsdf": {"type": "diffuse", "albedo": 0.8}}
+    return scene(g, classical and "medium", res, spp)
+
+
+def surface(classical, sampler, res, spp):
+    g = {"type": "gpis", "proxy": {"type": "sphere", "center": [0, 0, 0], "radius": 1.1},
+         "mean": {"type": "sphere", "center": [0, 0, 0], "radius": 1.0},
+         "kernel": {"type": "squared_exponential", "sigma": 0.01, "length_scale": 0.1},
+         "sampler": {"type": sampler},
+         "bsdf": {"type": "rough_conductor", "material": "Au", "roughness": 0.1}}
+    return scene(g, classical and "surface", res, spp)
+
+
+def scene(g, classical, res, spp):
+    if classical:
+        g["classical"] = classical
+    return {"camera": {"position": [0, 0, 4], "look_at": [0, 0, 0], "fov": 40,
+                       "resolution": [res, res]},
+            "render": {"spp": spp, "seed": 1, "max_depth": 64}, "shapes": [g],
+            "lights": [{"type": "environment", "radiance": 0.2},
+                       {"type": "rectangle", "center": [1.5, 2.5, 1.5], "u": [1, 0, 0],
+                        "v": [0, 0, 1], "radiance": 8.0}]}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--spp", type=int, default=64)
+    ap.add_argument("--resolution", type=int, default=64)
+    a = ap.parse_args()
+    cases = [("medium: GPIS mu/sigma=2", medium(False, a.resolution, a.spp)),
+             ("medium: counterpart", medium(True, a.resolution, a.spp))]
+    for sampler in ("weight_space", "function_space"):
+        cases += [(f"surface: GPIS {sampler}", surface(False, sampler, a.resolution, a.spp)),
+                  (f"surface: counterpart ({sampler} scene)",
+                   surface(True, sampler, a.resolution, a.spp))]
+    for name, doc in cases:
+        render_result(doc, spp=1)
+        r = render_result(doc)
+        print(f"{name:40s} {r.stats.paths / r.stats.seconds:12.0f} paths/s "
+              f"({r.stats.paths} paths, {r.stats.seconds:.2f} s, mean {r.image.mean.mean():.5f})")
+
+
+if __name__ == "__main__":
+    main()
