@@ -12,7 +12,7 @@ import pytest
 from gpiscl.cli import main
 from gpiscl.host.errors import SceneError
 from gpiscl.host.figures.density import Ray, density_data, parse_ray, write_density
-from gpiscl.host.figures.samples import PLOTS_MISSING
+from gpiscl.host.figures.plotting import PLOTS_MISSING
 from gpiscl.host.gp import Constant, SquaredExponential
 from gpiscl.host.gp import classical as C
 from gpiscl.host.render.flight_samples import flights

@@ -10,7 +10,8 @@ import pytest
 
 from gpiscl.cli import main
 from gpiscl.host.gp import RationalQuadratic, Sphere, SquaredExponential
-from gpiscl.host.figures.samples import (PLOTS_MISSING, empirical_covariance, exact_samples,
+from gpiscl.host.figures.plotting import PLOTS_MISSING
+from gpiscl.host.figures.samples import (empirical_covariance, exact_samples,
                                         fig2_data, implied_kernel, kernel_covariance,
                                         line_points, load_observations, occupancy,
                                         plane_points, posterior_maps, resolve_target,

@@ -21,7 +21,8 @@ from ..gp.kernels import Kernel
 from ..gp.means import Constant, Mean, Plane
 from ..render.device import Device, shared_device
 from ..render.flight_samples import flights
-from .samples import PLOTS_MISSING, resolve_target
+from .plotting import pyplot
+from .samples import resolve_target
 
 # the memory models, then the classical medium counterpart (kernels_cl/lib/fs_classical.h)
 MEMORIES = ("none", "renewal", "renewal_plus", "global", "classical_medium")
@@ -259,20 +260,10 @@ def write_flights_csv(runs: dict, path) -> None:
                 w.writerow([memory, int(i), int(b) + 1, *(f"{v:.9g}" for v in out[i, b, :4])])
 
 
-def _pyplot():
-    try:
-        import matplotlib
-    except ImportError:
-        raise SceneError("matplotlib is not installed", "", PLOTS_MISSING) from None
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
 def plot_density(data: dict, title: str, out_dir) -> list:
     """free_flight.png (each flight's distance per memory model, the fitted exponential and
     Rice's) and normals.png (tan theta_m at the first hit against Beckmann)."""
-    plt = _pyplot()
+    plt = pyplot()
     ray, runs, summary = data["ray"], data["runs"], data["summary"]
     bounces = next(iter(runs.values())).shape[1]
     rate = summary[0]["rice_entry_rate"]
@@ -330,7 +321,7 @@ def plot_limits(medium: dict, surface: dict, path) -> None:
     distance of first flights to the exponential of their own mean (medium: at a fixed
     mu/sigma, and at a fixed Rice mean free path); against alpha, the KS distance of
     first-hit slopes to Beckmann (surface). Dotted: 1/sqrt(n), the KS noise level."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, (a, r, b) = plt.subplots(1, 3, figsize=(14, 3.8))
     for label, rows in medium.items():
         ls = [row["length_scale"] for row in rows]
@@ -365,7 +356,7 @@ def write_density(scene: str, obj: int, out_dir, ray: Ray | None = None, paths: 
     """Everything `density` writes for GPIS number obj of a scene file: flights.csv,
     summary.csv, free_flight.png, normals.png (a mean with a gradient only). The medium
     counterpart joins the memory models for a constant mean. Returns the paths."""
-    _pyplot()   # fail before any work if matplotlib is missing
+    pyplot()   # fail before any work if matplotlib is missing
     target = resolve_target(scene, obj)
     if target.mean is None:
         raise SceneError("<command line>", "SCENE", "density needs a scene file")

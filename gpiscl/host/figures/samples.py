@@ -25,9 +25,8 @@ from ..scene.proxies import bounding_proxy
 from ..gp.means import Mean
 from ..gp.spectral import RandomFeatures, sample_frequencies
 from ..errors import API_SOURCE, CLI_SOURCE, SceneError
+from .plotting import pyplot
 
-PLOTS_MISSING = ("figures need it, as the optional extra: pip install -e '.[plots]' "
-                 "(or pip install matplotlib)")
 
 
 @dataclass
@@ -204,18 +203,8 @@ def fig2_data(kernel: Kernel, spec: dict, features=(10, 100, 1000), curves: int 
 
 # --- plots (matplotlib) -------------------------------------------------------------------
 
-def _pyplot():
-    try:
-        import matplotlib
-    except ImportError:
-        raise SceneError("matplotlib is not installed", "", PLOTS_MISSING) from None
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
 def plot_fig2(data: dict, title: str, path) -> None:
-    plt = _pyplot()
+    plt = pyplot()
     ms = data["features"]
     fig, ax = plt.subplots(2, len(ms) + 1, figsize=(3.2 * (len(ms) + 1), 5.6),
                            sharex=True, sharey="row")
@@ -244,7 +233,7 @@ def plot_fig2(data: dict, title: str, path) -> None:
 
 
 def plot_lines(t, samples, title: str, path) -> None:
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 3.2))
     ax.plot(t, np.asarray(samples).T, lw=1)
     ax.axhline(0.0, color="k", lw=0.5)
@@ -258,7 +247,7 @@ def plot_lines(t, samples, title: str, path) -> None:
 
 def plot_maps(maps, extent, titles, suptitle: str, path, cmap="RdBu_r", vmin=None,
               vmax=None, zero_contour=True, half_contour=False) -> None:
-    plt = _pyplot()
+    plt = pyplot()
     n = len(maps)
     fig, ax = plt.subplots(1, n, figsize=(max(3.2 * n, 5.0), 3.6), squeeze=False,
                            constrained_layout=True)
@@ -327,7 +316,7 @@ def write_figures(target: Target, out_dir, features=(10, 100, 1000), realization
         raise SceneError(API_SOURCE, f"kernel.{varying[0]}", "a spatially varying "
                          "kernel has no spectral density, so weight-space figures cannot be "
                          "drawn; remove the field to see the stationary kernel")
-    _pyplot()   # fail before any work if matplotlib is missing
+    pyplot()   # fail before any work if matplotlib is missing
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
