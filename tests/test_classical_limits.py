@@ -13,7 +13,7 @@ import pytest
 
 from gpiscl.host.gp import Matern32, Matern52, RationalQuadratic, SquaredExponential
 from gpiscl.host.gp import classical as C
-from gpiscl.host.gp import function_space as FS
+from gpiscl.testing.reference import function_space as FS
 from gpiscl.host.figures.density import (brdf_table, masking_series, medium_limit_series,
                                           surface_limit_series)
 from gpiscl.testing.stats import z_threshold

@@ -1,6 +1,5 @@
 """tools/convert_tungsten.py: the authors' CSG test scene imports, renders, and what we
 cannot import is an error naming the key path."""
-import copy
 import json
 import math
 import os

@@ -13,7 +13,7 @@ import pytest
 from scipy import special
 
 from gpiscl.host.gp import Constant, RationalQuadratic, SquaredExponential
-from gpiscl.host.gp import function_space as FS
+from gpiscl.testing.reference import function_space as FS
 from gpiscl.host.layout import function_space_records as FL
 from gpiscl.testing.stats import z_threshold
 from gpiscl.testing.flights import flights, run_crossings

@@ -12,7 +12,7 @@ from gpiscl.host.gp import Sphere
 from gpiscl.host.gp import SquaredExponential
 from gpiscl.host.gp import ThinPlate
 from gpiscl.host.layout import gp_records
-from gpiscl.host.gp import function_space as FS
+from gpiscl.testing.reference import function_space as FS
 from gpiscl.host.layout import function_space_records as FL
 from gpiscl.host.render.program_sources import fs_sampler_options
 from gpiscl.testing.stats import chi2_threshold

@@ -6,7 +6,7 @@ import math
 import numpy as np
 
 from gpiscl.host.gp import Constant, Plane, SquaredExponential
-from gpiscl.host.gp import function_space as FS
+from gpiscl.testing.reference import function_space as FS
 from gpiscl.testing.stats import z_threshold
 from gpiscl.testing.flights import flights
 from gpiscl.testing.stats import ks_two_sample

@@ -13,7 +13,7 @@ import pytest
 from scipy import stats as sst
 
 from gpiscl.host.gp import Constant, Matern32, Matern52
-from gpiscl.host.gp import function_space as FS
+from gpiscl.testing.reference import function_space as FS
 from gpiscl.host.gp.kernels import covariance_matrix
 from markov_wrappers import bridge, flights, paths, rule_ratios, transition
 from gpiscl.testing.stats import assert_agree, ks_two_sample, z_threshold

@@ -7,7 +7,7 @@ import pyopencl as cl
 import pytest
 
 from gpiscl.host.gp import Constant, Matern32, Plane, SquaredExponential
-from gpiscl.host.gp import function_space as FS
+from gpiscl.testing.reference import function_space as FS
 from gpiscl.host.layout.records import GPIS_MEMORIES
 from gpiscl.host.render.program_sources import fs_sampler_options
 from gpiscl.testing.stats import assert_agree, chi2_threshold, image_mean_se

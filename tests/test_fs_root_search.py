@@ -13,7 +13,7 @@ import pyopencl as cl
 import pytest
 
 from gpiscl.host.gp import Constant, SquaredExponential
-from gpiscl.host.gp import function_space as FS
+from gpiscl.testing.reference import function_space as FS
 from gpiscl.host.layout import function_space_records as FL
 from gpiscl.host.layout import gp_records
 from gpiscl.host.render.program_sources import fs_sampler_options

@@ -11,7 +11,7 @@ from gpiscl.host.gp import SquaredExponential
 from gpiscl.host.gp import ThinPlate
 from gpiscl.host.gp import Periodic
 from gpiscl.host.layout import gp_records
-from gpiscl.host.gp import function_space as FS
+from gpiscl.testing.reference import function_space as FS
 from gpiscl.testing.stats import chi2_threshold, z_threshold
 from gpiscl.testing.wrappers import buffer
 

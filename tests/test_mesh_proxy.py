@@ -1,6 +1,5 @@
 """Convex mesh proxies (scene/proxies.py, gpis_proxy.h): the device clips rays to exactly the
 convex mesh, non-convex or open meshes are errors, and a mesh box bounds a GPIS like a box."""
-import math
 
 import numpy as np
 import pyopencl as cl

@@ -12,7 +12,8 @@ import pytest
 
 from gpiscl import render_result
 from gpiscl.host.gp import Matern52, Plane, Sphere, SquaredExponential
-from gpiscl.host.gp import weight_space as ws
+from gpiscl.host.gp import spectral
+from gpiscl.testing.reference import weight_space as ws
 from gpiscl.host.layout.gp_records import pack_kernel, pack_mean
 from gpiscl.testing.reference.camera import pixel_rays
 from gpiscl.testing.stats import assert_agree, image_mean_se, z_threshold
@@ -173,7 +174,7 @@ def test_surface_type_slopes_follow_the_beckmann_law(device, kind):
     rng = np.random.default_rng(4)
     o = np.stack([rng.uniform(-5, 5, n), np.full(n, 0.5), rng.uniform(-5, 5, n)], -1)
     nodes = pack_mean(Plane(normal=(0.0, 1.0, 0.0)))
-    cdf = ws.order_table(kernel)
+    cdf = spectral.order_table(kernel)
     out = np.empty((n, 4), np.float32)
     out_buf = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
     prg["first_hit_normals"](device.queue, (n,), None, buffer(device, pack_kernel(kernel)),

@@ -9,7 +9,7 @@ import pytest
 
 from gpiscl.cli import main
 from gpiscl.host.compile.camera import compile_camera
-from gpiscl.host.gp import weight_space as ws
+from gpiscl.testing.reference import weight_space as ws
 from gpiscl.host.compile.gpis import build_kernel, build_mean
 from gpiscl.host.io.images import read_exr
 from gpiscl.host.scene.loading import load_scene

@@ -7,7 +7,7 @@ import pytest
 from gpiscl.host.gp import (Box, Constant, LocallyPeriodic, Matern32, Matern52, Periodic, Plane, RationalQuadratic,
                             Sphere, SquaredExponential, ThinPlate, Torus, Transform, Union,
                             sample_frequencies)
-from gpiscl.host.gp import weight_space as ws
+from gpiscl.testing.reference import weight_space as ws
 from gpiscl.host.layout.gp_records import pack_mean
 from gpiscl.testing.stats import z_threshold
 from gpiscl.testing.weight_space import (ROT, WS_BOUND_WRAPPERS, assert_tents_contain, build, dump,

@@ -6,7 +6,8 @@ import pytest
 
 from gpiscl.host.scene import observations as OBS
 from gpiscl.host.gp import RationalQuadratic, Sphere, SquaredExponential
-from gpiscl.host.gp import weight_space as ws
+from gpiscl.host.gp import spectral
+from gpiscl.testing.reference import weight_space as ws
 from gpiscl.host.layout.gp_records import pack_kernel, pack_mean
 from gpiscl.host.gp.posterior import Posterior, solve_triangular, surface_observations
 from gpiscl.testing.stats import assert_agree, z_threshold
@@ -125,7 +126,7 @@ def device_args(device, kernel, mean, post):
     other = pack_mean(Sphere(radius=0.5))
     prog = pack_mean(mean)
     nodes = np.concatenate([other, prog])
-    cdf = ws.order_table(kernel)
+    cdf = spectral.order_table(kernel)
     return (buffer(device, pack_kernel(kernel)), buffer(device, nodes),
             np.int32(len(other)), np.int32(len(prog)),
             *(buffer(device, a) for a in posterior_tables(post)), buffer(device, cdf),

@@ -35,7 +35,7 @@ from gpiscl.host.gp import Constant
 from gpiscl.host.gp import Sphere
 from gpiscl.host.gp import SquaredExponential
 from gpiscl.host.layout import gp_records  # noqa: E402
-from gpiscl.host.gp import function_space as FS  # noqa: E402
+from gpiscl.testing.reference import function_space as FS  # noqa: E402
 from gpiscl.host.layout import function_space_records as FL  # noqa: E402
 from gpiscl.host.render.program_sources import fs_sampler_options, fs_sampler_source  # noqa: E402
 from gpiscl.host.layout.records import GPIS_MEMORIES  # noqa: E402

@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from gpiscl.host.render.device import Device
 from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, join_sources  # noqa: E402
 from gpiscl.host.gp import Sphere, SquaredExponential  # noqa: E402
-from gpiscl.host.gp import weight_space as ws  # noqa: E402
+from gpiscl.host.gp import spectral  # noqa: E402
 from gpiscl.host.layout.gp_records import pack_kernel, pack_mean  # noqa: E402
 
 C_SOURCE = Path(__file__).resolve().parent / "ws_feature_loop.c"
@@ -345,7 +345,7 @@ def build_device(device, lanes):
 
 def gp_buffers(device):
     mf = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
-    nodes, cdf = pack_mean(Sphere(radius=RADIUS)), ws.order_table(KERNEL)
+    nodes, cdf = pack_mean(Sphere(radius=RADIUS)), spectral.order_table(KERNEL)
     return (cl.Buffer(device.ctx, mf, hostbuf=pack_kernel(KERNEL)),
             cl.Buffer(device.ctx, mf, hostbuf=nodes), np.int32(len(nodes)),
             cl.Buffer(device.ctx, mf, hostbuf=cdf), np.int32(len(cdf)))

@@ -5,7 +5,8 @@ import numpy as np
 import pyopencl as cl
 
 from gpiscl.host.gp import Constant
-from gpiscl.host.gp import weight_space as ws
+from gpiscl.host.gp import spectral
+from gpiscl.testing.reference import weight_space as ws
 from gpiscl.host.layout.gp_records import pack_kernel, pack_mean
 from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, join_sources
 
@@ -109,7 +110,7 @@ def keys_for(n, stream=7):
 
 def gp_args(device, kernel, mean=Constant(0.0)):
     """Device arguments (kernel, mean nodes, count, order table, count) of a GPIS."""
-    nodes, cdf = pack_mean(mean), ws.order_table(kernel)
+    nodes, cdf = pack_mean(mean), spectral.order_table(kernel)
     return (buffer(device, pack_kernel(kernel)), buffer(device, nodes), np.int32(len(nodes)),
             buffer(device, cdf), np.int32(len(cdf)))
 

@@ -14,7 +14,7 @@ from ..gp import kernels as K
 from ..gp import means as M
 from ..scene.proxies import analyse, bounding_proxy
 from ..scene.transforms import transform_matrix
-from ..gp.weight_space import pack_order_tables
+from ..gp.spectral import pack_order_tables
 from ..layout.gp_records import (GP_KERNEL, MEAN_NODE, pack_kernel, pack_kernel_grids,
                                  pack_mean_parts)
 from ..scene.gpis import DEFAULT_OCCUPANCY, FIELD_KEYS, field_minimum

@@ -1,5 +1,6 @@
-"""The Gaussian-process model: kernels, means, spectral samplers, posteriors and numpy
-twins of both samplers. Imports numpy only: every other package builds on it.
+"""The Gaussian-process model: kernels, means, spectral samplers and posteriors (the numpy
+twins of both device samplers, test oracles, live in gpiscl/testing/reference/). Imports
+numpy only: every other package builds on it.
 
 numpy implementations here are the references for the device kernels (lib/gp_kernels/)
 and gp_mean.h and for the scene compiler (their device records: layout/gp_records.py);

@@ -116,3 +116,39 @@ class RandomFeatures:
         value = c * np.cos(arg) @ weights
         grad = -c * (np.sin(arg) * weights) @ self.omega
         return value, grad
+
+
+# --- tables uploaded with a GPIS object -------------------------------------------------
+
+def periodic_order_cdf(length_scale: float) -> np.ndarray:
+    """cdf[m] = P(|n| <= m) (float32) of one axis's periodic order, last entry exactly 1.
+
+    P(|n| = m) is periodic_order_weights (e^-z I_m(z), n and -n folded, z = 1/l^2). The
+    device draws u in [0, 1) on a 2^-24 grid and takes the first m with u < cdf[m]; the
+    table is cut where the remaining mass is below 2^-26, which that grid cannot resolve,
+    and its last entry is set to 1 so every u finds an entry.
+    """
+    cdf = np.cumsum(periodic_order_weights(float(length_scale)))
+    n = int(np.searchsorted(cdf, 1.0 - 2.0**-26)) + 1
+    out = cdf[:n].astype(np.float32)
+    out[-1] = 1.0
+    return out
+
+
+def order_table(kernel) -> np.ndarray:
+    """The order table of a kernel: its periodic CDF, or [1] (never read) otherwise."""
+    if kernel.kind in ("periodic", "locally_periodic"):
+        return periodic_order_cdf(kernel.length_scale)
+    return np.ones(1, np.float32)
+
+
+def pack_order_tables(kernels):
+    """One float32 buffer of all objects' tables, with per-object (first, count).
+
+    Object j passes `table + first[j]` and `count[j]` as order_cdf / order_count.
+    """
+    tables = [order_table(k) for k in kernels]
+    count = np.array([len(t) for t in tables], np.int32)
+    first = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int32)
+    table = np.concatenate(tables) if tables else np.ones(1, np.float32)
+    return table.astype(np.float32), first, count

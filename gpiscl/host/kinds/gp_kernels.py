@@ -12,7 +12,7 @@ which device functions the file must define (required_functions):
                    (the Gaussian scale-mixture factor of a frequency) and <name>_ws_lambda2
                    (the spectral second moment along a direction)
   periodic_orders  its spectrum adds integer multiples of 2 pi w sqrt(A) (the periodic
-                   order tables, gp/weight_space.py order_table)
+                   order tables, gp/spectral.py order_table)
   markov_order     p > 0: (f, ..., f^(p)) along a ray is a Markov state (Matern p + 1/2);
                    fs_markov.h samples it exactly
   corr_lag         <name>_corr_lag gives the lag of a correlation in closed form (else the

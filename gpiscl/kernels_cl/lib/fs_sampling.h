@@ -3,7 +3,7 @@
  * and the declarations of function_space_records.c_declarations(); FS_MAX_ROWS and
  * FS_SCRATCH_DOUBLES come from function_space_records.defines().
  * fs_march.h (included after this) marches along the ray.
- * gpiscl/host/gp/function_space.py is the numpy reference of everything here.
+ * gpiscl/testing/reference/function_space.py is the numpy reference of everything here.
  *
  * Conventions (sign as everywhere: f > 0 outside; a hit is the first f >= 0 -> f < 0):
  *  - Stepping, online sampling, the crossing bracket, the slope at a hit: fs_march.h

@@ -1,7 +1,8 @@
 /* Weight-space ("Global infinity") GPIS realizations: random Fourier features
  *   f(x) = mean(x) + sqrt(k(0)) sqrt(2/M) sum_i w_i cos(theta_i . x + tau_i),
  * w_i ~ N(0,1), tau_i ~ U[0, 2 pi), theta_i from the kernel's normalised spectral measure
- * (gpiscl/host/gp/spectral.py derives each sampler; weight_space.py is the numpy twin).
+ * (gpiscl/host/gp/spectral.py derives each sampler; gpiscl/testing/reference/weight_space.py
+ * is the numpy twin).
  *
  * Memory: features are never stored. Feature i is a pure function of
  * (realization key, object, i), regenerated from Philox whenever it is needed, so a path's

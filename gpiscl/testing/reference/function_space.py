@@ -18,8 +18,8 @@ import math
 
 import numpy as np
 
-from ..layout import constants as C
-from .kernels import covariance_matrix
+from ...host.gp.kernels import covariance_matrix
+from ...host.layout import constants as C
 
 JITTER = C.FS_JITTER
 _SQRT2PI = math.sqrt(2.0 * math.pi)

@@ -1,9 +1,8 @@
-"""Weight-space realizations on the host: the tables ws_features.h needs, and numpy twins.
+"""Weight-space realizations in numpy: the twins of ws_features.h and ws_posterior.h that
+the tests use as oracles (the tables the device samples live in gpiscl/host/gp/spectral.py).
 
 The device regenerates feature i of a realization from Philox4x32-10 with counter
 (key.x, key.y, object, i) and Philox key (call, WS_PHILOX_KEY1) (ws_features.h). Here:
-  * periodic_order_cdf / pack_order_tables: the per-object tables the device samples
-    periodic orders from;
   * philox4x32 and regenerate_features: the same streams in numpy (SE and periodic
     kinds; RQ's rejection sampler is compared through features dumped from the device);
   * evaluate / dense_scan_first_root: the reference realization and root finder of tests;
@@ -13,50 +12,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..layout.constants import WS_CALL_MAIN, WS_CALL_NOISE, WS_CALL_ORDERS, WS_PHILOX_KEY1
-from .kernels import Kernel
-from .spectral import RandomFeatures, periodic_order_weights
+from ...host.gp.kernels import Kernel
+from ...host.gp.spectral import RandomFeatures, periodic_order_cdf
+from ...host.layout.constants import WS_CALL_MAIN, WS_CALL_NOISE, WS_CALL_ORDERS, WS_PHILOX_KEY1
 
 _PHILOX_M = (0xD2511F53, 0xCD9E8D57)
 _PHILOX_W = (0x9E3779B9, 0xBB67AE85)
 _MASK = np.uint64(0xFFFFFFFF)
 _2PI = 2.0 * np.pi
-
-
-# --- tables uploaded with a GPIS object -------------------------------------------------
-
-def periodic_order_cdf(length_scale: float) -> np.ndarray:
-    """cdf[m] = P(|n| <= m) (float32) of one axis's periodic order, last entry exactly 1.
-
-    P(|n| = m) is periodic_order_weights (e^-z I_m(z), n and -n folded, z = 1/l^2). The
-    device draws u in [0, 1) on a 2^-24 grid and takes the first m with u < cdf[m]; the
-    table is cut where the remaining mass is below 2^-26, which that grid cannot resolve,
-    and its last entry is set to 1 so every u finds an entry.
-    """
-    cdf = np.cumsum(periodic_order_weights(float(length_scale)))
-    n = int(np.searchsorted(cdf, 1.0 - 2.0**-26)) + 1
-    out = cdf[:n].astype(np.float32)
-    out[-1] = 1.0
-    return out
-
-
-def order_table(kernel: Kernel) -> np.ndarray:
-    """The order table of a kernel: its periodic CDF, or [1] (never read) otherwise."""
-    if kernel.kind in ("periodic", "locally_periodic"):
-        return periodic_order_cdf(kernel.length_scale)
-    return np.ones(1, np.float32)
-
-
-def pack_order_tables(kernels):
-    """One float32 buffer of all objects' tables, with per-object (first, count).
-
-    Object j passes `table + first[j]` and `count[j]` as order_cdf / order_count.
-    """
-    tables = [order_table(k) for k in kernels]
-    count = np.array([len(t) for t in tables], np.int32)
-    first = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int32)
-    table = np.concatenate(tables) if tables else np.ones(1, np.float32)
-    return table.astype(np.float32), first, count
 
 
 # --- the device's random streams in numpy ----------------------------------------------
