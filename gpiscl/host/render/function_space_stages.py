@@ -22,14 +22,11 @@ from .launch import launch
 from ..layout import function_space_records as FL
 
 # Bytes of global-model rings per batch (cap the batch). On a CPU the device's memory is
-# the process's and every page a batch touches stays resident, while 8 MB already keeps
-# two cores busy: the global-memory room (4 KB of ring a path) held 32 MB of rings at
-# 256 MB and 16 MB at 16 MB, at the same paths/s (tools/bench_scenes.py, same run); 8 MB
-# (2048 paths) against 16 MB: paths per CPU s x1.03 / x1.01 / x1.00 in 3 alternating
-# rounds, peak RSS 152 -> 143 MB.
+# the process's and every touched page stays resident, so the CPU cap is the smallest that
+# keeps two cores as busy (docs/design/batches.md, "Rings and scratch").
 BUDGET, CPU_BUDGET = 256 << 20, 8 << 20
 # Bytes of scratch per launch (cap the work items launched, which stride over the rays).
-# A CPU touches every scratch page: 16 MB of it held 15 MB resident for the knob.
+# A CPU touches every scratch page.
 SCRATCH_BUDGET, CPU_SCRATCH_BUDGET = 256 << 20, 4 << 20
 # Work-groups per compute unit in one launch: its items loop over the rays (grid-stride),
 # so the units finish together however the work per ray varies, and a few groups a unit

@@ -235,41 +235,18 @@ inline double fs_downcrossing_slope(double mean, double sd, double2 u)
 }
 
 /* The longest step the prior mean allows: the rule sees the process only at its nodes
- * (t + 0.355 h and t + 0.845 h; one node at t + 2h/3 when this cap was set) and the
- * samples at the step's ends, so a mean that dips to 0 between them (a
- * feature thinner than the step, with sigma << l: the knob's l = 1.4, sigma = 0.01) hides
- * the rate's peak, and steps of 2 l_d went through such features (the knob 6% too
- * bright). With the mean's Lipschitz bound `lip` (per unit t) the mean moves by at most
- * FS_MEAN_KAPPA = 6 sd over a step near its zero set, so t, the node and t + h are at
- * most 4 sd of mean apart: a mean that dips to 0 between two of them has a node or a
- * sample within 2 sd of its dip, whose rate rejects the step or whose value is likely
- * below 0 (with Simpson's nodes, 3 sd: the knob's brightness was the same at kappa 1, 2,
- * 3 and 6 and with steps capped to 0.035 l, while the cost fell from 21 to 8 samples per
- * flight; with the two nodes of "Step rule" the gaps are at most 0.49 h, so kappa 8 would
- * keep "4 sd apart", but paired renders of the knob (24^2, 2048 spp, the same seeds, only
- * kappa changed) read 1.27031 at kappa 3, +0.014% at 4.5, +0.055% at 6 and +0.11% at 8
- * (two seeds agreed on 6 -> 8 to 1e-5) for 3.94 -> 3.54 samples and 6.95 -> 6.08
- * evaluations a flight (6 -> 8, ~3% faster): a small bias that grows with kappa, so 6
- * stays), and far from it the step is the sphere-tracing distance to |mean| = FS_MEAN_Z
- * sd (a crossing there needs a residual of that size: rate ~ e^{-Z^2/2} / l, far below
- * any tolerance). m and sd are the prior's at x(ta) (sigma(x) fields and a posterior
- * included; fs_start_mean); a posterior's mean correction varies on the kernel's scale,
- * which the l_d cap covers. Returns the first try's length: hg (the growth ladder's),
- * or less where the mean needs it.
- * On the knob every step was this cap's (24^2 render: 6.6 steps a flight, all capped,
- * none rejected; most flights are fresh rays entering the occupancy shell at |mean| ~
- * 24 sd, gpis_proxy.h). Two ways to a longer step with the argument above unchanged (a
- * rejected try's half keeps both, being inside the certified stretch):
- *  - the slope bound of a grid mean over the try's stretch [ta, ta + hg] only
- *    (gp_mean_lipschitz_on, the bricks it crosses) instead of over the whole ray's
- *    (the knob's rays: 1.34 on average; steps a flight 6.6 -> 5.4);
- *  - far from the zero set, sphere tracing continued from ball to ball (up to
- *    FS_MEAN_HOPS prior-mean evaluations, no GP rows): each ball's edge starts the next,
- *    so |mean| >= FS_MEAN_Z sd on the whole union, the far case above, which the start's
- *    ball alone certified only up to (|m| - FS_MEAN_Z sd) / lip (a fresh ray took ~3
- *    GP steps to close in from 24 sd; steps a flight -> 3.5 with the first). Stationary
- *    priors without a posterior only, where sd is the same all along and the prior
- *    mean is the mean. */
+ * and at the step's ends, so a mean that dips to 0 between them (a feature thinner than
+ * the step, with sigma << l: the knob) would hide the rate's peak. With the mean's
+ * Lipschitz bound `lip` (per unit t) the mean moves by at most FS_MEAN_KAPPA sd over a step
+ * near its zero set, so a dip to 0 between two of them has a node or a sample within a few
+ * sd of it, whose rate rejects the step or whose value is likely below 0; far from the zero
+ * set the step is the sphere-tracing distance to |mean| = FS_MEAN_Z sd (a crossing there
+ * needs a residual of that size: rate ~ e^{-Z^2/2} / l, far below any tolerance). m and sd
+ * are the prior's at x(ta) (sigma(x) fields and a posterior included; fs_start_mean); a
+ * posterior's mean correction varies on the kernel's scale, which the l_d cap covers.
+ * Returns the first try's length: hg (the growth ladder's), or less where the mean needs
+ * it. Why kappa is 6, with the paired renders that chose it: docs/design/function-space-
+ * march.md, "The mean cap". */
 inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
                            FsRay ray, double3 dn, double ta, double hg, double m, double sd,
                            double lip, int grid FS_PROF_PARAM)
