@@ -117,6 +117,7 @@ def test_probes_and_cost_sized_batches_leave_the_image_bit_identical(device, mon
     scene = e10_scene(features=256, resolution=24, spp=3)
     plain = render_result(scene, device=device, batch_size=97)
     monkeypatch.setattr(integrator_module, "COSTS_AFTER_SECONDS", 0.0)   # always on
+    monkeypatch.setattr(integrator_module, "TRUSTED_SECONDS", 0.0)
     probed = []
     real = integrator_module.WavefrontIntegrator._dropped
 

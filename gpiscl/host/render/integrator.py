@@ -34,10 +34,13 @@ from ..compile.scene import CompiledScene
 DEFAULT_BATCH, CPU_DEFAULT_BATCH = 1 << 18, 1 << 14
 
 
-# Renders whose first batch says they need more than COSTS_AFTER_SECONDS size their batches
-# by what their pixels cost too (batching.PixelCosts; shorter ones, like most uq
-# realizations, are a few batches anyway), probing at most PROBES_PER_BATCH paths ahead
+# Renders that a batch of at least TRUSTED_SECONDS says need more than COSTS_AFTER_SECONDS
+# size their batches by what their pixels cost too (batching.PixelCosts; shorter ones, like
+# most uq realizations, are a few batches anyway), probing at most PROBES_PER_BATCH paths
+# ahead. A shorter batch's rate is its launches' overhead: judged by the first 64 paths,
+# a 0.5 s render (wedge_volume, 4 spp) probed and shrank its way to 2.5 s.
 COSTS_AFTER_SECONDS, PROBES_PER_BATCH, PATHS_PER_PROBE, PROBE_SHARE = 2.0, 32, 4, 0.1
+TRUSTED_SECONDS = 0.1
 
 
 # PATH_STATE's first-hit fields (aov.py): one element each when no AOV is asked for, as
@@ -434,7 +437,9 @@ class WavefrontIntegrator:
                     break
                 left = None if deadline is None else deadline - time.perf_counter()
                 n = sizer.next(total - done, left)
-                if costs is not None and n > 0:
+                if costs is not None and n > 0 and done < self.num_pixels:
+                    # the first pass, where a pixel's cost is not yet known to the
+                    # sizer's rates; later passes keep the rates it learnt there
                     n = self._shrunk(costs, done, n)
                 # the first batch always runs: a limit shorter than one batch still gives
                 # an image
@@ -451,7 +456,7 @@ class WavefrontIntegrator:
                     break
                 seconds = time.perf_counter() - t0
                 sizer.record(n, seconds)
-                if costs is None and sizer.rate is not None and (
+                if costs is None and seconds >= TRUSTED_SECONDS and (
                         total - done - n) / sizer.rate > COSTS_AFTER_SECONDS:
                     costs = PixelCosts(self.num_pixels)   # a long render
                 if costs is not None:
