@@ -118,6 +118,7 @@ def test_probes_and_cost_sized_batches_leave_the_image_bit_identical(device, mon
     plain = render_result(scene, device=device, batch_size=97)
     monkeypatch.setattr(integrator_module, "COSTS_AFTER_SECONDS", 0.0)   # always on
     monkeypatch.setattr(integrator_module, "TRUSTED_SECONDS", 0.0)
+    monkeypatch.setattr(integrator_module, "COSTLY_RATE", float("inf"))
     probed = []
     real = integrator_module.WavefrontIntegrator._dropped
 

@@ -41,6 +41,9 @@ DEFAULT_BATCH, CPU_DEFAULT_BATCH = 1 << 18, 1 << 14
 # a 0.5 s render (wedge_volume, 4 spp) probed and shrank its way to 2.5 s.
 COSTS_AFTER_SECONDS, PROBES_PER_BATCH, PATHS_PER_PROBE, PROBE_SHARE = 2.0, 32, 4, 0.1
 TRUSTED_SECONDS = 0.1
+# ... and only where paths are dear (below COSTLY_RATE paths/s: E10's scene ran ~100): on
+# the example scenes (2e4-4e5 paths/s) its probes and smaller batches cost 1.1-1.65x time
+COSTLY_RATE = 5000.0
 
 
 # PATH_STATE's first-hit fields (aov.py): one element each when no AOV is asked for, as
@@ -456,8 +459,8 @@ class WavefrontIntegrator:
                     break
                 seconds = time.perf_counter() - t0
                 sizer.record(n, seconds)
-                if costs is None and seconds >= TRUSTED_SECONDS and (
-                        total - done - n) / sizer.rate > COSTS_AFTER_SECONDS:
+                if costs is None and seconds >= TRUSTED_SECONDS and sizer.rate < COSTLY_RATE \
+                        and (total - done - n) / sizer.rate > COSTS_AFTER_SECONDS:
                     costs = PixelCosts(self.num_pixels)   # a long render
                 if costs is not None:
                     costs.record(done, n, seconds)
