@@ -4,22 +4,14 @@ A selection is a comma-separated list; each item is `all` (every device that can
 program and has double precision), `P:D` (platform and device indices, as
 `python -m gpiscl devices` prints them), `platform:device` name fragments (pyopencl's
 PYOPENCL_TEST form, e.g. `portable:pthread`) or one fragment of "platform device"."""
-import pyopencl as cl
 
-from gpiscl.host.render.device import list_devices
+from gpiscl.host.render.device import compiles, list_devices
 
 
 def usable(device) -> bool:
     """Double precision (the film needs it) and a compiler that works on this machine
     (PyPI's PoCL 3.0 cannot compile for CPUs newer than its LLVM)."""
-    if not device.double_fp_config:
-        return False
-    try:
-        cl.Program(cl.Context([device]), "__kernel void probe(__global int *a) { a[0] = 1; }"
-                   ).build()
-        return True
-    except (cl.Error, RuntimeError):
-        return False
+    return bool(device.double_fp_config) and compiles(device)
 
 
 def _matches(item: str, pi: int, di: int, platform: str, device: str) -> bool:

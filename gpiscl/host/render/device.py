@@ -58,7 +58,7 @@ def _pick(spec: str | None):
     pocls = [dev for _, _, plat, dev in devices
              if "portable computing language" in plat.name.lower()]
     for dev in pocls:
-        if _compiles(dev):
+        if compiles(dev):
             return dev
     if pocls:
         raise DeviceError("no PoCL device here can compile for this CPU (PyPI's PoCL 3.0 "
@@ -76,7 +76,7 @@ def _drivers_limited() -> str:
 
 
 @functools.lru_cache(maxsize=None)
-def _compiles(dev) -> bool:
+def compiles(dev) -> bool:
     """Whether a one-line program builds on dev (PoCL caches it: ~10 ms after the first)."""
     try:
         cl.Program(cl.Context([dev]), "__kernel void probe(__global int *a) { a[0] = 1; }"
