@@ -98,7 +98,8 @@ def survey(root: Path = PACKAGE):
     for path in package_files(root):
         found = comment_lines(path)
         total += len(found)
-        hits = [(n, t.strip()) for n, t in sorted(found.items()) if EVIDENCE.search(QUOTED.sub("", t))]
+        hits = [(n, t.strip()) for n, t in sorted(found.items())
+                if EVIDENCE.search(QUOTED.sub("", t))]
         if hits:
             evidence[path.relative_to(root.parent).as_posix()] = hits
     return total, evidence
@@ -122,7 +123,8 @@ def main(argv=None):
     for name, hits in ranked if args.all else ranked[:args.top]:
         print(f"\n{name}: {len(hits)}")
         for n, text in hits:
-            print(f"  {n:5d}: {text[:110]}")
+            found = ", ".join(m.group() for m in EVIDENCE.finditer(QUOTED.sub("", text)))
+            print(f"  {n:5d}: {text[:100]}  [{found}]")
     return 0
 
 
