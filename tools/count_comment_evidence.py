@@ -14,14 +14,19 @@ spanned by a /* */ or // comment.
 
 A measurement figure is one of (EVIDENCE below, case-insensitive):
   * a percentage:              "12%", "0.5 %"
-  * a ratio of speed or cost:  "1.05x", "3x", "x1.16", "3 times faster"
-                               (not a size such as "16x16": the x is followed by a digit)
+  * a ratio of speed or cost:  "1.05x", "~6x", "x1.16", "3 times faster"
+                               (not "16x16", "0x1f" or "2 x 2": sizes, hex, matrices)
   * a memory size:             "40 MB", "2 GiB", "512 KB"
-  * a rate:                    "paths per s", "paths per CPU second", "paths/s"
-  * the word "measured" or "measure(s)/measuring", "benchmark(ed)", "peak RSS"
+  * a rate:                    "6,000 paths/s", "paths per CPU s, same run"
+  * a reported measurement:    "(measured)", "measured: ...", "measured 5.6e8",
+                               "measured on ...", "peak RSS" (not "the measured
+                               throughput" or "measured from +y": what code does)
   * an experiment's timing:    "0.53 s", "12 ms", "4 min", "80 us"
-A numeric contract ("exact for degree 4", "<= 1e-6 relative", "1 << 14 paths") matches
-none of these, so needs no exception.
+A percentage, size or timing right after a bound word ("within 15%", "up to 4 KB",
+"every 10 s", "<1%"; BOUND) is a limit the code keeps, not a result, and text in
+backticks quotes code or a program's output. A numeric contract ("exact for degree 4",
+"<= 1e-6 relative", "1 << 14 paths", "batches sized to ~0.5 s") so matches none of these,
+and the tool needs no list of exceptions.
 """
 from __future__ import annotations
 
