@@ -48,7 +48,7 @@ EVIDENCE = re.compile(rf"""
     | (?<![\w.])~?\d+(?:\.\d+)?[x\u00d7](?![\w.])          # 1.05x, 3x (not 16x16, 0x1f, 2 x 2)
     | (?<![\w.])[x\u00d7]\d+\.\d+\b                       # x1.16
     | \b\d+(?:\.\d+)?\s?times\s(?:faster|slower|more|fewer|less)\b
-    | {BOUND}(?<![\w.])\d+(?:\.\d+)?\s?[KMGT]i?B\b         # memory sizes
+    | {BOUND}(?<![\w.])\d+(?:\.\d+)?\+?\s?[KMGT]i?B\b      # memory sizes
     | \d\s?(?:k\s)?paths?\s?(?:per|/)\s?s(?:ec(?:ond)?)?\b  # rates: 6,000 paths/s
     | \bper\s(?:cpu\s)?s(?:ec(?:ond)?)?\b[,;)]             # "paths per CPU s, same run"
     | \(measured | \bmeasured(?=\s*[:),(~\d]|\s+(?:on|at|in|no|with|over)\b)
