@@ -42,8 +42,8 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
         An OpenCL device, or 'P:D' indices / a name fragment (default: the first usable
         device, shared between calls).
     batch_size : int, optional
-        The most paths traced at once, in [1, 2**24]; batches are sized to take about
-        0.5 s each below it (default 16384 on a CPU, 262144 elsewhere).
+        The most paths traced at once, in [1, 2**24]; below it, batches are sized to take
+        about half a second each (default 16384 on a CPU, 262144 elsewhere).
     time_limit : float, optional
         Stop after this many seconds of rendering, in (0, 1e9]; holds to within one bounce
         of a batch (the first batch always completes).
@@ -99,7 +99,7 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
         raise SceneError(API_SOURCE, "aov", "not available with `cluster` yet")
     distributed = _dask(cluster) if cluster is not None else None
     from .host.render.device import announcing_compiles
-    # with progress on, a cold compile (~20 s) says so rather than sit silent
+    # with progress on, a cold compile says so rather than sit silent
     with announcing_compiles(sys.stderr if progress not in (None, False) else None):
         integrator, scene = prepare_render(scene, device=device, aov=bool(aovs), **checked)
         if on_compiled is not None:
@@ -125,8 +125,7 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
     # The film is on the host now: drop the integrator, so that its device buffers (the
     # film's sums, the scene's records: on a CPU device the process's own memory, the
     # film's in the malloc heap) are freed and handed back before the output files'
-    # buffers are allocated. The peak RSS of csg_baked was there, 4 MB above the render's
-    # (tools/bench_scenes.py).
+    # buffers are allocated (docs/design/memory-budget.md, 'Host peaks').
     del integrator
     return_freed_pages()
     result.scene, result.aovs = scene, aovs
@@ -300,8 +299,8 @@ def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
     cluster : distributed.Client or str, optional
         Render the realizations on a Dask cluster, as for render_result: the same sums.
     progress : callable or bool, optional
-        progress(1) after each realization, or True for a progress bar (a plain line every
-        10 s where stderr is not a terminal or a notebook).
+        progress(1) after each realization, or True for a progress bar (where stderr is
+        not a terminal or a notebook, a plain line every 10 s).
     on_started : callable, optional
         on_started(scene, where) once the arguments and the scene are checked, before any
         realization is compiled or rendered (as render_result's on_compiled).

@@ -3,8 +3,8 @@ system's only driver, without PyPI's copy.
 
 `pip install pyopencl[pocl]` brings its own ICD loader, which loads every driver it knows
 of before the first platform query: the system's (/etc/OpenCL/vendors) and PyPI's bundled
-PoCL 3.0. Loading a PoCL maps and relocates its LLVM and clang (~23 MB resident, measured:
-peak RSS of a 4-spp ws_sphere_se render 180 -> 157 MB) even if it is never used, and
+PoCL 3.0. Loading a PoCL maps and relocates its LLVM and clang (resident memory:
+docs/design/startup.md, 'Drivers') even if it is never used, and
 PyPI's PoCL (LLVM 14) cannot compile for CPUs newer than it (render/device.py), so where
 the system's only driver is a PoCL (what the README's set-up installs) PyPI's is left out.
 The loader can be limited only by naming one .icd file in OCL_ICD_VENDORS (a folder there

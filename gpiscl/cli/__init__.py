@@ -42,5 +42,5 @@ def main(argv=None) -> int:
 
 def console():
     """The `gpiscl` console script (setup.cfg entry point): the same as python -m gpiscl."""
-    signals.install()   # before the commands' imports (pyopencl, numpy: ~1 s)
+    signals.install()   # before the commands' slow imports (pyopencl, numpy)
     sys.exit(main())

@@ -23,7 +23,7 @@ the tables (and every image) are bit for bit what they were: a row's CDF sums up
 weights spanning many decades, where float32 would lose the dim texels' share (and change
 the tables of the shipped sky). The peak is 28 bytes a texel (the RGB beside the texels),
 checked against the memory budget before reading; the whole-map double copies peaked at
-~80 (2.7 GB for 8k, measured).
+~80 (docs/design/memory-budget.md, 'Environment maps').
 """
 from __future__ import annotations
 
@@ -70,7 +70,7 @@ class DeviceEnvmap:
 def _page_aligned_float32(shape) -> np.ndarray:
     """Zeros starting on a page: a CPU device uses such an array in place
     (render.device.to_device), where an unaligned one (numpy's large arrays start 16
-    bytes past a page) would be copied: 512 MB more for an 8k map's texels."""
+    bytes past a page) would be copied: the texels twice."""
     n = int(np.prod(shape))
     raw = np.zeros(4 * n + PAGE, np.uint8)
     start = -raw.ctypes.data % PAGE

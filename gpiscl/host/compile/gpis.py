@@ -87,7 +87,7 @@ def build_mean(m: dict, bakes=None) -> M.Mean:
 
 def _join(parts: list) -> np.ndarray:
     """np.concatenate(parts), emptying the list as it goes: each part is freed once copied,
-    so a scene's grid records (~10 MB per 128^3 grid) are not held twice."""
+    so a scene's grid records are not held twice."""
     nodes = MEAN_NODE.page_aligned_zeros(sum(len(p) for p in parts))   # used in place
     at = 0
     parts.reverse()

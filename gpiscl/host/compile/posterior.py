@@ -15,12 +15,10 @@ deviation `normal_noise`), which also tells inside from outside.
 Function space: the observations join every ray's conditioning set exactly
 (fs_sampling.h, FsPost). Cost on the device: for each conditioned row, n kernel
 evaluations and an n x n triangular solve (n = observation rows: points, times 4 with
-normals), so a segment of R rows costs ~R n^2 / 2 multiply-adds; tools/bench_posterior.py
-measures it. Measured on PoCL, 2 shared cores (SE, N = 16): 17 us per prior segment,
-0.35 ms at n = 100, 25 ms at n = 1000; a 16x16 x 8 spp sphere render takes 0.03 s
-(prior), 0.5 s (n = 100), 1.8 s (200), 6.6 s (400), ~45 s (1000). So a few hundred rows
-are practical, a thousand only for small images. MAX_ROWS bounds n: the factor (n^2 / 2
-doubles) and the per-row v cache (FS_MAX_ROWS n doubles per work item) grow with it.
+normals), so a segment of R rows costs ~R n^2 / 2 multiply-adds: a few hundred rows are
+practical, a thousand only for small images (docs/design/scene-key-costs.md,
+'Observations'). MAX_ROWS bounds n: the factor (n^2 / 2 doubles) and the per-row v cache
+(FS_MAX_ROWS n doubles per work item) grow with it.
 
 Weight space: each ray conditions its path's realization by Matheron's rule
 (ws_posterior.h), reading the same tables plus the noise deviations stored after the

@@ -175,7 +175,7 @@ def _bounds(prims: np.ndarray):
 
 def scene_box(data: dict, prims: np.ndarray | None = None):
     """(lo, hi) of everything bounded in the scene: primitives (area lights included),
-    bounded GPIS proxies, point lights and the camera, grown by 1% of the diagonal. A
+    bounded GPIS proxies, point lights and the camera, grown by 0.01 of the diagonal. A
     path that leaves it meets nothing but infinitely far lights. prims: the compiled
     primitives, or None to build them."""
     if prims is None:

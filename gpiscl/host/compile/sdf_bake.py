@@ -16,8 +16,8 @@ $GPISCL_CACHE/procedural, keyed by the sha256 of knob.py's source and the settin
 slope bounds of any grid mean (its brick bounds and lipschitz, and the cubic coefficients
 they are taken from: seconds of numpy at 128^3, every time a scene is loaded) in
 $GPISCL_CACHE/slopes, keyed by the grid's values, placement and interpolation and the
-source of gp/means.py that computes them (prepare_slopes). A warm start of the knob scene
-then reads ~0.5 MB (brick bounds of two 128^3 grids) instead of ~10 s of numpy.
+source of gp/means.py that computes them (prepare_slopes). A warm start then reads the
+small brick bounds instead of recomputing them (docs/design/bakes.md, 'Caches').
 """
 from __future__ import annotations
 
@@ -108,8 +108,8 @@ def _signed_distance_chunk(points, verts, faces, watertight: bool, band=None) ->
         # (|d| > ~0.7 band, seen here), so open meshes take the full query and the clamp
         sd = igl.signed_distance(points, verts, faces, sign)[0]
         return sd if band is None else np.clip(sd, -band, band)
-    # Narrow band: the bounded search skips faces farther than `band` (~4x faster at 96^3
-    # here) but leaves far points NaN, without a sign. Those are >= band from the surface,
+    # Narrow band: the bounded search skips faces farther than `band` (docs/design/bakes.md,
+    # 'Mesh bakes') but leaves far points NaN, without a sign. Those are >= band from the surface,
     # where the fast winding number's far-field approximation cannot tip w across 1/2.
     sd = igl.signed_distance(points, verts, faces, sign, -band, band)[0]
     far = ~np.isfinite(sd)
@@ -214,7 +214,7 @@ def _slopes_key(grid: GridMean) -> str:
     settings = {"version": BAKE_VERSION, "shape": list(values.shape), "dtype": str(values.dtype),
                 "origin": [float(o) for o in grid.origin], "voxel": float(grid.voxel_size),
                 "interpolation": grid.interpolation, "brick": GRID_BRICK}
-    # the array's own buffer, not a tobytes() copy (16 MB at 128^3 float64)
+    # the array's own buffer, not a tobytes() copy of a whole grid
     return _settings_key(settings, memoryview(values).cast("B"),
                          Path(means.__file__).read_bytes())
 
@@ -225,8 +225,8 @@ _SLAB_CELLS = 4   # x layers of cells per means.cubic_cell_bounds pass
 def _cubic_cell_bounds_in_slabs(coef: np.ndarray, h: float) -> np.ndarray:
     """means.cubic_cell_bounds over slabs of _SLAB_CELLS x layers: a cell's bound reads only
     its 4^3 coefficients, so each slab takes its cells' layers plus 3 and computes the same
-    numbers; the ~50 full-grid temporaries then stay in cache (2.6x faster at 128^3, and
-    ~200 MB less peak memory for the knob)."""
+    numbers; the ~50 full-grid temporaries then stay in cache (docs/design/bakes.md,
+    'Slabs')."""
     cells = coef.shape[0] - 3
     return np.concatenate([means.cubic_cell_bounds(coef[i:i + _SLAB_CELLS + 3], h)
                            for i in range(0, cells, _SLAB_CELLS)])
@@ -240,7 +240,7 @@ def _linear_slopes_in_slabs(values: np.ndarray, h: float):
     _LINEAR_SLAB_CELLS x layers: a cell's bound reads its 8 corners only, so each slab
     takes its cells' layers plus 1 and computes the same numbers, and the largest squared
     corner gradient of all slabs is the whole grid's (bit for bit: tests/test_bake_cache).
-    The whole-grid form held ~150 MB of float64 temporaries at 128^3."""
+    The whole-grid form held far more float64 temporaries (docs/design/bakes.md, 'Slabs')."""
     cells, parts, inner2 = values.shape[0] - 1, [], 0.0
     for i in range(0, cells, _LINEAR_SLAB_CELLS):
         c2 = means._corner_gradients2(np.asarray(values[i:i + _LINEAR_SLAB_CELLS + 1],

@@ -80,8 +80,8 @@ LOCAL = re.compile(r"local:(\d+)")
 def max_local_workers() -> int:
     """The most local:N workers: one per CPU this process may use (at least 4, so that a
     small machine can still test the units' merge order). Each worker is a process with
-    its own OpenCL runtime (~100+ MB) whose kernels already spread over every core, so
-    more only compete for the cores and memory: local:1000 started 1000 of them."""
+    its own OpenCL runtime (docs/design/startup.md, 'Drivers') whose kernels already spread
+    over every core, so more only compete for the cores and memory."""
     try:
         cpus = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):

@@ -115,7 +115,7 @@ def weight_space_samples(kernel: Kernel, m: int, x, n: int, rng) -> np.ndarray:
     pts = x.reshape(-1, 3)
     out = np.empty((n, len(pts)))
     scale = math.sqrt(kernel.variance) * math.sqrt(2.0 / m)
-    chunk = max(1, (1 << 22) // (m * len(pts)))     # realizations per ~32 MB of phases
+    chunk = max(1, (1 << 22) // (m * len(pts)))     # realizations per 2^22 float64 phases
     for lo in range(0, n, chunk):
         c = min(chunk, n - lo)
         omega = sample_frequencies(kernel, c * m, rng).reshape(c, m, 3)

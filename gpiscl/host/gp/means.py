@@ -321,8 +321,8 @@ class GridMean(Mean):
     def value_and_gradient(self, x):
         x = _vec(x)
         # the samples as stored (a bake's are float32): only the gathered corners go to
-        # float64, the same numbers without a double copy of the whole grid (36 MB for the
-        # knob's two 129^3 bakes, which the proxy-cut check evaluates: compile's peak RSS)
+        # float64, the same numbers without a double copy of the whole grid (the knob's
+        # bakes, which the proxy-cut check evaluates, set compile's peak memory there)
         vals = np.asarray(self.values)
         h = float(self.voxel_size)
         hi = np.asarray(vals.shape, np.float64) - 1.0
@@ -531,7 +531,7 @@ def grid_slope_bound(values: np.ndarray, h: float, inner2: float | None = None) 
     negative (g + d: orthogonal parts add). Edges and corners of the box take their values
     and slopes from face cells, and slope 1 from d: the bound is never below 1.
     inner2: max(_corner_gradients2(values)) when already known (compile/sdf_bake.py takes
-    it in slabs: the whole-grid temporaries were ~150 MB at 128^3); faces are in double."""
+    it in slabs: docs/design/bakes.md, 'Slabs'); faces are in double."""
     if inner2 is None:
         inner2 = float(np.max(_corner_gradients2(np.asarray(values, np.float64))))
     bound2 = max(inner2 / h**2, 1.0)

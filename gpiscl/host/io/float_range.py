@@ -20,8 +20,8 @@ def array_problem(a, what: str, nonnegative: bool = False):
         a = a.astype(np.float64)
     if not a.size:
         return None
-    # the extremes alone decide, without a temporary per number (an 8 MB bake's check
-    # added 17 MB to compile's peak RSS): a NaN propagates into both, an infinity is one
+    # the extremes alone decide, without a temporary per number (docs/design/memory-budget.md,
+    # 'Host copies'): a NaN propagates into both, an infinity is one
     lo, hi = a.min(), a.max()
     if not (np.isfinite(lo) and np.isfinite(hi)):
         bad = np.count_nonzero(~np.isfinite(a))

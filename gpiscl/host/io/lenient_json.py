@@ -4,10 +4,11 @@ kParseCommentsFlag | kParseTrailingCommasFlag | kParseNanAndInfFlag, and their e
 scenes rely on the first), so their scene files import as they are.
 
 The text goes to the json module (C speed; it reads NaN and Infinity itself); when that
-fails, again after one regular-expression pass blanks the comments and trailing commas, keeping every other
-character where it was, so the json module's line and column of a mistake are the file's.
-A pure-Python JSON5 parser read ~55 KB/s (a 2 MB file took 19 s). Errors are one
-SceneError line naming the file and the line and column of the problem.
+fails, again after one regular-expression pass blanks the comments and trailing commas,
+keeping every other character where it was, so the json module's line and column of a
+mistake are the file's. A pure-Python JSON5 parser was far slower
+(docs/design/tungsten-import.md, 'Parsing speed (E09)'). Errors are one SceneError line
+naming the file and the line and column of the problem.
 """
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ MAX_SCENE_BYTES = 64 << 20   # a scene names its big data in files; more is a mi
 # a string (kept), a comment (blanked), or a comma with only blanks and comments before
 # a closing bracket (blanked); strings first, so a "//" or "," inside one is left alone.
 # The look-ahead's group is atomic: backtracking into a comment let "/* c */" stretch to
-# a later "*/" (quadratic: 2000 commented objects took 3 s)
+# a later "*/" (quadratic in the comments: docs/design/tungsten-import.md, same section)
 _LENIENT = re.compile(r'("[^"\\]*(?:\\.[^"\\]*)*")'
                       r'|(//[^\n]*|/\*[\s\S]*?\*/)'
                       r'|(,)(?=(?>\s+|//[^\n]*|/\*[\s\S]*?\*/)*+[\]}])')

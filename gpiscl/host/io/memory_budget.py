@@ -5,9 +5,8 @@
   its cgroup    a container's or a job's memory limit (v2 memory.max, v1
                 memory.limit_in_bytes) less what the cgroup uses, at its own level and at
                 every level above it (a parent's limit binds its children)
-Only MemAvailable was read before: under `ulimit -v 3G` an 8192^2 film passed the check and
-failed in OpenCL with a traceback, and in a 2 GiB cgroup the OOM killer ended the render
-without a word.
+MemAvailable alone let renders over a process or cgroup limit pass the check and fail late
+(docs/design/memory-budget.md, 'The budget').
 
 A cgroup's usage counts its page cache; the inactive file pages among it are the first the
 kernel reclaims, so they count as free (the working set container tools report).

@@ -1,7 +1,7 @@
 """Triangle mesh files (.obj, .ply, .stl) through trimesh, and plain OBJ files without it.
 
-`import trimesh` pulls in scipy and PIL: ~58 MB resident, a third of a small render's
-(tools/bench_scenes.py, wedge_volume's mesh proxy). A plain OBJ (v, f of triangles or of
+`import trimesh` pulls in scipy and PIL, a third of a small render's resident memory
+(docs/design/startup.md, 'Imports'). A plain OBJ (v, f of triangles or of
 quads only, vt / vn / o / g / s / usemtl / mtllib lines ignored) is read here into the
 triangles trimesh gives, in its order (each quad as (0, 1, 2), (2, 3, 0)); anything else
 goes to trimesh.

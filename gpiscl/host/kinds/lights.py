@@ -107,8 +107,8 @@ def pack_directional(lt):
 # receives from them, times the scene's cross-section pi R^2 (R: the radius of the
 # scene's bounding sphere), times the chance that BSDF sampling misses them (bsdf_miss):
 # a light that BSDF sampling finds by itself gains little from NEE's choices, which the
-# concentrated lights need (a sun beside a sky: 53x lower variance than by power alone
-# on a diffuse floor). Arguments: the packer's fields and R.
+# concentrated lights need (a sun beside a sky on a diffuse floor, 'Measured' there).
+# Arguments: the packer's fields and R.
 
 def brightness(rgb) -> float:
     """The scalar the estimates rank lights by: the mean of the RGB channels."""

@@ -45,7 +45,8 @@ def _eta_k_together(b):
 # unpolarised Fresnel term of the complex index eta + i k (a `material` preset,
 # conductors.py, or explicit RGB eta and k), height-correlated Smith masking; `albedo`
 # multiplies it. Single scattering: energy that would bounce between microfacets is lost
-# (a few percent at roughness 0.5, ~0.1% at 0.1).
+# (a few percent at roughness 0.5, less when smoother: docs/design/scene-key-costs.md,
+# 'rough_conductor').
 ROUGH_CONDUCTOR = Record({"material": Field(Enum(*CONDUCTORS), "Cu"),
                           "eta": Field(Nullable(RGB), None),
                           "k": Field(Nullable(RGB), None),

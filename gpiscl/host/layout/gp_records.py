@@ -191,7 +191,7 @@ def payload_records(count: int, lead: int = 0):
     payload records for `count` floats, and the (payload records, GRID_PAYLOAD_FLOATS)
     float32 view of their row0..p1 that write_floats fills. Writing into the records
     directly spares the float64 and float32 copies of a whole grid that a
-    concatenate-then-convert pass holds at once (~60 MB per 128^3 grid)."""
+    concatenate-then-convert pass holds at once."""
     n_rec = -(-int(count) // GRID_PAYLOAD_FLOATS)
     records = MEAN_NODE.zeros(lead + n_rec)
     records["kind"][lead:] = MEAN_KINDS["payload"]
@@ -324,7 +324,7 @@ def pack_mean(mean: M.Mean) -> np.ndarray:
 
 def pack_mean_parts(mean: M.Mean) -> list:
     """pack_mean's program as the record arrays it concatenates, for a caller that joins
-    several programs: one concatenation instead of two (a grid's records are ~10 MB)."""
+    several programs: one concatenation instead of two (a grid's records are large)."""
     need = _stack_need(mean)
     if need > MEAN_STACK_DEPTH:
         raise ValueError(f"mean CSG tree needs a stack of {need} entries; the device "

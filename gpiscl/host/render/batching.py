@@ -1,20 +1,21 @@
 """Batches sized in time, not in paths.
 
-A fixed path count per batch is seconds on a fast scene and minutes on a slow one (a
-1024-feature rational-quadratic GPIS traces ~6,000 paths/s on a CPU, so 2^18 paths are 40 s);
-progress, time limits and interrupts can only act between batches (or bounces), so every
-batch must be short. BatchSizer starts small, measures each batch's throughput and sizes
-the next one to take about TARGET_SECONDS, never more than the time left. The image does
-not depend on how the paths are split (the film adds each pixel's paths in sample order),
-so this changes nothing but responsiveness.
+A fixed path count per batch is seconds on a fast scene and minutes on a slow one
+(docs/design/batches.md, 'Batches sized in time'); progress, time limits and interrupts
+can only act between batches (or bounces), so every batch must be short. BatchSizer
+starts small, measures each batch's throughput and sizes the next one to take about
+TARGET_SECONDS, never more than the time left. The image does not depend on how the paths
+are split (the film adds each pixel's paths in sample order), so this changes nothing but
+responsiveness.
 
-Paths run in pixel order, so consecutive batches cover different rows whose cost differs
-by orders of magnitude (sky against a 65536-feature GPIS: ~1000x): sized from cheap sky
-rows, a batch that then landed on the object took 12 s against a 2 s time limit (E10), in
-one bounce. BatchSizer's rate is the slowest of the last RATE_WINDOW batches, which helps
-within a pass only; PixelCosts then shrinks each batch to what the pixels it will cover
-cost: measured by the batches that covered them before, and in the first pass, where
-nothing is known yet, by probing one path ahead (the render loop: integrator.py).
+Paths run in pixel order, so consecutive batches cover different rows whose cost can differ
+by orders of magnitude (sky against a large GPIS): sized from cheap sky rows, a batch that
+then lands on the object overruns a time limit by a whole bounce (docs/design/batches.md,
+'Batches sized by what their pixels cost'). BatchSizer's rate is the slowest of the last
+RATE_WINDOW batches, which helps within a pass only; PixelCosts then shrinks each batch to
+what the pixels it will cover cost: known from the batches that covered them before, and
+in the first pass, where nothing is known yet, by probing one path ahead (the render loop:
+integrator.py).
 """
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ import math
 from collections import deque
 
 TARGET_SECONDS = 0.5      # per batch: the bar moves, and a stop acts, at least once a second
-FIRST_BATCH = 64          # paths: ~1 s on the slowest scenes measured (~60 paths/s)
+FIRST_BATCH = 64          # paths: about a second on the slowest scenes (docs/design/batches.md)
 MAX_GROWTH = 2            # per batch: small batches are overhead-bound, so their rate is low
 RATE_WINDOW = 8
 COST_CELLS = 1024         # runs of pixels whose cost PixelCosts keeps
@@ -114,7 +115,7 @@ class PixelCosts:
     def probed(self, pixel: int, seconds: float) -> None:
         """A one-path batch at pixel took seconds: its cell costs that, less the launches
         every such batch pays (the cheapest one-path batch seen), which a real batch shares
-        among its paths. A share of them left in the path's cost (a GPU's ~30 ms a batch)
+        among its paths. A share of them left in the path's cost (a GPU's launch latency)
         would keep every first-pass batch at a few hundred paths."""
         self.overhead = seconds if self.overhead is None else min(self.overhead, seconds)
         c = self._cell(pixel % self.pixels)

@@ -77,7 +77,7 @@ def _drivers_limited() -> str:
 
 @functools.lru_cache(maxsize=None)
 def compiles(dev) -> bool:
-    """Whether a one-line program builds on dev (PoCL caches it: ~10 ms after the first)."""
+    """Whether a one-line program builds on dev (PoCL caches it: cheap after the first)."""
     try:
         cl.Program(cl.Context([dev]), "__kernel void probe(__global int *a) { a[0] = 1; }"
                    ).build()
@@ -125,12 +125,13 @@ def shared_device(spec: str | None = None) -> "Device":
 
 
 WORK_GROUP = 64
-# Built programs by (context, source, options): even a PoCL cache hit costs ~0.1 s, paid
-# by every integrator (one per UQ realization, one per test render) without this.
+# Built programs by (context, source, options): even a PoCL cache hit costs a noticeable
+# build call (docs/design/startup.md, 'OpenCL builds'), paid by every integrator (one per
+# UQ realization, one per test render) without this.
 _BUILT: dict = {}
 
 
-# A build the driver's cache answers takes ~0.1 s; one still running after this compiles
+# A build the driver's cache answers is quick; one still running after this compiles
 SLOW_COMPILE_SECONDS = 2.0
 COMPILE_NOTICE = "compiling OpenCL programs (first run only)"
 _notice = {"to": None, "said": False}   # announcing_compiles: where, and whether said
@@ -140,7 +141,8 @@ _notice = {"to": None, "said": False}   # announcing_compiles: where, and whethe
 def announcing_compiles(file):
     """While on (file: a text stream; None: off), a compile that outlasts
     SLOW_COMPILE_SECONDS prints COMPILE_NOTICE to file, once per process: a cold start is
-    otherwise ~20 s of silence. The command line turns it on, the API only with progress."""
+    otherwise silent for a whole cold compile (docs/design/startup.md, 'OpenCL builds').
+    The command line turns it on, the API only with progress."""
     previous, _notice["to"] = _notice["to"], file
     try:
         yield
@@ -240,9 +242,9 @@ class Program:
                               f"{' '.join(opts)}; source saved to {path}:\n{exc}") from None
         kernels = {k.function_name: k for k in prg.all_kernels()}
         if not kernels:
-            # PyPI's PoCL 3.0-rc2 does this on this project's programs (measured
-            # 2026-12-03 on an AVX-512 AMD EPYC): a build that "succeeds" with no
-            # kernels, which would otherwise end in a KeyError at the first launch
+            # PyPI's PoCL 3.0-rc2 does this on this project's programs on CPUs newer than
+            # its LLVM (docs/design/startup.md, 'Drivers'): a build that "succeeds" with
+            # no kernels, which would otherwise end in a KeyError at the first launch
             raise DeviceError(f"the OpenCL build on '{device.name}' returned no kernels (a "
                               "fault of this OpenCL driver); install the distribution's PoCL "
                               "(Debian, Ubuntu: apt-get install pocl-opencl-icd) or choose "
@@ -311,9 +313,10 @@ def to_device(device: Device, array: np.ndarray, writable=False) -> cl.Buffer:
 
     A read-only buffer on a CPU device uses the array's own memory when it is aligned as
     the device aligns its buffers (USE_HOST_PTR; the buffer keeps the array alive): a copy
-    would be the same RAM twice, e.g. 20 MB of the knob's grid records, which the compiler
-    allocates page-aligned for this (tools/bench_scenes.py, peak RSS). The array must then
-    not change while the buffer lives, which holds for the compiled scene's arrays.
+    would be the same RAM twice, e.g. the knob's grid records, which the compiler
+    allocates page-aligned for this (docs/design/memory-budget.md, 'Host copies'). The
+    array must then not change while the buffer lives, which holds for the compiled
+    scene's arrays.
     Unaligned arrays (vector loads would straddle cache lines) and GPUs get a copy."""
     mf = cl.mem_flags
     if array.size == 0:

@@ -3,9 +3,8 @@ slope bounds of trilinear grid means, one work item per sample or brick.
 
 The numpy forms stay as the twins (gp/knob.py knob_grid, compile/sdf_bake.py's slabs over
 gp/means.py), and the device gives the same numbers bit for bit (tests/test_device_bakes.py),
-so the bake cache's entries do not depend on which computed them. The knob's two 128^3
-bakes and their slope bounds took ~1 s of numpy on two cores (~100 s at 256^3); cached
-scenes never build this program.
+so the bake cache's entries do not depend on which computed them (costs:
+docs/design/bakes.md, 'On the device'); cached scenes never build this program.
 """
 from __future__ import annotations
 

@@ -62,7 +62,7 @@ __kernel void theory_flights(__global const GpKernel* kp, __global const MeanNod
 """
 
 
-_BUILT: dict = {}      # by context: one build (~1 min on PoCL) per process
+_BUILT: dict = {}      # by context: one (slow) build per process
 
 
 def _kernel(device: Device):

@@ -38,11 +38,12 @@ DEFAULT_BATCH, CPU_DEFAULT_BATCH = 1 << 18, 1 << 14
 # size their batches by what their pixels cost too (batching.PixelCosts; shorter ones, like
 # most uq realizations, are a few batches anyway), probing at most PROBES_PER_BATCH paths
 # ahead. A shorter batch's rate is its launches' overhead: judged by the first 64 paths,
-# a 0.5 s render (wedge_volume, 4 spp) probed and shrank its way to 2.5 s.
+# short renders probed and shrank their way to several times their length.
 COSTS_AFTER_SECONDS, PROBES_PER_BATCH, PATHS_PER_PROBE, PROBE_SHARE = 2.0, 32, 4, 0.1
 TRUSTED_SECONDS = 0.1
-# ... and only where paths are dear (below COSTLY_RATE paths/s: E10's scene ran ~100): on
-# the example scenes (2e4-4e5 paths/s) its probes and smaller batches cost 1.1-1.65x time
+# ... and only where paths are dear (below COSTLY_RATE paths/s, far below the example
+# scenes' rates), where its probes and smaller batches cost less than they save
+# (docs/design/batches.md, 'When cost-per-pixel sizing is on')
 COSTLY_RATE = 5000.0
 
 
@@ -150,7 +151,7 @@ class WavefrontIntegrator:
         self.paths = None     # the work queues: _allocate_work, release_work
         # not a scene key: off, every ray solves for its posterior weights (the baseline
         # of tests/test_kriging_cache.py). Kept across release_work: its tags are zeroed
-        # once, its slots stay valid (keyed by realization) and a batch touches ~1 MB.
+        # once, its slots stay valid (keyed by realization) and a batch touches only its paths'.
         self.kriging = kriging_cache.KrigingCache(device, gpis.objects, self.batch,
                                                   settings.get("kriging_cache", True))
         self.counters_host = np.zeros(layouts.NUM_COUNTERS, np.int32)
@@ -198,7 +199,8 @@ class WavefrontIntegrator:
         """Free the queues and the function-space stages' per-batch buffers: render()
         does it before reading the film, so the film's host copies and the output files'
         buffers do not come on top of them (on a CPU device they are the process's own
-        memory: every example scene's peak RSS was at the end, 13-20 MB above the render)."""
+        memory, and every example scene's peak came at the end: docs/design/memory-budget.md,
+        'Host peaks')."""
         if self.paths is not None:
             for queue in (self.paths, *self.rays, self.hits, self.escaped, self.shadow):
                 queue.release()
@@ -377,8 +379,8 @@ class WavefrontIntegrator:
 
     def _warm_up(self) -> None:
         """A path traced and dropped before the clock starts: PoCL compiles each kernel for
-        its work-group size at its first launch (~8 s cold for the stage program), which
-        counted as rendering (a cold start reported 331 paths/s) and sat at 0 %."""
+        its work-group size at its first launch (seconds, cold), which would count as
+        rendering (docs/design/batches.md, 'Batches sized by what their pixels cost')."""
         with slow_compile_notice():
             self._dropped(lambda: self.render_batch(0, 0, 1, keep=False))
 
@@ -387,7 +389,7 @@ class WavefrontIntegrator:
         batch's time (batching.PixelCosts). Where it covers pixels no batch has yet (the
         first pass), paths at up to PROBES_PER_BATCH points spread over it (one per
         PATHS_PER_PROBE, for PROBE_SHARE of a batch's time) are probed first, traced and
-        dropped: sized from sky rows, a batch took 12 s on the object."""
+        dropped: sized from sky rows alone, a batch can land on the object and overrun."""
         n, spent = costs.limit(start, n), 0.0
         for k in range(PROBES_PER_BATCH):
             if k >= n // PATHS_PER_PROBE or spent >= PROBE_SHARE * costs.target:

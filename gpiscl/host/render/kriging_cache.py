@@ -12,8 +12,8 @@ value offset) of object k, or -1.
 Memory: (n + 1) doubles a path and object, up to 4 KB at WS_MAX_ROWS. The batch is capped
 so that the values fit the device's budget. On a CPU the buffer is the process's memory,
 but only the pages of the paths a batch holds are touched (the tags, 16 bytes a path and
-object, are zeroed once), and batches are sized to ~0.5 s (batching.py): a 100-row
-posterior traces ~3,000 paths/s, so ~1,500 paths touch ~1.2 MB of the 16 MB budget.
+object, are zeroed once), and batches are sized in time (batching.py), so a batch touches
+a small part of the budget (docs/design/memory-budget.md, 'Kriging cache').
 """
 from __future__ import annotations
 
@@ -24,9 +24,9 @@ from ..layout import records as layouts
 from .device import Device
 
 TAG_BYTES = 16        # uint4 (key.x, key.y, object + 1, 0): ws_post_tag
-# Bytes of kept values per batch, as function_space_stages.BUDGET: a GPU holds the
-# default 2^18-path batch of 100-row weights in 256 MB; a CPU's 16 MB holds 20,000 paths
-# of them, more than ~0.5 s of batch (batching.py) at their ~3,000 paths/s.
+# Bytes of kept values per batch, as function_space_stages.BUDGET: a GPU's holds the
+# default 2^18-path batch of 100-row weights; a CPU's holds more of those paths than one
+# time-sized batch traces (docs/design/memory-budget.md, 'Kriging cache').
 BUDGET, CPU_BUDGET = 256 << 20, 16 << 20
 
 

@@ -1,7 +1,7 @@
 """What a render will allocate, checked against what there is before anything is allocated.
 
-A legal 16384^2 camera needs ~15 GiB of film on the device and more on the host to read it
-back; a 10^8-path batch needs ~23 GiB of queues. Allocating first and failing later gave
+A legal 16384^2 camera needs tens of GiB of film on the device and on the host to read it
+back, and a 10^8-path batch as much of queues. Allocating first and failing later gave
 MemoryError tracebacks (or a segfault in the OpenCL runtime) minutes into a run. Here:
   film    56 bytes a pixel on the device (sum, sum of squares, count, in double), and
           HOST_BYTES_PER_PIXEL on the host to read it back, convert and write it
@@ -87,10 +87,10 @@ def plan(device, num_pixels: int, batch: int, max_memory: int | None = None,
 def return_freed_pages() -> None:
     """Hand the heap's free pages back to the system after large buffers are released.
 
-    PoCL's CPU device allocates buffers with malloc. A queue's per-field buffers (128 KB
-    each at 2^15 paths) fall below glibc's dynamic mmap threshold, so their pages stay in
+    PoCL's CPU device allocates buffers with malloc. At a CPU's batch sizes a queue's
+    per-field buffers fall below glibc's dynamic mmap threshold, so their pages stay in
     the heap after release and the process keeps them resident; malloc_trim returns every
-    free page (measured: 11 MB of queues at 2^15 paths). A no-op without glibc."""
+    free page (docs/design/memory-budget.md, 'Host peaks'). A no-op without glibc."""
     try:
         trim = ctypes.CDLL(None).malloc_trim
     except (OSError, AttributeError):

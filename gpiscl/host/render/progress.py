@@ -66,7 +66,7 @@ class SppBar:
 
 
 def duration(seconds: float) -> str:
-    """12 s, 3 min 05 s, 2 h 07 min, 549 d 20 h."""
+    """`12 s`, `3 min 05 s`, `2 h 07 min`, `549 d 20 h`."""
     s = int(round(min(seconds, 1e15)))
     if s < 60:
         return f"{s} s"

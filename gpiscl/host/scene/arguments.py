@@ -24,7 +24,7 @@ SIZE_UNITS = {"": 1, "k": 1 << 10, "m": 1 << 20, "g": 1 << 30, "t": 1 << 40}
 
 
 def parse_size(text: str) -> int:
-    """'512M', '8G', '8GiB', '1.5g', '1000000' -> bytes."""
+    """`512M`, `8G`, `8GiB`, `1.5g`, `1000000` -> bytes."""
     m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*([kmgt]?)(i?b)?\s*", str(text).lower())
     if not m:
         raise ValueError(f"expected a size like 8G, 512M or a number of bytes (got {text!r})")

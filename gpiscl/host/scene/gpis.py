@@ -53,11 +53,11 @@ MEANS.register("transform", Record({"child": Field(MEANS), **TRANSFORM.fields}))
 # mirror micro-BSDF shows as facets) or "cubic" (the interpolating tricubic B-spline: C2,
 # no facets, O(h^4) on smooth data; each evaluation reads 64 coefficients instead of 8
 # samples, and its certified slope bound, from Bezier control points, is looser along a
-# distance's ridges: renders 1.1-1.7x slower, tools/bench_grid_interpolation.py).
+# distance's ridges: renders are slower, docs/design/scene-key-costs.md, 'Interpolation').
 _INTERPOLATION = Field(Enum("linear", "cubic"), "linear")
 # Baked signed distance of a triangle mesh (gpiscl/host/compile/sdf_bake.py): `resolution`
 # samples along the longest axis of the mesh bounds grown by `margin` per side (null:
-# 10% of the largest extent); `band` clamps distances to [-band, band] (null: none);
+# 0.1 of the largest extent); `band` clamps distances to [-band, band] (null: none);
 # `transform` is applied to the vertices before baking, so distances stay exact.
 MEANS.register("mesh", Record({"file": Field(File((".obj", ".ply", ".stl", ".off"),
                                                   mesh_problem)),
@@ -193,9 +193,9 @@ def _fields_positive(g):
 # inside the proxy where P(f(x) <= 0) can reach `occupancy` (epsilon); null: the whole
 # proxy. Realizations with f < 0 only where the occupancy is below epsilon are ignored
 # (about epsilon per correlation length of clipped ray); 1e-4 (mean > 3.72 sigma) keeps
-# that far below a render's noise. On for both samplers: function space saves samples
-# (3.4x faster on scenes/knob_no_csg.json), weight space is about even (its search
-# already strides where |f| >> sigma); tools/bench_occupancy.py measures.
+# that far below a render's noise. On for both samplers: function space saves samples,
+# weight space is about even (its search already strides where |f| >> sigma;
+# docs/design/scene-key-costs.md, 'Occupancy').
 # >= 1e-12: below ~1e-16, 1 - epsilon rounds to 1 and has no normal quantile
 DEFAULT_OCCUPANCY = 1e-4
 BOUNDS = Record({"occupancy": Field(Nullable(Number(ge=1e-12, lt=0.5)),

@@ -21,7 +21,7 @@ from ..schema import (Bool, Enum, Field, File, Int, ListOf, Nullable, String, Nu
 __all__ = ["SHAPES", "LIGHTS", "BSDFS", "SCENE"]
 
 
-MAX_BATCH = 1 << 24       # paths: the queues' size at 16M paths is ~3 GiB already
+MAX_BATCH = 1 << 24       # paths: the queues of 16M paths already take several GiB
 
 
 def _sub(a, b):

@@ -6,7 +6,7 @@
  * at a time (a conditioned bisection point, a gradient at a hit) without moving anything,
  * and the factorisation below is row-oriented, so an appended row is factored by the
  * same code in O(n^2). Private arrays are not used: PoCL's CPU device segfaulted on
- * private double arrays of 512 entries (4 KiB) at its automatic work-group size (256
+ * private double arrays of 512 entries at its automatic work-group size (256
  * and 384 worked; 8192 worked only with local size 1), far below the ~100 rows of a
  * global-memory ray (ring, window, bisection, hit rows).
  *

@@ -185,8 +185,10 @@ inline double fs_phi(double x) { return 0.3989422804014327 * exp(-0.5 * x * x); 
 /* Rice's rate (per unit length) of crossings from the side `outside` says back across 0:
  * up-crossings when outside, down-crossings inside. In float: the rate only decides a
  * step against a tolerance, where 1e-6 relative is far below what matters, and PoCL's
- * double exp and erfc made this function 40% of an evaluation (measured). A deep
- * Gaussian tail underflows to a rate of 0, which is what it is next to any tolerance. */
+ * double exp and erfc made this function much of an evaluation
+ * (docs/design/function-space-march.md, 'The step rule: a bound on missed crossings').
+ * A deep Gaussian tail underflows to a rate of 0, which is what it is next to any
+ * tolerance. */
 inline float fs_phif(float x) { return 0.39894228f * exp(-0.5f * x * x); }
 
 inline double fs_return_rate(FsMoments M, int outside)

@@ -324,7 +324,7 @@ inline FsMoments fs_mk_moments(double m, double m1, double Q[3][3])
 /* The step rule's ratio r = scale * fs_return_rate(fs_mk_moments(m, m1, Q), outside), or
  * any value on the same side of each of the rule's thresholds (accept r <= 1; grow by 2,
  * 1.5, 1.1 below 0.05, 0.3, 1): the same decisions, without erfc where the bracket below
- * settles them (erfcf was ~18% of a flight, measured). rate = phi(z) e(a) g / s with
+ * settles them (docs/design/markov-sampler.md, 'Cost'). rate = phi(z) e(a) g / s with
  * e(a) = phi(a) + a Phi(a); Birnbaum's and Sampford's bounds on the normal tail,
  * 2 / (t + sqrt(t^2 + 4)) < Q(t) / phi(t) < 4 / (3t + sqrt(t^2 + 8)) (t >= 0), bracket
  * e(a) within 15% (both exact at a = 0, both ~phi(a) / a^2 as a -> -inf), written without
@@ -356,7 +356,7 @@ inline double fs_mk_rule_ratio(double m, double m1, double Q[3][3], int outside,
         lo = pa * 8.0f / ((s8 + t) * (3.0f * t + s8));
         hi = pa * 4.0f / ((t + s4) * (t + s4));
         /* below a = -8 fs_return_rate takes the asymptotic phi(a) / a^2 (1 - 3 / a^2),
-         * up to 0.35% under e(a) (0.04% under lo there): the bracket must hold it */
+         * up to 0.35% under e(a) (less than 0.05% under lo there): the bracket must hold it */
         if (a < -8.0f) lo *= 0.995f;
     }
     float pz = 0.39894228f * exp(-0.5f * (float)(ms * ms * iv));
@@ -422,8 +422,8 @@ inline double fs_mk_mean(__global const MeanNode* mean, int mc, FsRay ray, doubl
 
 /* fs_mk_mean, or (flat: the mean's Lipschitz bound on the ray is 0, so it is constant
  * there) its value mu0 at the start and slope 0 without evaluating the mean program: the
- * same numbers (a constant mean's gradient is exactly 0), ~5% of a flight through a
- * constant mean (measured). */
+ * same numbers (a constant mean's gradient is exactly 0), and the evaluation it skips is
+ * a share of a flight (docs/design/markov-sampler.md, 'Cost'). */
 inline double fs_mk_mean_on(int flat, double mu0, __global const MeanNode* mean, int mc,
                             FsRay ray, double3 dn, double t, double* slope)
 {

@@ -390,12 +390,10 @@ inline void fs_row_copy(GpKernel p, FsScratch S, int k, FsScratch D, int i)
 /* The stationary kernel's jets at x - (row j's position) for rows j0 .. j0 + FS_LANES - 1
  * of S: a radial
  * kernel's exps are taken in one double4, which PoCL's CPU runs several times faster than
- * as scalars (ws_posterior.h measured 5.6e8 against 5.8e7 a second in double8), and these
- * exps were the largest single cost of a function-space flight (gp_radial ~1/4 of it,
- * perf). Why 4 lanes, not 8 (renders, paths per CPU s, same run): adaptive flights hold
- * few rows (memory + ~5 samples), and 4 lanes were 6-10% faster there than 8 and as fast
- * for the uniform step's longer systems. Used where rows are factored (fs_factor_known);
- * the step rule's small system (fs_moments) measured no faster with it. The same
+ * as scalars, and these exps were the largest single cost of a function-space flight.
+ * 4 lanes, not 8: adaptive flights hold few rows (memory + a few samples). Used where
+ * rows are factored (fs_factor_known); the step rule's small system (fs_moments) gained
+ * nothing from it (docs/design/function-space-march.md, 'Vector jets'). The same
  * operations as gp_kernel_jet lane by lane; the vector exp may round differently from the
  * scalar one (images moved by <= 1e-6 on the room, none on the SE sphere). */
 #define FS_LANES 4

@@ -41,8 +41,8 @@ inline GP_REAL3 gp_aniso(GpKernel p)
 }
 
 /* Radial kernels of s alone: value, 2 k'(s), 4 k''(s), in two halves so that a caller with
- * many lags can take the exps in vector lanes (fs_sampling.h fs_jets: PoCL's double exp
- * runs ~10x faster in double8 than scalar): gp_radial_arg is the exponent x whose exp the
+ * many lags can take the exps in vector lanes (fs_sampling.h fs_jets: PoCL's vector double
+ * exp is much faster than its scalar one): gp_radial_arg is the exponent x whose exp the
  * kernel takes (0 for a kernel that takes none), gp_radial_of the three numbers given
  * e = exp(x). gp_radial is the two in a row: the same operations as one function.
  * Product kernels k = sigma^2 exp(-h) give h, grad h and diag Hess h (gp_log_terms).

@@ -85,7 +85,7 @@ inline float gpis_occupancy_march(__global const MeanNode* mean, int count, floa
         if (!(lt > 0.0f)) return t_stop;     /* constant mean above the level everywhere */
         float step = g / lt;
         if (local_lip) {
-            /* the bound over the cells of a 4x longer step: if it certifies that step,
+            /* the bound over the cells of a step 4 times as long: if it certifies it,
              * take it; otherwise g / (its bound) certifies a step inside that stretch,
              * never shorter than the global one */
             float far = fmin(4.0f * step, fabs(t_stop - t));

@@ -11,7 +11,8 @@
  *
  * Each kind's file says what its Light record's fields mean. Cones are described by
  * 1 - cos(half-angle) throughout: a float32 cos of a 0.1 degree sun keeps one digit of
- * 1 - cos, which made it 1.75 % too bright (kinds/lights.py packs it as 2 sin^2(r / 2)). */
+ * 1 - cos, which made it visibly too bright (docs/design/light-sampling.md, 'Cones');
+ * kinds/lights.py packs it as 2 sin^2(r / 2). */
 
 typedef struct {
     __global const float4* texels;   /* H*W radiance */

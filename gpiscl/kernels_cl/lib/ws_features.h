@@ -18,10 +18,10 @@
  * polynomial log/sin/cos. PoCL does not vectorise across work-items through a data-dependent
  * loop (the root finder's), and its scalar transcendental builtins are opaque calls, so
  * explicit lanes are what makes the feature loop SIMD. Build with -DWS_LANES=1 on GPUs; on
- * CPUs the device's native float vector width is best (16 with AVX-512: 1.5-2x faster than
- * 8, tools/bench_weight_space.py). Every lane computes its own feature from its own index,
- * so results do not depend on WS_LANES. Regenerating a feature costs ~6x evaluating a
- * stored one, so a root search regenerates its ray's features once into a private cache
+ * CPUs the device's native float vector width is best (docs/design/batches.md,
+ * 'Weight-space lanes'). Every lane computes its own feature from its own index, so
+ * results do not depend on WS_LANES. Regenerating a feature costs several times evaluating
+ * a stored one, so a root search regenerates its ray's features once into a private cache
  * (WS_CACHE_FEATURES) and reads them from there on every bound.
  *
  * Precision: float32 suffices. Values are O(sigma) and roots are wanted to ~1e-4 l, i.e. f
@@ -36,12 +36,13 @@
 #endif
 /* Features kept in private memory for one root search when M <= WS_CACHE_FEATURES: a
  * search evaluates its ray's realization ~35 times, and regenerating a feature (Philox,
- * two Box-Muller pairs) costs ~6x evaluating a stored one, so on CPUs the cache makes
- * searches several times faster for 20 KB of stack (1024 features). GPUs (WS_LANES 1)
- * would spill it: off by default there. Caution (PoCL 3.0 pthread): a kernel that fills a
- * cache and then runs loops with uniform trip counts gets the array replicated per
- * work-item, which overflows the stack for work-groups >= 512; inside the search, whose
- * loop is data-dependent, it is not replicated (tested up to 4096). */
+ * two Box-Muller pairs) costs several times evaluating a stored one, so on CPUs the cache
+ * makes searches several times faster for a little stack (docs/design/batches.md,
+ * 'Weight-space lanes'). GPUs (WS_LANES 1) would spill it: off by default there. Caution
+ * (PoCL 3.0 pthread): a kernel that fills a cache and then runs loops with uniform trip
+ * counts gets the array replicated per work-item, which overflows the stack for
+ * work-groups >= 512; inside the search, whose loop is data-dependent, it is not
+ * replicated (tested up to 4096). */
 #ifndef WS_CACHE_FEATURES
 #if WS_LANES > 1
 #define WS_CACHE_FEATURES 1024

@@ -95,10 +95,11 @@ inline double3 ws_post_aniso(GpKernel k)
 
 /* Rows are processed WS_POST_LANES at a time in double vectors (the cross-covariances'
  * exp and log1p): PoCL's scalar double exp is an opaque per-call routine, its double8 one
- * is vector code, ~10x the throughput on AVX-512 (measured 5.8e7 vs 5.6e8 exp/s). A
- * point evaluation costs n cross-covariances and a bound 4n, against M float features:
- * with scalar rows a 100-row posterior's bound costs ~10x its features'. Lanes past n
- * read row n - 1 with weight 0. GPUs (WS_LANES 1) keep one row per step. */
+ * is vector code with an order of magnitude more throughput on AVX-512
+ * (docs/design/batches.md, 'Weight-space lanes'). A point evaluation costs n
+ * cross-covariances and a bound 4n, against M float features: with scalar rows a 100-row
+ * posterior's bound would cost many times its features'. Lanes past n read row n - 1
+ * with weight 0. GPUs (WS_LANES 1) keep one row per step. */
 #if WS_LANES > 1
 #define WS_POST_LANES 8
 typedef double8 wpd;
