@@ -24,7 +24,8 @@ __all__ = ["Scene", "SceneError", "load_scene", "render", "render_result", "writ
 def render_result(scene, spp: int | None = None, seed: int | None = None,
                   resolution=None, device=None, batch_size: int | None = None,
                   time_limit: float | None = None, progress=None, realization=None,
-                  stop=None, max_memory=None, aov=None, cluster=None, on_compiled=None):
+                  stop=None, max_memory=None, aov=None, cluster=None, on_compiled=None,
+                  settings=None):
     """Render a scene; the image with its standard errors, sample counts and statistics.
 
     Parameters
@@ -74,6 +75,10 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
         on_compiled(scene, where) once the scene is compiled, before the first sample:
         the resolved Scene to be rendered and where it renders (the device's name, or the
         cluster).
+    settings : dict, optional
+        Scene values by key path, applied before the arguments above: {"render.nee":
+        False, "camera.fov": 30, "shapes[0].bsdf.albedo": [1, 0, 0]}. The scene schema
+        checks them; a bad path or value is a SceneError naming settings['KEY'].
 
     Returns
     -------
@@ -101,7 +106,8 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
     from .host.render.device import announcing_compiles
     # with progress on, a cold compile (~20 s) says so rather than sit silent
     with announcing_compiles(sys.stderr if progress not in (None, False) else None):
-        integrator, scene = prepare_render(scene, device=device, aov=bool(aovs), **checked)
+        integrator, scene = prepare_render(scene, device=device, aov=bool(aovs),
+                                           settings=settings, **checked)
         if on_compiled is not None:
             on_compiled(scene, _where(cluster, integrator.device))
         spp = scene.data["render"]["spp"]
@@ -134,7 +140,7 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
 
 
 def prepare_render(scene, spp=None, seed=None, resolution=None, device=None, batch_size=None,
-                   realization=None, max_memory=None, aov=False):
+                   realization=None, max_memory=None, aov=False, settings=None):
     """The compiled integrator and the resolved Scene with the overrides applied: the part
     of render_result before any sample is traced (the arguments already checked)."""
     from .host.compile.scene import compile_scene
@@ -143,7 +149,7 @@ def prepare_render(scene, spp=None, seed=None, resolution=None, device=None, bat
     from .host.render.memory import return_freed_pages
 
     scene = load_scene(scene).with_overrides(spp=spp, seed=seed, resolution=resolution,
-                                             realization=realization)
+                                             realization=realization, settings=settings)
     _check_realization(scene.data, scene.source)
     device = _device(device)
     compiled = compile_scene(scene.data, scene.source, DeviceBakes(device))
@@ -194,13 +200,13 @@ def _where(cluster, device) -> str:
 def render(scene, spp: int | None = None, seed: int | None = None, resolution=None,
            device=None, batch_size: int | None = None, time_limit: float | None = None,
            progress=None, realization=None, stop=None, max_memory=None, aov=None,
-           cluster=None):
+           cluster=None, settings=None):
     """Render a scene; its mean image.
 
     Parameters
     ----------
     scene, spp, seed, resolution, device, batch_size, time_limit, progress, realization,
-    stop, max_memory, aov, cluster
+    stop, max_memory, aov, cluster, settings
         As for render_result.
 
     Returns
@@ -217,7 +223,7 @@ def render(scene, spp: int | None = None, seed: int | None = None, resolution=No
     return render_result(scene, spp=spp, seed=seed, resolution=resolution, device=device,
                          batch_size=batch_size, time_limit=time_limit, progress=progress,
                          realization=realization, stop=stop, max_memory=max_memory,
-                         aov=aov, cluster=cluster).image.mean
+                         aov=aov, cluster=cluster, settings=settings).image.mean
 
 
 def check_output(output, scene, aov=None, exposure: float = 0.0) -> None:
@@ -275,7 +281,7 @@ def write_image(path, result, exposure: float = 0.0) -> dict:
 def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
        first: int = 0, resolution=None, device=None, batch_size: int | None = None,
        output=None, exposure: float = 0.0, stop=None, cluster=None, progress=None,
-       on_started=None):
+       on_started=None, settings=None):
     """Per-pixel mean and unbiased variance over GPIS realizations (as `gpiscl uq`).
 
     Parameters
@@ -290,7 +296,7 @@ def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
         Picks the realizations and their samples, in [0, 2**32).
     first : int
         Index of the first realization (>= 0): runs [I, I+N) of one seed merge exactly.
-    resolution, device, batch_size, stop
+    resolution, device, batch_size, stop, settings
         As for render_result.
     output : str or os.PathLike, optional
         NAME.exr: checked writable before any work, then written as write_uq does; needs
@@ -327,7 +333,7 @@ def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
         raise SceneError(API_SOURCE, "realizations",
                          "`first` + `realizations` must be <= 2**31")
     distributed = _dask(cluster) if cluster is not None else None
-    scene = load_scene(scene)
+    scene = load_scene(scene).with_overrides(settings=settings)
     check_uq_scene(scene.data, scene.source)
     if output is not None:
         check_uq_output(output, scene)
@@ -419,18 +425,20 @@ def uq_merge(partials, output, exposure: float = 0.0):
 
 def devices() -> list:
     """The OpenCL devices present: dicts with "index" ('P:D', for device=), "platform",
-    "name", "type" ('cpu', 'gpu', ...), "compute_units" and "default" (the one a render
-    picks without device=)."""
-    import pyopencl as cl
+    "name", "type" ('cpu', 'gpu' or 'accelerator', also for device=), "compute_units"
+    and "default" (the one a render picks without device=)."""
     from .host.errors import DeviceError
-    from .host.render.device import Device, list_devices
+    from .host.render.device import DEVICE_TYPES, Device, list_devices
 
     try:
         default = Device().device
     except DeviceError:
         default = None
     return [{"index": f"{pi}:{di}", "platform": plat.name.strip(), "name": dev.name.strip(),
-             "type": cl.device_type.to_string(dev.type).lower(),
+             # the names device= takes; PoCL's CPU also has the DEFAULT bit, which
+             # pyopencl's to_string showed as "all | cpu"
+             "type": " | ".join(t for t, bit in DEVICE_TYPES.items() if dev.type & bit)
+             or "other",
              "compute_units": dev.max_compute_units,
              "default": default is not None and dev.int_ptr == default.int_ptr}
             for pi, di, plat, dev in list_devices()]
