@@ -446,18 +446,21 @@ def devices() -> list:
 
 def sample_figures(target: str, output="figures", object: int = 0,
                    features=(10, 100, 1000), realizations: int = 4, resolution: int = 128,
-                   seed: int = 0, observations=None, noise: float = 1e-4) -> list:
+                   seed: int = 0, observations=None, noise: float = 1e-2) -> list:
     """PNG figures of GPIS realizations into the folder output (needs matplotlib): lines,
     slices, weight-space features vs exact samples, prior occupancy, and with
-    observations (a file of surface points) the posterior. target: a kernel type, a
-    kernel JSON object or a scene file (its GPIS number object). Returns the paths."""
+    observations (a file of surface points) the posterior, each point observed on the
+    surface with standard deviation noise (world units, as a scene's observations.noise).
+    target: a kernel type, a kernel JSON object or a scene file (its GPIS number object).
+    Returns the paths."""
     from .host.figures.samples import load_observations, resolve_target, write_figures
 
     checked = arguments.check(arguments.SAMPLE_SPECS, object=object, features=features,
                               realizations=realizations, resolution=resolution, seed=seed,
                               noise=noise)
     found = resolve_target(target, checked["object"])
-    obs = load_observations(observations, checked["noise"]) if observations else None
+    # a deviation, as in scene files; the posterior takes variances
+    obs = load_observations(observations, checked["noise"] ** 2) if observations else None
     return write_figures(found, output, tuple(checked["features"]), checked["realizations"],
                          checked["seed"], checked["resolution"], observations=obs)
 
