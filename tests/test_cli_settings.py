@@ -1,5 +1,5 @@
 """Scene settings by key path (--set KEY=VALUE, the API's settings=), --resolution N,
---device by type, and the built-in scene's name: what a newcomer types first."""
+--device by type, the built-in scene's name, sizes in errors: what a newcomer meets first."""
 import json
 import subprocess
 import sys
@@ -101,3 +101,9 @@ def test_device_takes_the_types_devices_lists():
     assert types <= set(DEVICE_TYPES) | {"other"}
     if "cpu" in types:
         assert shared_device("cpu").is_cpu
+
+
+def test_memory_sizes_in_an_error_are_in_a_unit_that_fits(tmp_path):
+    r = gpiscl_cli("render", "--max-memory", "10K", "-o", str(tmp_path / "img.exr"))
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert "pixels need about 14.4 MiB for the film; 10 KiB available" in r.stderr, r.stderr
