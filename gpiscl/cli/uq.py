@@ -32,7 +32,8 @@ def add_parser(sub):
 def run(a) -> int:
     if a.partials:
         sums, paths = api.uq_merge(a.partials, a.output, a.exposure)
-        print(f"merged {sums.n} realizations; wrote {paths['exr']}", file=sys.stderr)
+        print(f"merged {sums.n} realizations; wrote {', '.join(map(str, paths.values()))}",
+              file=sys.stderr)
         return 0
     scene = scene_of(a)
     api.check_uq_output(a.output, scene, a.exposure)   # before any work
@@ -65,6 +66,5 @@ def run(a) -> int:
             print(f"one realization has no variance; wrote its partial sums {paths['sums']} "
                   "(combine with: uq --merge)", file=sys.stderr)
         else:
-            print(f"wrote {paths['exr']}, {paths['png']}, {paths['std_png']}, "
-                  f"{paths['sums']}", file=sys.stderr)
+            print(f"wrote {', '.join(map(str, paths.values()))}", file=sys.stderr)
         return code
