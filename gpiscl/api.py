@@ -17,7 +17,7 @@ from .host.scene import arguments
 from .host.scene.loading import Scene, load_scene
 
 __all__ = ["Scene", "SceneError", "load_scene", "render", "render_result", "write_image",
-           "uq", "write_uq", "uq_merge", "check_output", "check_uq_output", "devices", "sample_figures",
+           "tonemap", "uq", "write_uq", "uq_merge", "check_output", "check_uq_output", "devices", "sample_figures",
            "convert_vdb"]
 
 
@@ -249,8 +249,9 @@ def write_image(path, result, exposure: float = 0.0) -> dict:
         NAME.exr (EXR with standard errors, sample counts, the AOVs the render collected
         and how it was made, a PNG preview and NAME.scene.json) or NAME.png (the preview
         and NAME.scene.json).
-    result : RenderResult
-        From render_result.
+    result : RenderResult or numpy.ndarray
+        From render_result; or an (H, W, 3) linear image such as render() returns, written
+        as the EXR's R, G, B and the preview (clamp curve), without a scene file.
     exposure : float
         Preview exposure in stops.
 
@@ -265,17 +266,50 @@ def write_image(path, result, exposure: float = 0.0) -> dict:
         For an unknown extension or a path that cannot be written, before anything is
         written; each file is written whole or not at all.
     """
-    from .host.io.output_files import check_writable, scene_inputs
+    from .host.io.output_files import check_writable, scene_inputs, write_atomically
     from .host.render.integrator import RenderResult
     from .host.render.output import output_paths, write_outputs
 
-    if not isinstance(result, RenderResult) or result.scene is None:
-        raise SceneError(API_SOURCE, "result", "expected the RenderResult of render_result()")
     exposure = arguments.check(exposure=exposure)["exposure"]
-    check_writable(output_paths(path, "path").values(), "path",
-                   inputs=scene_inputs(result.scene))
-    return write_outputs(result.image, result.scene, path, exposure, result.stats,
-                         result.aovs, "path")
+    if isinstance(result, RenderResult) and result.scene is not None:
+        check_writable(output_paths(path, "path").values(), "path",
+                       inputs=scene_inputs(result.scene))
+        return write_outputs(result.image, result.scene, path, exposure, result.stats,
+                             result.aovs, "path")
+    from .host.io.images import write_exr, write_png
+    rgb = _rgb(result, "result", "the RenderResult of render_result() or an (H, W, 3) image")
+    paths = dict(output_paths(path, "path"), scene=None)
+    check_writable(paths.values(), "path")
+    if paths["exr"] is not None:
+        write_atomically(paths["exr"], lambda tmp: write_exr(tmp, rgb.astype("float32")))
+    preview = tonemap(rgb, exposure)
+    write_atomically(paths["png"], lambda tmp: write_png(tmp, preview))
+    return paths
+
+
+def tonemap(image, exposure: float = 0.0, curve: str = "clamp"):
+    """The 8-bit sRGB preview of a linear (H, W, 3) image, as the PNG a render writes:
+    scaled by 2**exposure, then the curve ('clamp': clip and sRGB-encode; 'filmic': roll
+    the highlights off, the scene's render.tonemap). Returns (H, W, 3) uint8."""
+    from .host.io.images import TONEMAPS, tonemap_srgb8
+
+    exposure = arguments.check(exposure=exposure)["exposure"]
+    if curve not in TONEMAPS:
+        raise SceneError(API_SOURCE, "curve", f"expected one of {', '.join(TONEMAPS)} (got "
+                         f"{curve!r:.40})")
+    return tonemap_srgb8(_rgb(image, "image", "an (H, W, 3) image"), exposure, curve)
+
+
+def _rgb(image, name: str, expected: str):
+    import numpy as np
+    try:
+        rgb = np.asarray(image, dtype=np.float64)
+    except (TypeError, ValueError):
+        rgb = None
+    if rgb is None or rgb.ndim != 3 or rgb.shape[2] != 3 or 0 in rgb.shape:
+        raise SceneError(API_SOURCE, name, f"expected {expected} (got "
+                         f"{getattr(image, 'shape', type(image).__name__)})")
+    return rgb
 
 
 def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
