@@ -12,7 +12,7 @@ from .opencl_vendors import prefer_system_pocl
 # before anything imports pyopencl (every gpiscl module is imported after this package)
 prefer_system_pocl()
 __all__ = ["Scene", "SceneError", "load_scene", "render", "render_result", "write_image",
-           "uq"]
+           "tonemap", "uq"]
 
 
 def __getattr__(name):

@@ -17,14 +17,15 @@ from .host.scene import arguments
 from .host.scene.loading import Scene, load_scene
 
 __all__ = ["Scene", "SceneError", "load_scene", "render", "render_result", "write_image",
-           "uq", "write_uq", "uq_merge", "check_output", "check_uq_output", "devices", "sample_figures",
+           "tonemap", "uq", "write_uq", "uq_merge", "check_output", "check_uq_output", "devices", "sample_figures",
            "convert_vdb"]
 
 
 def render_result(scene, spp: int | None = None, seed: int | None = None,
                   resolution=None, device=None, batch_size: int | None = None,
                   time_limit: float | None = None, progress=None, realization=None,
-                  stop=None, max_memory=None, aov=None, cluster=None, on_compiled=None):
+                  stop=None, max_memory=None, aov=None, cluster=None, on_compiled=None,
+                  settings=None):
     """Render a scene; the image with its standard errors, sample counts and statistics.
 
     Parameters
@@ -74,6 +75,10 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
         on_compiled(scene, where) once the scene is compiled, before the first sample:
         the resolved Scene to be rendered and where it renders (the device's name, or the
         cluster).
+    settings : dict, optional
+        Scene values by key path, applied before the arguments above: {"render.nee":
+        False, "camera.fov": 30, "shapes[0].bsdf.albedo": [1, 0, 0]}. The scene schema
+        checks them; a bad path or value is a SceneError naming settings['KEY'].
 
     Returns
     -------
@@ -101,7 +106,8 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
     from .host.render.device import announcing_compiles
     # with progress on, a cold compile says so rather than sit silent
     with announcing_compiles(sys.stderr if progress not in (None, False) else None):
-        integrator, scene = prepare_render(scene, device=device, aov=bool(aovs), **checked)
+        integrator, scene = prepare_render(scene, device=device, aov=bool(aovs),
+                                           settings=settings, **checked)
         if on_compiled is not None:
             on_compiled(scene, _where(cluster, integrator.device))
         spp = scene.data["render"]["spp"]
@@ -133,7 +139,7 @@ def render_result(scene, spp: int | None = None, seed: int | None = None,
 
 
 def prepare_render(scene, spp=None, seed=None, resolution=None, device=None, batch_size=None,
-                   realization=None, max_memory=None, aov=False):
+                   realization=None, max_memory=None, aov=False, settings=None):
     """The compiled integrator and the resolved Scene with the overrides applied: the part
     of render_result before any sample is traced (the arguments already checked)."""
     from .host.compile.scene import compile_scene
@@ -142,7 +148,7 @@ def prepare_render(scene, spp=None, seed=None, resolution=None, device=None, bat
     from .host.render.memory import return_freed_pages
 
     scene = load_scene(scene).with_overrides(spp=spp, seed=seed, resolution=resolution,
-                                             realization=realization)
+                                             realization=realization, settings=settings)
     _check_realization(scene.data, scene.source)
     device = _device(device)
     compiled = compile_scene(scene.data, scene.source, DeviceBakes(device))
@@ -193,13 +199,13 @@ def _where(cluster, device) -> str:
 def render(scene, spp: int | None = None, seed: int | None = None, resolution=None,
            device=None, batch_size: int | None = None, time_limit: float | None = None,
            progress=None, realization=None, stop=None, max_memory=None, aov=None,
-           cluster=None):
+           cluster=None, settings=None):
     """Render a scene; its mean image.
 
     Parameters
     ----------
     scene, spp, seed, resolution, device, batch_size, time_limit, progress, realization,
-    stop, max_memory, aov, cluster
+    stop, max_memory, aov, cluster, settings
         As for render_result.
 
     Returns
@@ -216,7 +222,7 @@ def render(scene, spp: int | None = None, seed: int | None = None, resolution=No
     return render_result(scene, spp=spp, seed=seed, resolution=resolution, device=device,
                          batch_size=batch_size, time_limit=time_limit, progress=progress,
                          realization=realization, stop=stop, max_memory=max_memory,
-                         aov=aov, cluster=cluster).image.mean
+                         aov=aov, cluster=cluster, settings=settings).image.mean
 
 
 def check_output(output, scene, aov=None, exposure: float = 0.0) -> None:
@@ -242,8 +248,9 @@ def write_image(path, result, exposure: float = 0.0) -> dict:
         NAME.exr (EXR with standard errors, sample counts, the AOVs the render collected
         and how it was made, a PNG preview and NAME.scene.json) or NAME.png (the preview
         and NAME.scene.json).
-    result : RenderResult
-        From render_result.
+    result : RenderResult or numpy.ndarray
+        From render_result; or an (H, W, 3) linear image such as render() returns, written
+        as the EXR's R, G, B and the preview (clamp curve), without a scene file.
     exposure : float
         Preview exposure in stops.
 
@@ -258,23 +265,56 @@ def write_image(path, result, exposure: float = 0.0) -> dict:
         For an unknown extension or a path that cannot be written, before anything is
         written; each file is written whole or not at all.
     """
-    from .host.io.output_files import check_writable, scene_inputs
+    from .host.io.output_files import check_writable, scene_inputs, write_atomically
     from .host.render.integrator import RenderResult
     from .host.render.output import output_paths, write_outputs
 
-    if not isinstance(result, RenderResult) or result.scene is None:
-        raise SceneError(API_SOURCE, "result", "expected the RenderResult of render_result()")
     exposure = arguments.check(exposure=exposure)["exposure"]
-    check_writable(output_paths(path, "path").values(), "path",
-                   inputs=scene_inputs(result.scene))
-    return write_outputs(result.image, result.scene, path, exposure, result.stats,
-                         result.aovs, "path")
+    if isinstance(result, RenderResult) and result.scene is not None:
+        check_writable(output_paths(path, "path").values(), "path",
+                       inputs=scene_inputs(result.scene))
+        return write_outputs(result.image, result.scene, path, exposure, result.stats,
+                             result.aovs, "path")
+    from .host.io.images import write_exr, write_png
+    rgb = _rgb(result, "result", "the RenderResult of render_result() or an (H, W, 3) image")
+    paths = dict(output_paths(path, "path"), scene=None)
+    check_writable(paths.values(), "path")
+    if paths["exr"] is not None:
+        write_atomically(paths["exr"], lambda tmp: write_exr(tmp, rgb.astype("float32")))
+    preview = tonemap(rgb, exposure)
+    write_atomically(paths["png"], lambda tmp: write_png(tmp, preview))
+    return paths
+
+
+def tonemap(image, exposure: float = 0.0, curve: str = "clamp"):
+    """The 8-bit sRGB preview of a linear (H, W, 3) image, as the PNG a render writes:
+    scaled by 2**exposure, then the curve ('clamp': clip and sRGB-encode; 'filmic': roll
+    the highlights off, the scene's render.tonemap). Returns (H, W, 3) uint8."""
+    from .host.io.images import TONEMAPS, tonemap_srgb8
+
+    exposure = arguments.check(exposure=exposure)["exposure"]
+    if curve not in TONEMAPS:
+        raise SceneError(API_SOURCE, "curve", f"expected one of {', '.join(TONEMAPS)} (got "
+                         f"{curve!r:.40})")
+    return tonemap_srgb8(_rgb(image, "image", "an (H, W, 3) image"), exposure, curve)
+
+
+def _rgb(image, name: str, expected: str):
+    import numpy as np
+    try:
+        rgb = np.asarray(image, dtype=np.float64)
+    except (TypeError, ValueError):
+        rgb = None
+    if rgb is None or rgb.ndim != 3 or rgb.shape[2] != 3 or 0 in rgb.shape:
+        raise SceneError(API_SOURCE, name, f"expected {expected} (got "
+                         f"{getattr(image, 'shape', type(image).__name__)})")
+    return rgb
 
 
 def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
        first: int = 0, resolution=None, device=None, batch_size: int | None = None,
        output=None, exposure: float = 0.0, stop=None, cluster=None, progress=None,
-       on_started=None):
+       on_started=None, settings=None):
     """Per-pixel mean and unbiased variance over GPIS realizations (as `gpiscl uq`).
 
     Parameters
@@ -289,7 +329,7 @@ def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
         Picks the realizations and their samples, in [0, 2**32).
     first : int
         Index of the first realization (>= 0): runs [I, I+N) of one seed merge exactly.
-    resolution, device, batch_size, stop
+    resolution, device, batch_size, stop, settings
         As for render_result.
     output : str or os.PathLike, optional
         NAME.exr: checked writable before any work, then written as write_uq does; needs
@@ -326,7 +366,7 @@ def uq(scene, realizations: int = 16, spp: int = 16, seed: int | None = None,
         raise SceneError(API_SOURCE, "realizations",
                          "`first` + `realizations` must be <= 2**31")
     distributed = _dask(cluster) if cluster is not None else None
-    scene = load_scene(scene)
+    scene = load_scene(scene).with_overrides(settings=settings)
     check_uq_scene(scene.data, scene.source)
     if output is not None:
         check_uq_output(output, scene)
@@ -418,18 +458,20 @@ def uq_merge(partials, output, exposure: float = 0.0):
 
 def devices() -> list:
     """The OpenCL devices present: dicts with "index" ('P:D', for device=), "platform",
-    "name", "type" ('cpu', 'gpu', ...), "compute_units" and "default" (the one a render
-    picks without device=)."""
-    import pyopencl as cl
+    "name", "type" ('cpu', 'gpu' or 'accelerator', also for device=), "compute_units"
+    and "default" (the one a render picks without device=)."""
     from .host.errors import DeviceError
-    from .host.render.device import Device, list_devices
+    from .host.render.device import DEVICE_TYPES, Device, list_devices
 
     try:
         default = Device().device
     except DeviceError:
         default = None
     return [{"index": f"{pi}:{di}", "platform": plat.name.strip(), "name": dev.name.strip(),
-             "type": cl.device_type.to_string(dev.type).lower(),
+             # the names device= takes; PoCL's CPU also has the DEFAULT bit, which
+             # pyopencl's to_string showed as "all | cpu"
+             "type": " | ".join(t for t, bit in DEVICE_TYPES.items() if dev.type & bit)
+             or "other",
              "compute_units": dev.max_compute_units,
              "default": default is not None and dev.int_ptr == default.int_ptr}
             for pi, di, plat, dev in list_devices()]
@@ -437,18 +479,21 @@ def devices() -> list:
 
 def sample_figures(target: str, output="figures", object: int = 0,
                    features=(10, 100, 1000), realizations: int = 4, resolution: int = 128,
-                   seed: int = 0, observations=None, noise: float = 1e-4) -> list:
+                   seed: int = 0, observations=None, noise: float = 1e-2) -> list:
     """PNG figures of GPIS realizations into the folder output (needs matplotlib): lines,
     slices, weight-space features vs exact samples, prior occupancy, and with
-    observations (a file of surface points) the posterior. target: a kernel type, a
-    kernel JSON object or a scene file (its GPIS number object). Returns the paths."""
+    observations (a file of surface points) the posterior, each point observed on the
+    surface with standard deviation noise (world units, as a scene's observations.noise).
+    target: a kernel type, a kernel JSON object or a scene file (its GPIS number object).
+    Returns the paths."""
     from .host.figures.samples import load_observations, resolve_target, write_figures
 
     checked = arguments.check(arguments.SAMPLE_SPECS, object=object, features=features,
                               realizations=realizations, resolution=resolution, seed=seed,
                               noise=noise)
     found = resolve_target(target, checked["object"])
-    obs = load_observations(observations, checked["noise"]) if observations else None
+    # a deviation, as in scene files; the posterior takes variances
+    obs = load_observations(observations, checked["noise"] ** 2) if observations else None
     return write_figures(found, output, tuple(checked["features"]), checked["realizations"],
                          checked["seed"], checked["resolution"], observations=obs)
 

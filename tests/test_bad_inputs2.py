@@ -189,7 +189,7 @@ def test_a_map_the_memory_budget_cannot_hold_is_refused_before_reading(tmp_path)
                        capture_output=True, text=True, env=ENV, cwd=ROOT, timeout=300)
     assert r.returncode == 0 and r.stdout.count("\n") == 1, r.stdout + r.stderr
     assert r.stdout.startswith(f"{scene}: lights[0].file: a 4096 x 2048 environment map "
-                               "needs about 0.188 GiB"), r.stdout
+                               "needs about 192 MiB"), r.stdout
     assert "RLIMIT_AS" in r.stdout and r.stdout.rstrip().endswith("big.exr")
 
 

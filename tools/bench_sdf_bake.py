@@ -1,6 +1,6 @@
 """Signed-distance bake time for a 100k-face mesh: libigl against trimesh.proximity.
 
-    python tools/bench_sdf_bake.py [--resolution 128] [--subsample 2000]
+    python tools/bench_sdf_bake.py [--resolution 128] [--subsample 2000]   (pip install rtree)
 
 The mesh is a bumpy torus (250 x 200 sections: exactly 100,000 faces, watertight, not
 convex). libigl bakes the whole resolution^3 grid (the renderer's path, sdf_bake.bake_mesh);
@@ -46,6 +46,11 @@ def main() -> int:
     ap.add_argument("--subsample", type=int, default=2000)
     args = ap.parse_args()
     import trimesh
+    try:   # trimesh.proximity's spatial index: without it the run failed after the bakes
+        import rtree  # noqa: F401
+    except ImportError:
+        print("needs rtree for trimesh.proximity: pip install rtree", file=sys.stderr)
+        return 2
 
     mesh = bumpy_torus()
     print(f"mesh: {len(mesh.faces)} faces, watertight {mesh.is_watertight}; "

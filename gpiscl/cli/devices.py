@@ -17,5 +17,5 @@ def run(_a) -> int:
         mark = "*" if d["default"] else " "
         print(f"{mark} {d['index']}  {d['platform']} / {d['name']}  [{d['type']}, "
               f"{d['compute_units']} compute units]")
-    print("* default (override with --device P:D or PYOPENCL_CTX)")
+    print("* default (override with --device P:D, cpu or gpu, or PYOPENCL_CTX)")
     return 0

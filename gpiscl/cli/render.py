@@ -5,8 +5,7 @@ from __future__ import annotations
 import sys
 
 from .. import api, signals
-from ..scenes import default_scene
-from .args import add_scene_options, int_or_none
+from .args import add_scene_options, int_or_none, scene_of, settings_of
 
 
 def add_parser(sub):
@@ -38,7 +37,7 @@ def add_parser(sub):
 
 
 def run(a) -> int:
-    scene = api.load_scene(a.scene or default_scene()).with_overrides(tonemap=a.tonemap)
+    scene = scene_of(a).with_overrides(tonemap=a.tonemap)
     api.check_output(a.output, scene, a.aov, a.exposure)   # before any work
     with signals.rendering() as compiled:
         def banner(scene, where):
@@ -51,7 +50,7 @@ def run(a) -> int:
             scene, spp=a.spp, seed=a.seed, resolution=a.resolution, device=a.device,
             batch_size=a.batch_size, time_limit=a.time_limit, progress=True,
             realization=a.realization, stop=signals.requested, max_memory=a.max_memory,
-            aov=a.aov, cluster=a.cluster, on_compiled=banner)
+            aov=a.aov, cluster=a.cluster, on_compiled=banner, settings=settings_of(a))
         st, stopped_by = result.stats, signals.received()
         if st.paths == 0:
             print(f"interrupted by {signals.name(stopped_by)} before the first samples: "

@@ -28,8 +28,9 @@ def add_parser(sub):
     s.add_argument("--observations", metavar="FILE",
                    help="surface points (x y z [nx ny nz] per line, or .npy): also draw the "
                    "posterior GPIS given them (mean, sd, occupancy, realizations)")
-    s.add_argument("--noise", type=float, default=1e-4,
-                   help="variance of the observed values (default 1e-4)")
+    s.add_argument("--noise", type=float, default=1e-2,
+                   help="standard deviation of the observed values f = 0, > 0, in world "
+                   "units as a scene's observations.noise (default 1e-2)")
     return s
 
 

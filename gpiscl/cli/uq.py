@@ -5,8 +5,7 @@ from __future__ import annotations
 import sys
 
 from .. import api, signals
-from ..scenes import default_scene
-from .args import add_scene_options
+from .args import add_scene_options, scene_of, settings_of
 
 
 def add_parser(sub):
@@ -33,9 +32,10 @@ def add_parser(sub):
 def run(a) -> int:
     if a.partials:
         sums, paths = api.uq_merge(a.partials, a.output, a.exposure)
-        print(f"merged {sums.n} realizations; wrote {paths['exr']}", file=sys.stderr)
+        print(f"merged {sums.n} realizations; wrote {', '.join(map(str, paths.values()))}",
+              file=sys.stderr)
         return 0
-    scene = api.load_scene(a.scene or default_scene())
+    scene = scene_of(a)
     api.check_uq_output(a.output, scene, a.exposure)   # before any work
     with signals.rendering() as started:
         def banner(scene, where):
@@ -46,7 +46,8 @@ def run(a) -> int:
         run = api.uq(scene, a.realizations, a.spp, seed=a.seed,
                      first=a.first, resolution=a.resolution, device=a.device,
                      batch_size=a.batch_size, exposure=a.exposure, stop=signals.requested,
-                     cluster=a.cluster, progress=True, on_started=banner)
+                     cluster=a.cluster, progress=True, on_started=banner,
+                     settings=settings_of(a))
         n, stopped_by = run.sums.n, signals.received()
         code = 0 if stopped_by is None else signals.exit_code(stopped_by)
         if run.interrupted:
@@ -65,6 +66,5 @@ def run(a) -> int:
             print(f"one realization has no variance; wrote its partial sums {paths['sums']} "
                   "(combine with: uq --merge)", file=sys.stderr)
         else:
-            print(f"wrote {paths['exr']}, {paths['png']}, {paths['std_png']}, "
-                  f"{paths['sums']}", file=sys.stderr)
+            print(f"wrote {', '.join(map(str, paths.values()))}", file=sys.stderr)
         return code

@@ -62,7 +62,7 @@ def process_limits(proc: Path = PROC) -> list:
             continue
         mapped = _kib(status[used]) if used in status else 0
         out.append(Budget(soft - mapped, f"the process limit {name} ({shell}) of "
-                                         f"{gib(soft)}, {gib(mapped)} mapped already"))
+                                         f"{size_text(soft)}, {size_text(mapped)} mapped already"))
     return out
 
 
@@ -99,8 +99,8 @@ def _levels(root: Path, path: str, limit_file: str, usage_file: str, inactive_ke
             continue        # no such file, "max", or v1's "unlimited" (~2^63)
         inactive = _key_values(level / "memory.stat", sep=" ").get(inactive_key, "0")
         used = max(usage - int(inactive), 0)
-        out.append(Budget(limit - used, f"the memory cgroup's limit of {gib(limit)} "
-                                        f"({level / limit_file}), {gib(used)} in use"))
+        out.append(Budget(limit - used, f"the memory cgroup's limit of {size_text(limit)} "
+                                        f"({level / limit_file}), {size_text(used)} in use"))
     return out
 
 
@@ -125,5 +125,10 @@ def _kib(text: str) -> int:
     return int(text.split()[0]) * 1024
 
 
-def gib(n: float) -> str:
-    return f"{n / (1 << 30):.3g} GiB"
+def size_text(n: float) -> str:
+    """Bytes in the largest binary unit that keeps the number >= 1: '192 MiB', '10 KiB'
+    (a --max-memory 10K budget read '9.54e-06 GiB')."""
+    for shift, unit in ((40, "TiB"), (30, "GiB"), (20, "MiB"), (10, "KiB")):
+        if abs(n) >= 1 << shift:
+            return f"{n / (1 << shift):.3g} {unit}"
+    return f"{n:.0f} bytes"

@@ -16,7 +16,7 @@ import numpy as np
 
 from .float_range import array_problem
 from .images import read_exr_rgb, read_exr_size
-from .memory_budget import gib, memory_budget
+from .memory_budget import memory_budget, size_text
 
 # bytes a texel takes while read: an EXR's three float32 channels and their stacked copy
 # (a .hdr decodes straight to 12)
@@ -97,7 +97,7 @@ def read_environment_rgb(path, bytes_per_texel: int = DECODE_BYTES_PER_TEXEL) ->
         need, budget = width * height * bytes_per_texel, memory_budget()
         if need > budget.bytes:
             raise ValueError(f"{path}: a {width} x {height} environment map needs about "
-                             f"{gib(need)}; {gib(budget.bytes)} available, under "
+                             f"{size_text(need)}; {size_text(budget.bytes)} available, under "
                              f"{budget.limit}")
     if str(path).lower().endswith(".hdr"):
         rgb = read_hdr_rgb(path)

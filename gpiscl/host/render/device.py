@@ -47,6 +47,12 @@ def _pick(spec: str | None):
                 if (p_i, d_i) == (pi, di):
                     return dev
             raise DeviceError(f"no OpenCL device {spec} (see: python -m gpiscl devices)")
+        if spec.lower() in DEVICE_TYPES:   # the types `gpiscl devices` prints
+            of_type = [d for _, _, _, d in devices if d.type & DEVICE_TYPES[spec.lower()]]
+            if not of_type:
+                raise DeviceError(f"no OpenCL device of type '{spec}' (see: python -m gpiscl "
+                                  "devices)")
+            return next((d for d in of_type if compiles(d)), of_type[0])
         for _, _, plat, dev in devices:
             if spec.lower() in f"{plat.name} {dev.name}".lower():
                 return dev
@@ -66,6 +72,10 @@ def _pick(spec: str | None):
                           "apt-get install pocl-opencl-icd) or choose another --device"
                           + _drivers_limited())
     return devices[0][3]
+
+
+DEVICE_TYPES = {"cpu": cl.device_type.CPU, "gpu": cl.device_type.GPU,
+                "accelerator": cl.device_type.ACCELERATOR}
 
 
 def _drivers_limited() -> str:

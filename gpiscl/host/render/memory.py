@@ -17,7 +17,7 @@ from __future__ import annotations
 import ctypes
 
 from ..errors import SceneError
-from ..io.memory_budget import Budget, gib, memory_budget
+from ..io.memory_budget import Budget, memory_budget, size_text
 from ..layout import records as layouts
 
 FILM_BYTES_PER_PIXEL = 7 * 8          # film.py: 3 sums, 3 sums of squares, 1 count
@@ -64,13 +64,13 @@ def plan(device, num_pixels: int, batch: int, max_memory: int | None = None,
     per_buffer = int(dev.max_mem_alloc_size)
     for need, budget in checks:
         if need > budget.bytes:
-            raise SceneError(source, key, f"{num_pixels} pixels need about {gib(need)} for "
-                             f"the film; {gib(budget.bytes)} available, under {budget.limit} "
+            raise SceneError(source, key, f"{num_pixels} pixels need about {size_text(need)} for "
+                             f"the film; {size_text(budget.bytes)} available, under {budget.limit} "
                              "(render fewer pixels, or set --max-memory if the estimate is "
                              "wrong)")
     if num_pixels * 3 * 8 > per_buffer:      # the film's biggest buffer
-        raise SceneError(source, key, f"{num_pixels} pixels need about {gib(film_device)} "
-                         f"for the film; the device allocates at most {gib(per_buffer)} at "
+        raise SceneError(source, key, f"{num_pixels} pixels need about {size_text(film_device)} "
+                         f"for the film; the device allocates at most {size_text(per_buffer)} at "
                          "once (render fewer pixels)")
     film, budget = checks[0]    # the queues live where the film's first part does
     per_path = bytes_per_path()
@@ -80,7 +80,7 @@ def plan(device, num_pixels: int, batch: int, max_memory: int | None = None,
     fits = min(fits, per_buffer // widest)   # each queue field is one buffer
     if fits < 1:
         raise SceneError(source, key, f"no memory left for even one path after the film "
-                         f"({gib(film)} of {gib(budget.bytes)})")
+                         f"({size_text(film)} of {size_text(budget.bytes)})")
     return max(1, min(batch, fits))
 
 

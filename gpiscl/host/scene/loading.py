@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from . import gpis  # noqa: F401  (registers the "gpis" shape with records.SHAPES)
 from .arguments import NO_REALIZATION
 from .records import SCENE
+from .settings import apply as apply_settings
 from ..schema import Context, kind_of
 from .tungsten_keys import tungsten_hint, tungsten_hint_of_text
 
@@ -70,16 +71,19 @@ class Scene:
         return self
 
     def with_overrides(self, spp=None, seed=None, resolution=None, realization=None,
-                       tonemap=None) -> "Scene":
+                       tonemap=None, settings=None) -> "Scene":
         """This scene with the settings given (None: the scene's own), as a new Scene;
         realization='none' averages over realizations whatever the scene says. The values
-        are checked by the caller (scene/arguments.py), so the scene is not resolved again."""
+        are checked by the caller (scene/arguments.py), so the scene is not resolved again;
+        settings ({key path: value}, scene/settings.py) are applied first and checked by
+        the schema, an error naming the setting."""
         self.checked()
         render = {k: v for k, v in (("spp", spp), ("seed", seed), ("realization", realization),
                                     ("tonemap", tonemap)) if v is not None}
-        if not render and resolution is None:
+        if not render and resolution is None and not settings:
             return self
-        data = copy.deepcopy(self.data)
+        data = (apply_settings(self.data, self.source, self.base_dir, settings) if settings
+                else copy.deepcopy(self.data))
         data["render"].update(render)
         if realization == NO_REALIZATION:
             data["render"]["realization"] = None

@@ -8,7 +8,7 @@ from dataclasses import fields
 
 import numpy as np
 
-from ..errors import SceneError
+from ..errors import SceneError, argument_source
 from .sums import UqSums
 
 # ---- partial sums from elsewhere: --merge checks that they belong together -----------
@@ -191,7 +191,8 @@ def write_uq_outputs(sums: UqSums, scene, exr_path, exposure: float = 0.0,
     for name, img in planes.items():
         for i, c in enumerate("RGB"):
             extra[f"{name}.{c}"] = img[..., i]
-    write_atomically(paths["exr"], lambda tmp: write_exr(tmp, sums.mean, extra))
+    attributes = uq_attributes(sums, scene, meta)
+    write_atomically(paths["exr"], lambda tmp: write_exr(tmp, sums.mean, extra, attributes))
     curve = scene.data["render"]["tonemap"] if scene is not None else "clamp"
     write_atomically(paths["png"],
                      lambda tmp: write_png(tmp, tonemap_srgb8(sums.mean, exposure, curve)))
@@ -205,9 +206,26 @@ def write_uq_outputs(sums: UqSums, scene, exr_path, exposure: float = 0.0,
     return paths
 
 
+def uq_attributes(sums: UqSums, scene, meta: dict | None) -> dict:
+    """What a uq EXR says about how it was made, as a render's does (render/output.py):
+    the seed and the realization ranges as strings, EXR ints being 32-bit."""
+    from ...version import __version__
+    attrs = {"gpiscl:version": __version__, "gpiscl:realizations": int(sums.n)}
+    if scene is not None:
+        attrs["gpiscl:scene"] = str(scene.source)
+    if meta is not None:
+        attrs.update({"gpiscl:seed": str(meta["seed"]), "gpiscl:spp": int(meta["spp"]),
+                      "gpiscl:ranges": json.dumps(meta["ranges"])})
+    return attrs
+
+
 def uq_output_paths(exr_path, option: str = "output") -> dict:
     """uq's files for -o NAME.exr: the variances need the EXR, so only .exr is accepted."""
     from ..io.output_files import plan
+    if str(exr_path).lower().endswith(".png"):
+        raise SceneError(argument_source(option), option, f"uq writes its means and "
+                         f"variances to an EXR, with PNG previews beside it: use NAME.exr "
+                         f"(got {str(exr_path)!r})")
     paths = plan(exr_path, option, formats={".exr": ("exr", "png", "scene")})
     base = paths["exr"].with_suffix("")
     paths["std_png"] = base.with_name(base.name + ".std.png")
