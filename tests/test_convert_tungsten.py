@@ -114,7 +114,7 @@ BAD = [
      "primitives[1].int_medium", 'no entry named "fog"'),
     (_with(["primitives", 0, "type"], "curves"), "primitives[0].type", "not supported"),
     (_with(["camera", "type"], "thinlens"), "camera.type", "pinhole only"),
-    # malformed values (../shared/bad-input-cases/D12): one line at the input's key path
+    # malformed values: one line at the input's key path
     (_with(["primitives", 2, "cap_angle"], 0), "primitives[2].cap_angle", "must be > 0"),
     (_with(["camera"], 5), "camera", "expected an object"),
     (_with(["camera", "resolution"], "abc"), "camera.resolution", "expected an integer"),

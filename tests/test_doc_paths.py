@@ -91,3 +91,13 @@ def test_the_check_sees_a_missing_path_and_a_present_one():
     assert [t for _, t in prose(code, ".py")] == ["# see compile/bvh.py", "kernels_cl/bvh.h"]
     assert [n for _, n in prose("int a; /* lib/x.h */ // y/z.c\n", ".h")] == ["/* lib/x.h */",
                                                                                  "// y/z.c"]
+
+
+def test_nothing_cites_the_workspace_outside_the_repository():
+    """The product and its tests never point at the developers' workspace beside the
+    checkout (a reader of a clone cannot open it): what they need lives in docs/."""
+    outside = re.compile(r"\.\./" + "shared/|/work/" + "shared")
+    hits = [f"{rel}:{n}" for rel in citing_files(repository_files())
+            for n, line in enumerate((ROOT / rel).read_text().splitlines(), 1)
+            if outside.search(line)]
+    assert not hits, hits

@@ -144,7 +144,7 @@ def test_signal_during_an_sdf_bake_acts_at_once_and_leaves_no_files(tmp_path):
 
 def test_a_signal_sent_twice_at_once_is_one_stop(tmp_path):
     """`timeout` and `kill -- -PGID` deliver one stop to the process and again to its group
-    within microseconds (../shared/bad-input-cases/D21): that is one request, so the
+    within microseconds: that is one request, so the
     samples so far are still written (the duplicate used to mean 'stopped at once,
     nothing written')."""
     out = tmp_path / "img.exr"

@@ -23,7 +23,7 @@ from gpiscl.host.scene.tungsten import convert_tungsten
 
 ROOT = Path(__file__).resolve().parent.parent
 
-# Their shared setup (../shared/design/REFERENCE-ALGORITHMS.md section 8.2), in their
+# Their shared setup (docs/design/tungsten-import.md), in their
 # spelling: a trailing comma after the last key, // and /* */ comments, a NaN in a key
 # their renderer does not read, tabs.
 SETUP = """

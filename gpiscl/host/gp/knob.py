@@ -1,5 +1,5 @@
-"""The authors' "material test knob" signed distance (their SdfFunctions.cpp, restated in
-../shared/design/REFERENCE-ALGORITHMS.md Appendix A), vectorised in numpy.
+"""The authors' "material test knob" signed distance (their SdfFunctions.cpp in
+daseyb/gpis-light-transport), vectorised in numpy.
 
 Reproduced as written, including what is not a true distance (the cone's c = (pi/3, pi/3)
 is not a unit (sin, cos) pair and 0.7 scales the base): these are bounds-free shapes that

@@ -1,6 +1,6 @@
 """Import the GPIS subset of the authors' Tungsten scene format into a gpiscl scene dict.
 
-Mapping (../shared/design/REFERENCE-ALGORITHMS.md section 8 describes their format):
+Mapping (docs/design/tungsten-import.md says what is read and why):
 
   files   read as Tungsten reads them (lenient_json.py): trailing commas, comments, NaN
   transforms {position, scale, rotation}: T R S with their Mat4f::rotYXZ rotation, whose Y
