@@ -186,10 +186,10 @@ def test_a_render_frees_its_work_buffers_before_the_film_and_gets_them_back(devi
     freed = before - _rss_anon_mb()
     assert used.paths is None and used.function_space.work is None
     if device.device.type & cl.device_type.CPU:
-        # 15 of 34 MB in the full suite, 0.44 (26 of 48 before the AOV fields were dropped and
-        # the scratch sized to 4 groups a unit): most ring slots and scratch tails are
-        # never touched
-        assert freed >= 0.3 * work / 2**20, (freed, work / 2**20)
+        # only the touched pages count, and which scratch pages the pthread device's work
+        # groups touch depends on how many threads ran at once (0.3 of the work freed on an
+        # idle machine was missed once under load): a tenth still fails if nothing is freed
+        assert freed >= 0.1 * work / 2**20, (freed, work / 2**20)
     n = 1000
     assert used.render_batch(0, 0, n)
     fresh, _ = prepare_render(scene, device=device)
