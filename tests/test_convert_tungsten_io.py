@@ -110,6 +110,24 @@ def test_a_new_output_folder_is_made_and_paths_inside_it_are_relative(scene, tmp
     assert load_scene(tmp_path / "out" / "scene.json").data["lights"][-1]["file"] == str(sky)
 
 
+def test_paths_outside_the_output_folder_are_relative_too_so_a_copied_project_renders(
+        scene, tmp_path):
+    """Issue 30 item 9: converted scenes stored absolute paths and did not move."""
+    import shutil
+    from gpiscl.host.io.radiance_hdr import write_hdr
+    project = tmp_path / "project"
+    (project / "maps").mkdir(parents=True)
+    write_hdr(project / "maps" / "sky.hdr", np.ones((4, 8, 3), np.float32))
+    convert_file(scene, project / "scenes" / "scene.json",
+                 {"type": "environment_map", "file": str(project / "maps" / "sky.hdr")})
+    text = (project / "scenes" / "scene.json").read_text()
+    assert str(tmp_path) not in text
+    assert json.loads(text)["lights"][-1]["file"] == "../maps/sky.hdr"
+    moved = shutil.move(str(project), str(tmp_path / "elsewhere"))
+    light = load_scene(Path(moved) / "scenes" / "scene.json").data["lights"][-1]
+    assert light["file"] == str(Path(moved) / "maps" / "sky.hdr")
+
+
 # ---- E08: derived files stay in the output folder, under plain names ------------------
 
 def grid_scene(tmp_path, density_name, offset=0.5):

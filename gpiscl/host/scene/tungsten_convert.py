@@ -80,13 +80,16 @@ def _same_file(a: Path, b: Path) -> bool:
 
 def _paths_moved(value, moved: dict, base: Path):
     """The scene with each staged file's path replaced by its final one, and every path
-    inside `base` made relative to it."""
+    made relative to `base` (the converted scene's folder; a scene refers to files
+    relative to its own folder), so a copied project folder still renders."""
     if isinstance(value, dict):
         return {k: _paths_moved(v, moved, base) for k, v in value.items()}
     if isinstance(value, list):
         return [_paths_moved(v, moved, base) for v in value]
     if isinstance(value, str) and os.path.isabs(value):
         value = moved.get(value, value)
-        rel = os.path.relpath(value, base)
-        return value if rel == ".." or rel.startswith("../") else rel
+        try:
+            return os.path.relpath(value, base)
+        except ValueError:      # another drive (Windows): no relative path exists
+            return value
     return value
