@@ -93,6 +93,10 @@ def test_exr_header_says_how_it_was_made(tmp_path, scene_file):
     assert r.returncode == 0, r.stderr
     a = read_exr_attributes(out)
     assert a["gpiscl:version"] == gpiscl.__version__
+    # this checkout's commit (issue 30 item 9), '+' when its files differ from it
+    head = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
+                          cwd=Path(gpiscl.__file__).parent).stdout.strip()
+    assert a["gpiscl:commit"].rstrip("+") == head and len(head) == 40
     assert a["gpiscl:scene"] == str(scene_file)
     assert a["gpiscl:seed"] == "4294967295"
     assert a["gpiscl:spp"] == 2.0 and a["gpiscl:spp_requested"] == 2

@@ -55,8 +55,9 @@ def write_outputs(image: FilmImage, scene: Scene, path, exposure: float = 0.0,
 def exr_attributes(scene: Scene, stats=None) -> dict:
     """What an EXR says about how it was made. The seed is a string: EXR ints are 32-bit
     signed and seeds go to 2**32 - 1."""
-    from ...version import __version__
-    attrs = {"gpiscl:version": __version__, "gpiscl:scene": str(scene.source),
+    from ...version import __version__, source_commit
+    attrs = {"gpiscl:version": __version__, "gpiscl:commit": source_commit(),
+             "gpiscl:scene": str(scene.source),
              "gpiscl:seed": str(scene.data["render"]["seed"]),
              "gpiscl:spp_requested": int(scene.data["render"]["spp"])}
     if stats is not None:

@@ -209,8 +209,9 @@ def write_uq_outputs(sums: UqSums, scene, exr_path, exposure: float = 0.0,
 def uq_attributes(sums: UqSums, scene, meta: dict | None) -> dict:
     """What a uq EXR says about how it was made, as a render's does (render/output.py):
     the seed and the realization ranges as strings, EXR ints being 32-bit."""
-    from ...version import __version__
-    attrs = {"gpiscl:version": __version__, "gpiscl:realizations": int(sums.n)}
+    from ...version import __version__, source_commit
+    attrs = {"gpiscl:version": __version__, "gpiscl:commit": source_commit(),
+             "gpiscl:realizations": int(sums.n)}
     if scene is not None:
         attrs["gpiscl:scene"] = str(scene.source)
     if meta is not None:
