@@ -196,3 +196,16 @@ def test_spatially_varying_kernels_are_refused_with_the_key(tmp_path, capsys):
     assert main(["sample", str(path), "-o", str(tmp_path / "f")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "kernel.sigma_field" in err
+
+
+def test_a_scene_whose_kernel_varies_in_space_is_refused_at_its_own_key(tmp_path):
+    """Issue 30 item 9: `sample bunny_grid.json` named `<command line>: kernel...`, not
+    the scene's file and key."""
+    from pathlib import Path
+    scene = Path(__file__).resolve().parents[1] / "scenes" / "bunny_grid.json"
+    r = subprocess.run([sys.executable, "-m", "gpiscl", "sample", str(scene), "-o",
+                        str(tmp_path)], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.startswith(f"error: {scene}: shapes[1].kernel.sigma_field: a spatially "
+                               "varying kernel has no spectral density"), r.stderr
+    assert r.stderr.count("\n") == 1 and not any(tmp_path.iterdir())

@@ -39,6 +39,8 @@ class Target:
     mean: Mean | None = None
     center: np.ndarray | None = None      # slice centre (the proxy's)
     half_extent: float | None = None      # half the slice width
+    source: str = API_SOURCE              # where the kernel was given, for errors
+    key: str = "kernel"                   # and at which key
 
 
 def resolve_target(spec: str, obj: int = 0) -> Target:
@@ -70,6 +72,7 @@ def resolve_target(spec: str, obj: int = 0) -> Target:
         raise SceneError(CLI_SOURCE, "--object",
                          f"must be in [0, {len(gpis)}) for this scene (got {obj})")
     g = gpis[obj]
+    key = f"shapes[{next(i for i, s in enumerate(scene.data['shapes']) if s is g)}].kernel"
     proxy = bounding_proxy(g["proxy"])
     if proxy["type"] == "scene":
         from ..compile.scene import scene_box
@@ -83,7 +86,7 @@ def resolve_target(spec: str, obj: int = 0) -> Target:
     kdict = g["kernel"]
     name = f"{Path(spec).stem} gpis {obj} ({kdict['type']})"
     return Target(name, _kernel(build_kernel, kdict), kdict, build_mean(g["mean"]),
-                  center, half)
+                  center, half, spec, key)
 
 
 def _kernel(build, kdict) -> Kernel:
@@ -309,11 +312,11 @@ def write_figures(target: Target, out_dir, features=(10, 100, 1000), realization
     """Every figure for target into out_dir; returns the paths written. With
     observations (posterior.Observations), also the posterior's maps and realizations."""
     if not spectral_ok(target.kernel):
-        raise SceneError(API_SOURCE, "kernel", "thin_plate has no spectral density, "
+        raise SceneError(target.source, target.key, "thin_plate has no spectral density, "
                          "so weight-space figures cannot be drawn")
     varying = [k for k in ("sigma_field", "length_scale_field") if target.kernel_spec.get(k)]
     if varying:
-        raise SceneError(API_SOURCE, f"kernel.{varying[0]}", "a spatially varying "
+        raise SceneError(target.source, f"{target.key}.{varying[0]}", "a spatially varying "
                          "kernel has no spectral density, so weight-space figures cannot be "
                          "drawn; remove the field to see the stationary kernel")
     pyplot()   # fail before any work if matplotlib is missing
