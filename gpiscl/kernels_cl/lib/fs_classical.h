@@ -8,7 +8,7 @@
  *
  * A constant mean with a stationary isotropic kernel is homogeneous: exponential flights
  * (fs_classical_homogeneous_flight). Everything else is tracked against a majorant
- * (fs_classical_tracked_flight): Sec. 4 of the note derives the bound. */
+ * (fs_classical_tracked_flight): Sec. 4.1 of the note derives the bound. */
 
 /* The homogeneous medium: exponential flights with the rate at the mean where the
  * flight starts (exact: the mean is constant). */
@@ -168,7 +168,7 @@ inline void fs_cl_collision_law(GpKernel p, FsClKernel k, double3 grad_mu, GpFie
  * tracking against a majorant that bounds sigma_t on each stretch [a, b] of the ray,
  *   maj = slope0 / (sigma0 ml_lo) h(z_lo) psi(-lip / s_lo),
  * since sigma_t = slope0 / (sigma0 ml) h(mu / sigma) psi(m / s), h and psi decrease, and on
- * the stretch mu >= mu(a) - lip |b - a|, |m| <= lip, s >= s_lo (Sec. 4 of the note). The
+ * the stretch mu >= mu(a) - lip |b - a|, |m| <= lip, s >= s_lo (Sec. 4.1 of the note). The
  * optical depth left at a stretch's end carries over to the next (memorylessness), so
  * tentative collision k draws block FS_U_TRACK + k: x its optical depth, y its
  * acceptance. More than FS_TRACK_CAP tentative collisions or stretches: status
@@ -195,19 +195,16 @@ inline FsResult fs_classical_tracked_flight(GpKernel p, __global const MeanNode*
         GpFieldsAt fa = fs_fields(p, mean, a);
         float3 ga;
         double mu = (double)gp_mean_eval(mean, mc, convert_float3(a), &ga);
-        double L = fmin((ray.t1 - t) * dlen,
-                        fmin(fs_cl_field_stretch(p.sigma_field, sgrid, fa.ms, fa.gs, dn),
-                             fs_cl_field_stretch(p.ls_field, lgrid, fa.ml, fa.gl, dn)));
-        double tight = FS_CL_STRETCH * k.sigma0 * fa.ms;
-        double lip = lip_all;
+        /* the ray's and the fields' limit, then the mean's */
+        double room = fmin((ray.t1 - t) * dlen,
+                           fmin(fs_cl_field_stretch(p.sigma_field, sgrid, fa.ms, fa.gs, dn),
+                                fs_cl_field_stretch(p.ls_field, lgrid, fa.ml, fa.gl, dn)));
+        double tight = FS_CL_STRETCH * k.sigma0 * fa.ms, lip = lip_all, L = room;
         if (lip > 0.0) L = fmin(L, tight / lip);
         if (grid_mean && lip > 0.0) {
             /* the bound over the stretch only, and a longer stretch where it is smaller */
-            lip = gp_mean_lipschitz_on(mean, mc, convert_float3(a),
-                                       convert_float3(a + L * dn));
-            double longer = fmin((ray.t1 - t) * dlen, tight / fmax(lip, (double)FLT_MIN));
-            longer = fmin(longer, fmin(fs_cl_field_stretch(p.sigma_field, sgrid, fa.ms, fa.gs, dn),
-                                       fs_cl_field_stretch(p.ls_field, lgrid, fa.ml, fa.gl, dn)));
+            lip = gp_mean_lipschitz_on(mean, mc, convert_float3(a), convert_float3(a + L * dn));
+            double longer = fmin(room, tight / fmax(lip, (double)FLT_MIN));
             if (longer > L) {
                 L = longer;
                 lip = gp_mean_lipschitz_on(mean, mc, convert_float3(a),
