@@ -1,10 +1,12 @@
 """Paths per second of the classical counterparts against the GPIS they stand for
 (docs/design/classical-limits.md): the medium counterpart of a constant-mean GPIS
-(mu/sigma = 2, Rice mean free path 0.5, function space, renewal) and the surface
-counterpart of a sphere-mean GPIS (sigma/l = 0.1, weight space and function space).
-Each scene renders once to warm the build, then once timed.
+(mu/sigma = 2, Rice mean free path 0.5, function space, renewal), the same counterpart
+through the tracked (heterogeneous) flight (a sigma field of 1 everywhere), the
+heterogeneous counterpart of a sphere-mean GPIS (sigma 0.1, l 0.02, a linear sigma
+field), and the surface counterpart of a sphere-mean GPIS (sigma/l = 0.1, weight space
+and function space). Each scene renders once to warm the build, then once timed.
 
-Usage: python tools/bench_classical.py [--spp 64] [--resolution 64]"""
+Usage: python tools/bench_classical.py [--spp 64] [--resolution 64] [--only medium,het,surface]"""
 import argparse
 
 from gpiscl import render_result
@@ -12,12 +14,25 @@ from gpiscl.host.gp import SquaredExponential
 from gpiscl.host.gp import classical as C
 
 
-def medium(classical, res, spp):
+def medium(classical, res, spp, tracked=False):
     l = float(C.entry_rate(SquaredExponential(1.0, 1.0), 2.0)) * 0.5
     g = {"type": "gpis", "clip": True,
          "proxy": {"type": "sphere", "center": [0, 0, 0], "radius": 1.0},
          "mean": {"type": "constant", "value": 2.0},
          "kernel": {"type": "squared_exponential", "sigma": 1.0, "length_scale": l},
+         "sampler": {"type": "function_space", "memory": "renewal"},
+         "bsdf": {"type": "diffuse", "albedo": 0.8}}
+    if tracked:   # a field makes the kernel non-stationary: the tracked flight runs
+        g["kernel"]["sigma_field"] = {"type": "linear", "value": 1.0, "gradient": [0, 0, 0]}
+    return scene(g, classical and "medium", res, spp)
+
+
+def het_medium(classical, res, spp):
+    g = {"type": "gpis", "clip": True,
+         "proxy": {"type": "sphere", "center": [0, 0, 0], "radius": 1.0},
+         "mean": {"type": "sphere", "center": [0, 0, 0], "radius": 0.6},
+         "kernel": {"type": "squared_exponential", "sigma": 0.1, "length_scale": 0.02,
+                    "sigma_field": {"type": "linear", "value": 1.0, "gradient": [0, 0.5, 0]}},
          "sampler": {"type": "function_space", "memory": "renewal"},
          "bsdf": {"type": "diffuse", "albedo": 0.8}}
     return scene(g, classical and "medium", res, spp)
@@ -47,10 +62,18 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--resolution", type=int, default=64)
+    ap.add_argument("--only", default="medium,het,surface",
+                    help="comma-separated groups of cases: medium, het, surface")
     a = ap.parse_args()
-    cases = [("medium: GPIS mu/sigma=2", medium(False, a.resolution, a.spp)),
-             ("medium: counterpart", medium(True, a.resolution, a.spp))]
-    for sampler in ("weight_space", "function_space"):
+    groups, cases = a.only.split(","), []
+    if "medium" in groups:
+        cases += [("medium: GPIS mu/sigma=2", medium(False, a.resolution, a.spp)),
+                  ("medium: counterpart", medium(True, a.resolution, a.spp)),
+                  ("medium: counterpart, tracked", medium(True, a.resolution, a.spp, True))]
+    if "het" in groups:
+        cases += [("het medium: GPIS sphere mean", het_medium(False, a.resolution, a.spp)),
+                  ("het medium: counterpart", het_medium(True, a.resolution, a.spp))]
+    for sampler in ("weight_space", "function_space") if "surface" in groups else ():
         cases += [(f"surface: GPIS {sampler}", surface(False, sampler, a.resolution, a.spp)),
                   (f"surface: counterpart ({sampler} scene)",
                    surface(True, sampler, a.resolution, a.spp))]

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from .kernels import Kernel
+from .kernels import Kernel, NonStationary
 
 
 def slope_variance(kernel: Kernel, d=(1.0, 0.0, 0.0)) -> float:
@@ -48,6 +48,38 @@ def entry_rate(kernel: Kernel, level, d=(1.0, 0.0, 0.0), mean_slope=0.0):
     crossing_rate / P(f > 0) (Eq. 3)."""
     sigma = math.sqrt(kernel.variance)
     return crossing_rate(kernel, level, d, mean_slope) / _normal_cdf(np.asarray(level) / sigma)
+
+
+def local_extinction(kernel: Kernel, mean, points, d) -> np.ndarray:
+    """The heterogeneous medium counterpart's sigma_t at each of `points` (n, 3) for light
+    travelling along unit d: Eq. 3 with Rice's rate (2) at the local mean, its slope along
+    d, and (local stationarity) sigma(x) = sigma m_s(x), Lambda(x) = (m_s / m_l)^2 Lambda
+    of the stationary base; fs_classical.h's fs_cl_rate is its device twin."""
+    x = np.atleast_2d(np.asarray(points, float))
+    d = np.asarray(d, float) / np.linalg.norm(d)
+    base = kernel.base if isinstance(kernel, NonStationary) else kernel
+    ms = ml = np.ones(len(x))
+    if isinstance(kernel, NonStationary) and kernel.sigma_field is not None:
+        ms = np.asarray(kernel.sigma_field.eval(x)[0], float)
+    if isinstance(kernel, NonStationary) and kernel.length_scale_field is not None:
+        ml = np.asarray(kernel.length_scale_field.eval(x)[0], float)
+    mu, grad = mean.value_and_gradient(x)
+    sigma = math.sqrt(base.variance) * ms
+    s = ms * math.sqrt(slope_variance(base, d)) / ml
+    m = np.asarray(grad, float) @ d
+    negative_part = s * _normal_pdf(m / s) - m * _normal_cdf(-m / s)    # E[(-f')^+]
+    z = np.asarray(mu, float) / sigma
+    return _normal_pdf(z) / sigma * negative_part / _normal_cdf(z)
+
+
+def optical_depth(kernel: Kernel, mean, origin, d, t, nodes: int = 20001) -> np.ndarray:
+    """int_0^t sigma_t along origin + s d (unit d) at each distance in t, by the
+    trapezoidal rule on `nodes` points up to max(t): the reference of the tracked flights."""
+    d = np.asarray(d, float) / np.linalg.norm(d)
+    s = np.linspace(0.0, float(np.max(t)), nodes)
+    rate = local_extinction(kernel, mean, np.asarray(origin, float) + s[:, None] * d, d)
+    depth = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(s))])
+    return np.interp(np.asarray(t, float), s, depth)
 
 
 def beckmann_alpha(kernel: Kernel, tangent=(1.0, 0.0, 0.0), mean_gradient_norm=1.0) -> float:

@@ -9,8 +9,9 @@ Every model is three hooks in kernels_cl/lib/fs_memory.h, which asks these trait
   fs_memory_record      what a hit records for later rays: its ray's rows into the ring
   fs_memory_markov_ok   whether fs_markov.h's exact Matern sampler may run: only when every
                         row a ray conditions on lies on that ray (not ring)
-and fs_objects.h asks `exponential`: the flight is fs_classical.h's exponential one of
-Rice's entry rate instead of the sampler's.
+and fs_objects.h asks `exponential`: the flight is fs_classical.h's medium counterpart
+(Rice's entry rate as extinction: exponential where it is constant, tracked elsewhere)
+instead of the sampler's.
 """
 from __future__ import annotations
 

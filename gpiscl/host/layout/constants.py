@@ -94,6 +94,11 @@ FS_MIN_BISECT = _const("FS_MIN_BISECT", root_budget(FS_H_MAX, FS_ROOT_WIDTH),
 
 FS_JITTER = _const("FS_JITTER", 1e-10, "relative nugget: K_ii (1 + FS_JITTER)", "double")
 
+# --- heterogeneous medium counterpart (fs_classical.h) -----------------------------------
+
+FS_CL_STRETCH = _const("FS_CL_STRETCH", 0.375, "a majorant stretch: the mean moves by at most "
+                       "this many sigma over it", "double")
+
 # --- Philox streams ---------------------------------------------------------------------
 
 # SHA-256 IV word 2 (rng.h's stream uses word 0)

@@ -38,7 +38,8 @@ FS_VERTEX = Struct("FsVertex", (
 ))
 
 OBS_KINDS = {"value": 0, "deriv": 1}
-STATUS = {"ok": 0, "not_pd": 1, "nan": 2, "rows": 3, "steps": 4}
+STATUS = {"ok": 0, "not_pd": 1, "nan": 2, "rows": 3, "steps": 4, "track_cap": 5,
+          "majorant": 6}
 STRUCTS = (FS_OBS, FS_VERTEX)
 
 DEFAULT_WINDOW = C.FS_WINDOW   # samples conditioned on besides the memory (fs_march.h)

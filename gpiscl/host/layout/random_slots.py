@@ -72,21 +72,32 @@ NORMAL_SLOTS = SlotPlan("normal", NORMALS_PER_BLOCK, (
 ))
 # Uniform blocks. grid: the uniform baseline's offset of a ray's first step; start: the
 # truncated-normal start value, and after it the retries of its tail sampler; slope: the
-# slope at a hit.
+# slope at a hit; track: the heterogeneous medium counterpart's tentative collisions
+# (fs_classical.h: block k holds the k-th one's optical depth and acceptance), so a flight
+# has at most FS_TRACK_CAP of them and counts a flight that needs more as failed.
 FS_TN_TAIL_TRIES = 16   # acceptance > 99.8% each (fs_truncnorm_pos)
+FS_TRACK_CAP = 2048
 UNIFORM_BLOCKS = SlotPlan("uniform", 1, (
     ("grid", "FS_U_GRID", 1024, 1),
     ("start", "FS_U_START", 1025, 1 + FS_TN_TAIL_TRIES),
     ("slope", "FS_U_SLOPE", 1100, 1),
+    ("track", "FS_U_TRACK", 2048, FS_TRACK_CAP),
 ))
+# fs_uniform2's counter holds a block in 12 bits
+BLOCK_LIMIT = 1 << 12
 
 _CLASHES = overlaps(NORMAL_SLOTS, UNIFORM_BLOCKS)
 if _CLASHES:
     raise ValueError(f"random slot ranges share Philox blocks: {_CLASHES}")
+_BEYOND = [r.name for plan in (NORMAL_SLOTS, UNIFORM_BLOCKS) for r in plan.ranges
+           if plan.blocks(r)[1] >= BLOCK_LIMIT]
+if _BEYOND:
+    raise ValueError(f"random slot ranges beyond block {BLOCK_LIMIT - 1}: {_BEYOND}")
 
 
 def c_defines() -> str:
     lines = ["/* Generated from gpiscl/host/layout/random_slots.py: do not edit. */"]
     lines += NORMAL_SLOTS.c_defines() + UNIFORM_BLOCKS.c_defines()
     lines.append(f"#define FS_TN_TAIL_TRIES {FS_TN_TAIL_TRIES}")
+    lines.append(f"#define FS_TRACK_CAP {FS_TRACK_CAP}")
     return "\n".join(lines) + "\n"

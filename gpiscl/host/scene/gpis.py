@@ -229,7 +229,7 @@ GPIS = SHAPES.register("gpis", Record({
     "clip": Field(Bool(), False),
     # render the classical counterpart instead (compile/classical.py and
     # docs/design/classical-limits.md): "surface", the mean's zero set with the GP's
-    # Beckmann slopes; "medium", exponential flights of Rice's entry rate
+    # Beckmann slopes; "medium", flights of Rice's entry rate at the local mean and fields
     "classical": Field(Nullable(Enum("surface", "medium")), None),
 }, checks=[mesh_proxy_problem, _weight_space_kernel, _thin_plate_span, _fields_positive,
            observations_problem]))
