@@ -1,6 +1,7 @@
 """Where the function-space march spends its work on grid-mean scenes (issue 33): per
 scene, stage times, bounces, shadow rays, flights, and fs_march.h's work counters (steps,
-rule tries and evaluations, mean-program evaluations, what set each step's first try),
+rule tries and evaluations, mean-program evaluations, what set each step's first try,
+how often the monotone stretch lifted the mean cap),
 then paths per CPU second of the exact default against the uniform 0.99 / 0.9 steps.
 
     python tools/profile_grid_scenes.py [SCENE ...] [--resolution 32] [--spp 4]
@@ -86,6 +87,8 @@ def report(name, st, c, stages, sec):
           f"{c['fs_cap_hmax'] / steps:.1%}, growth {c['fs_cap_grow'] / steps:.1%}, ray end "
           f"{c['fs_cap_end'] / steps:.1%}; near the zero set (|m| < (Z + kappa) sd) "
           f"{c['fs_near_steps'] / steps:.1%}")
+    print(f"  monotone stretch (fs_mean_step): {c['fs_mono_scans'] / fl:.2f} slope-range "
+          f"scans a flight, cap lifted on {c['fs_mono_steps'] / steps:.1%} of the steps")
     print("  stage device seconds: " + ", ".join(
         f"{k} {v:.2f} ({v / total:.0%})" for k, v in sorted(stages.items(), key=lambda kv: -kv[1])
         if v / total >= 0.02))

@@ -74,6 +74,13 @@ FS_RULE_NODE1 = _const("FS_RULE_NODE1", 0.3550510257216822, "(6 - sqrt 6) / 10",
 FS_RULE_WEIGHT1 = _const("FS_RULE_WEIGHT1", 0.5124858261884216, "(16 + sqrt 6) / 36", "double")
 FS_RULE = ((FS_RULE_NODE0, FS_RULE_WEIGHT0), (FS_RULE_NODE1, FS_RULE_WEIGHT1))
 
+# A stretch over which the prior mean's slope along the ray keeps one sign with
+# |dm/dt| >= FS_MONO_R g (g the prior slope's sd along the ray) takes the growth ladder's
+# step, not the mean cap's: its expected crossings missed are <= psi(r) / r with
+# psi(r) = phi(r) - r Phi(-r), 1e-17 at 8 (2.6e-11 at 6 leaves room for rows shifting the
+# slope's mean by 2 g). docs/design/grid-means.md, "The monotone stretch".
+FS_MONO_R = _const("FS_MONO_R", 8.0, "the monotone stretch's slope, prior slope sds", "double")
+
 # --- function-space root search (fs_root_point) ----------------------------------------
 
 FS_ROOT_WIDTH = _const("FS_ROOT_WIDTH", 1e-2, "final bracket, l_d", "double")

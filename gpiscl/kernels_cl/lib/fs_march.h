@@ -246,12 +246,16 @@ inline double fs_downcrossing_slope(double mean, double sd, double2 u)
  * needs a residual of that size: rate ~ e^{-Z^2/2} / l, far below any tolerance). m and sd
  * are the prior's at x(ta) (sigma(x) fields and a posterior included; fs_start_mean); a
  * posterior's mean correction varies on the kernel's scale, which the l_d cap covers.
- * Returns the first try's length: hg (the growth ladder's), or less where the mean needs
- * it. Why kappa is 6, with the paired renders that chose it: docs/design/function-space-
- * march.md, "The mean cap". */
+ * A mean certified monotone with |slope| >= FS_MONO_R g (g: the prior slope's sd along
+ * dn, > 0 only for stationary priors without a posterior; gp_mean_monotone_reach) cannot
+ * dip and come back, and the crossings it could hide are negligible: the cap extends to
+ * the end of that stretch (after the far one sphere tracing certified). Returns the first
+ * try's length: hg (the growth ladder's), or less where the mean needs it. Why kappa is
+ * 6, with the paired renders that chose it: docs/design/function-space-march.md, "The
+ * mean cap"; the monotone stretch: docs/design/grid-means.md. */
 inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
                            FsRay ray, double3 dn, double ta, double hg, double m, double sd,
-                           double lip, int grid FS_PROF_PARAM)
+                           double lip, int grid, double g FS_PROF_PARAM)
 {
     if (!(lip > 0.0)) return hg;
     double reach = fmax(FS_MEAN_KAPPA * sd, fabs(m) - FS_MEAN_Z * sd), cap = reach / lip;
@@ -267,6 +271,7 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
         cap = reach / lip;
         if (cap >= he) return hg;
     }
+    double far = 0.0;
     if (fabs(m) > FS_MEAN_Z * sd && !S.post.n && !gp_kernel_nonstationary(p)) {
         /* sphere tracing on, from ball to ball: each ends where the next starts, so
          * |mean| >= FS_MEAN_Z sd (one sign) on all of [ta, ta + s] */
@@ -282,7 +287,28 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
             if (!(mk * m > 0.0) || !(fabs(mk) > FS_MEAN_Z * sd)) break;
             mz = fabs(mk);
         }
+        far = s;
         cap = fmax(cap, s);
+    }
+    if (g > 0.0) {
+        /* the monotone stretch after the far one: a dip to 0 and back fits in neither */
+        double ma = m;
+        if (far > 0.0) {
+            ma = fs_prior_mean(mean, mc, ray.o + (ta + far) * ray.d, dn, FS_OBS_VALUE);
+            FS_PROF_ADD(HOPS, 1);
+        }
+        FS_PROF_ADD(MONO_SCANS, 1);
+        double mono = (double)gp_mean_monotone_reach(
+            mean, convert_float3(ray.o + (ta + far) * ray.d),
+            convert_float3(ray.o + (ta + he) * ray.d), convert_float3(dn),
+            (float)(FS_MONO_R * g), (float)ma, (float)(FS_MEAN_Z * sd));
+        if (mono >= 1.0) {
+            FS_PROF_ADD(MONO_STEPS, 1);
+            return hg;
+        }
+        double end = far + mono * (he - far);
+        FS_PROF_ADD(MONO_STEPS, end > cap);
+        cap = fmax(cap, end);
     }
     return cap;
 }
@@ -392,6 +418,12 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
         : (double)gp_mean_lipschitz_on(mean, mc, convert_float3(ray.o + ray.t0 * ray.d),
                                        convert_float3(ray.o + ray.t1 * ray.d)) * dlen;
     int grid = lip > 0.0 && gp_mean_has_grid(mean, mc);
+    /* the prior slope's sd along dn where sd is constant on the ray (fs_mean_step's
+     * monotone stretch); 0: no certificate */
+    double3 o3 = (double3)(0.0);
+    double gslope = grid && !S.post.n && !gp_kernel_nonstationary(p)
+                    && gp_mean_is_trilinear_grid(mean, mc)
+        ? sqrt(gp_cov(p, o3, dn, 1, o3, dn, 1)) : 0.0;
     FS_PROF_ADD(LIP_SCANS, dt > 0.0 ? 0 : 1);
     FsScratch R = fs_rule_scratch(S);
     int nr = 0, r_new = FS_RULE_SAMPLES + 1;   /* rows of R; samples since it was built */
@@ -413,7 +445,8 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
                 ? fs_start_mean(p, mean, mc, S, fixed, n, ray.o + ta * ray.d, dn, &sd0
                                 FS_PROF_PASS) : 0.0;
             double hg = fmin(grow * h, FS_H_MAX * ell);
-            h = fs_mean_step(p, mean, mc, S, ray, dn, ta, hg, m0, sd0, lip, grid FS_PROF_PASS);
+            h = fs_mean_step(p, mean, mc, S, ray, dn, ta, hg, m0, sd0, lip, grid, gslope
+                             FS_PROF_PASS);
 #ifdef FS_PROFILE
             /* what set the first try: the ray's end, the mean cap, FS_H_MAX, the growth */
             if (ta + fmin(h, hg) >= ray.t1) res.prof[FS_PROF_CAP_END]++;

@@ -344,3 +344,96 @@ inline float gp_mean_lipschitz_on(GP_MEAN_SPACE const MeanNode* nodes, int count
     return lip;
 }
 
+
+/* Whether a mean program is one trilinear grid leaf (gp_mean_monotone_reach's case). */
+inline int gp_mean_is_trilinear_grid(GP_MEAN_SPACE const MeanNode* nodes, int count)
+{
+    return count > 0 && nodes[0].kind == GP_MEAN_GRID && nodes[0].p0.y < 0.5f
+        && count == 1 + nodes[0].flags && nodes[0].scale > 0.0f;
+}
+
+/* How far along the segment [p, q] (a fraction in [0, 1]) a one-trilinear-grid-leaf mean
+ * program (gp_mean_is_trilinear_grid) is certified monotone with a slope along `dir` (per
+ * unit of dir) of one sign and magnitude >= thr. The cells the segment crosses are walked
+ * in order (Amanatides and Woo): in a cell each gradient component is a bilinear blend of
+ * the cell's four edge differences along its axis, so the slope lies in
+ * sum_i dir_i [min, max] of them (index space); the walk stops at the first cell whose
+ * range breaks the bound, at the sample box's faces (the outside continuation is not
+ * walked), and where the mean, m_p at p, heads for its zero set, once it is certified
+ * past it by `band` (its bound accumulated cell by cell: the step then ends on the far
+ * side anyway, with a short bracket for the root search).
+ * A cell the segment only grazes within rounding may be skipped: its slope acts over
+ * ~1e-6 voxels, too short to move the mean by anything that matters. */
+inline float gp_mean_monotone_reach(GP_MEAN_SPACE const MeanNode* n, float3 p, float3 q,
+                                    float3 dir, float thr, float m_p, float band)
+{
+    float3 r0 = n->row0.xyz, r1 = n->row1.xyz, r2 = n->row2.xyz;
+    float3 a = (float3)(dot(r0, p) + n->row0.w, dot(r1, p) + n->row1.w, dot(r2, p) + n->row2.w);
+    float3 b = (float3)(dot(r0, q) + n->row0.w, dot(r1, q) + n->row1.w, dot(r2, q) + n->row2.w);
+    /* index-space slope per unit of the segment's fraction, in the samples' units */
+    float3 u = (float3)(dot(r0, dir), dot(r1, dir), dot(r2, dir)) * length(q - p);
+    float inv = 1.0f / n->scale;
+    thr *= length(q - p) * inv;
+    float v = m_p * inv;
+    band *= inv;
+    float3 top = n->p1.xyz - 1.0f, d = b - a;
+    if (any(a < (float3)(0.0f)) || any(a > top)) return 0.0f;
+    /* where the segment leaves the sample box */
+    float3 face = select((float3)(0.0f), top, d > (float3)(0.0f));
+    float3 texit = select((face - a) / d, (float3)(INFINITY), d == (float3)(0.0f));
+    float tend = fmin(1.0f, fmin(texit.x, fmin(texit.y, texit.z)));
+    GP_MEAN_SPACE const MeanNode* payload = n + 1;
+    int ny = (int)n->p1.y, nz = (int)n->p1.z, sx = ny * nz;
+    int3 c = convert_int3(fmin(floor(a), top - 1.0f));
+    int3 last = convert_int3(fmin(floor(fmin(fmax(a + tend * d, (float3)(0.0f)), top)),
+                                  top - 1.0f));
+    int3 step = select((int3)(-1), (int3)(1), d > (float3)(0.0f));
+    float3 next = select((float3)(0.0f), (float3)(1.0f), d > (float3)(0.0f));
+    float3 tnext = select((convert_float3(c) + next - a) / d, (float3)(INFINITY),
+                          d == (float3)(0.0f));
+    float3 tstep = select(1.0f / fabs(d), (float3)(INFINITY), d == (float3)(0.0f));
+    int3 left = convert_int3(abs(last - c));
+    int cells = left.x + left.y + left.z + 1, sign = 0;
+    float t = 0.0f;                                   /* where the current cell starts */
+    for (int k = 0; k < cells; ++k) {
+        int base = (c.x * ny + c.y) * nz + c.z;
+        float c000 = gp_grid_sample(payload, base), c001 = gp_grid_sample(payload, base + 1);
+        float c010 = gp_grid_sample(payload, base + nz);
+        float c011 = gp_grid_sample(payload, base + nz + 1);
+        float c100 = gp_grid_sample(payload, base + sx);
+        float c101 = gp_grid_sample(payload, base + sx + 1);
+        float c110 = gp_grid_sample(payload, base + sx + nz);
+        float c111 = gp_grid_sample(payload, base + sx + nz + 1);
+        float4 ex = (float4)(c100 - c000, c101 - c001, c110 - c010, c111 - c011);
+        float4 ey = (float4)(c010 - c000, c011 - c001, c110 - c100, c111 - c101);
+        float4 ez = (float4)(c001 - c000, c011 - c010, c101 - c100, c111 - c110);
+        float3 lo = (float3)(fmin(fmin(ex.x, ex.y), fmin(ex.z, ex.w)),
+                             fmin(fmin(ey.x, ey.y), fmin(ey.z, ey.w)),
+                             fmin(fmin(ez.x, ez.y), fmin(ez.z, ez.w)));
+        float3 hi = (float3)(fmax(fmax(ex.x, ex.y), fmax(ex.z, ex.w)),
+                             fmax(fmax(ey.x, ey.y), fmax(ey.z, ey.w)),
+                             fmax(fmax(ez.x, ez.y), fmax(ez.z, ez.w)));
+        float3 s0 = u * lo, s1 = u * hi;
+        float smin = dot(fmin(s0, s1), (float3)(1.0f)), smax = dot(fmax(s0, s1), (float3)(1.0f));
+        if (sign == 0) sign = smin >= thr ? 1 : (smax <= -thr ? -1 : 0);
+        if (!(sign > 0 ? smin >= thr : (sign < 0 && smax <= -thr))) return t;
+        float tout = fmin(fmin(tnext.x, fmin(tnext.y, tnext.z)), tend);
+        /* the bound of the mean at the cell's exit: the least change, in the slope's sign */
+        v += (sign > 0 ? smin : smax) * (tout - t);
+        if (sign * m_p < 0.0f && (sign > 0 ? v >= band : v <= -band)) return tout;
+        if (tout >= tend) break;
+        /* the next cell: across the nearest face */
+        if (tnext.x <= tnext.y && tnext.x <= tnext.z) {
+            if (c.x == last.x) break;
+            c.x += step.x; tnext.x += tstep.x;
+        } else if (tnext.y <= tnext.z) {
+            if (c.y == last.y) break;
+            c.y += step.y; tnext.y += tstep.y;
+        } else {
+            if (c.z == last.z) break;
+            c.z += step.z; tnext.z += tstep.z;
+        }
+        t = tout;
+    }
+    return tend;
+}
