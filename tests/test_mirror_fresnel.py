@@ -1,6 +1,7 @@
 """The mirror's optional Fresnel term (a conductor preset or eta and k, bsdf/mirror.h with
 bsdf/fresnel.h): its scene keys, and a mirror sphere in a unit environment against the
-Fresnel reflectance quadrature predicts for every pixel. Function-space mirrors with a
+Fresnel reflectance quadrature predicts for every pixel, also as a nearly deterministic
+GPIS in weight and in function space. Function-space mirrors' light samples with a
 conductor: tests/test_fs_nee.py (NEE + MIS against BSDF sampling)."""
 import numpy as np
 import pytest
@@ -48,11 +49,19 @@ def test_bad_fresnel_keys_are_scene_errors(keys, where):
     assert where in str(err.value)
 
 
-def _sphere_scene(bsdf, spp):
+def _sphere_scene(bsdf, spp, sampler=None):
+    """The unit sphere in a unit environment: a plain sphere, or (sampler given) a GPIS
+    of a sphere mean so smooth (sigma 0.001, l 0.5: normals spread by 0.16 degrees) that
+    its pixels are the sphere's to far below the noise."""
+    shape = {"type": "sphere", "center": [0, 0, 0], "radius": 1.0, "bsdf": bsdf}
+    if sampler is not None:
+        shape = {"type": "gpis", "proxy": {"type": "sphere", "center": [0, 0, 0], "radius": 1.1},
+                 "mean": {"type": "sphere", "center": [0, 0, 0], "radius": 1.0},
+                 "kernel": {"type": "squared_exponential", "sigma": 0.001, "length_scale": 0.5},
+                 "sampler": sampler, "bsdf": bsdf}
     return {"camera": CAMERA, "render": {"spp": spp, "seed": 4, "max_depth": 8,
                                          "russian_roulette": {"start_depth": 100}},
-            "shapes": [{"type": "sphere", "center": [0, 0, 0], "radius": 1.0, "bsdf": bsdf}],
-            "lights": [{"type": "environment", "radiance": 1.0}]}
+            "shapes": [shape], "lights": [{"type": "environment", "radiance": 1.0}]}
 
 
 def _expected(eta, k, albedo):
@@ -67,18 +76,20 @@ def _expected(eta, k, albedo):
     return value.mean(axis=2)
 
 
-@pytest.mark.parametrize("keys, eta_k", [
-    ({"conductor": "Au"}, CONDUCTORS["Au"]),
-    ({"eta": [1.5, 0.4, 2.0], "k": [0.2, 3.0, 0.0]}, ((1.5, 0.4, 2.0), (0.2, 3.0, 0.0))),
-], ids=["Au", "own eta k"])
-def test_mirror_sphere_in_a_unit_environment_reflects_fresnel(device, keys, eta_k):
+@pytest.mark.parametrize("keys, eta_k, sampler", [
+    ({"conductor": "Au"}, CONDUCTORS["Au"], None),
+    ({"eta": [1.5, 0.4, 2.0], "k": [0.2, 3.0, 0.0]}, ((1.5, 0.4, 2.0), (0.2, 3.0, 0.0)), None),
+    ({"conductor": "Au"}, CONDUCTORS["Au"], {"type": "weight_space"}),
+    ({"conductor": "Au"}, CONDUCTORS["Au"], {"type": "function_space"}),
+], ids=["Au", "own eta k", "Au weight-space GPIS", "Au function-space GPIS"])
+def test_mirror_sphere_in_a_unit_environment_reflects_fresnel(device, keys, eta_k, sampler):
     """Every 4x4 block (z from the pixels' sample variances plus the float floor: a
     block, not a pixel, so that an edge pixel whose few samples all missed the sphere
     still shows its coverage's variance) and the image mean against the quadrature; the
     plain mirror's pixels are exactly 1."""
     albedo = [0.9, 1.0, 0.8]
-    img = render_result(_sphere_scene({"type": "mirror", "albedo": albedo, **keys}, 32),
-                        device=device).image
+    img = render_result(_sphere_scene({"type": "mirror", "albedo": albedo, **keys}, 32,
+                                      sampler), device=device).image
     ref = _expected(*eta_k, albedo)
     mean, se = block_means(img.mean, img.stderr, 4)
     ref_blocks, _ = block_means(ref, np.zeros_like(ref), 4)
@@ -86,6 +97,6 @@ def test_mirror_sphere_in_a_unit_environment_reflects_fresnel(device, keys, eta_
     assert z.max() < z_threshold(z.size), f"max |z| {z.max():.2f} over {z.size}"
     se = image_mean_se(img.stderr) + FLOAT_FLOOR
     assert abs(img.mean.mean() - ref.mean()) < z_threshold(1) * se
-    plain = render_result(_sphere_scene({"type": "mirror", "albedo": 1.0}, 4),
+    plain = render_result(_sphere_scene({"type": "mirror", "albedo": 1.0}, 4, sampler),
                           device=device).image
     assert np.all(plain.mean == 1.0) and np.all(plain.stderr == 0.0)
