@@ -13,11 +13,13 @@ from gpiscl.host.compile.classical import with_counterparts
 from gpiscl.host.errors import SceneError
 from gpiscl.host.gp import SquaredExponential
 from gpiscl.host.gp import classical as C
+from gpiscl.host.kinds.conductors import CONDUCTORS
 from gpiscl.host.scene.loading import load_scene
 from gpiscl.testing.stats import assert_agree, image_mean_se, z_threshold
 
 MIRROR = {"type": "mirror", "albedo": 1.0}
 GOLD = {"type": "rough_conductor", "material": "Au", "roughness": 0.1}
+GOLD_MIRROR = {"type": "mirror", "albedo": 1.0, "conductor": "Au"}
 
 
 def sphere_scene(micro, classical=False, spp=64, light="rectangle", kernel=None):
@@ -52,6 +54,8 @@ def test01_counterpart_shapes_and_roughness():
     s = counterpart(sphere_scene(MIRROR, classical=True, kernel=m32))
     assert math.isclose(s["bsdf"]["roughness"], math.sqrt(6) * 0.1)
     assert s["bsdf"]["type"] == "rough_conductor" and min(s["bsdf"]["k"]) >= 1e4
+    s = counterpart(sphere_scene(GOLD_MIRROR, classical=True))   # its own Fresnel term
+    assert (tuple(s["bsdf"]["eta"]), tuple(s["bsdf"]["k"])) == CONDUCTORS["Au"]
     doc = load_scene("scenes/ws_rough_mirror_plane.json").data
     doc = copy.deepcopy(doc)
     doc["shapes"][0]["classical"] = "surface"
@@ -102,7 +106,8 @@ def test03_white_furnace(device):
 INNER = (slice(10, 22), slice(10, 22))
 
 
-@pytest.mark.parametrize("micro", [MIRROR, GOLD], ids=["mirror", "rough_gold"])
+@pytest.mark.parametrize("micro", [MIRROR, GOLD, GOLD_MIRROR],
+                         ids=["mirror", "rough_gold", "gold_mirror"])
 def test04_counterpart_renders_like_the_gpis(device, micro):
     """A rectangle light and a dim environment: the GPIS (sigma/l = 0.1, weight space) and
     its counterpart agree per 4x4 block within the films' errors (64 spp) away from the

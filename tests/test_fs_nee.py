@@ -304,6 +304,7 @@ def lit_scene(memory, bsdf, spp, nee, seed, radius=0.3, kernel=None):
 
 
 MIRROR = {"type": "mirror", "albedo": 0.9}
+GOLD_MIRROR = {"type": "mirror", "albedo": 0.9, "conductor": "Au"}
 CONDUCTOR = {"type": "rough_conductor", "material": "Au", "roughness": 0.3}
 
 
@@ -315,9 +316,10 @@ MATERN = {"type": "matern32", "sigma": 0.3, "length_scale": 0.2, "aniso": [1.0, 
     (MIRROR, "renewal_plus", 0.3, None), (MIRROR, "global", 0.3, None),
     (MIRROR, "none", 0.3, None), (MIRROR, "renewal", 0.3, None),
     (CONDUCTOR, "renewal_plus", 0.3, None), (CONDUCTOR, "renewal_plus", 0.8, None),
-    (MIRROR, "renewal_plus", 0.3, MATERN)],
+    (MIRROR, "renewal_plus", 0.3, MATERN), (GOLD_MIRROR, "renewal_plus", 0.3, None)],
     ids=["mirror-renewal_plus", "mirror-global", "mirror-none", "mirror-renewal",
-         "conductor-renewal_plus", "conductor-large-light", "mirror-markov"])
+         "conductor-renewal_plus", "conductor-large-light", "mirror-markov",
+         "mirror-fresnel"])
 def test_nee_with_mis_equals_bsdf_sampling(device, bsdf, memory, radius, kernel):
     """NEE + MIS against BSDF sampling alone, per 4x4 block (z-test from the per-pixel
     sample variances) and over the whole image. The mirror's light samples pick their
@@ -326,7 +328,9 @@ def test_nee_with_mis_equals_bsdf_sampling(device, bsdf, memory, radius, kernel)
     has: measured, without the s^2 max |z| 5.0 (threshold 4.3) and the image 0.0168 vs
     0.052, without the 4 |d.h| max |z| 18. The conductor under a large light, where BSDF
     samples meet the light often, fails (image z 12.8) when BSDF sampling's weight
-    ignores the lobe strategy's density (fs_conductor_light_pdf without q)."""
+    ignores the lobe strategy's density (fs_conductor_light_pdf without q). A gold
+    mirror's light samples take Fresnel at the half vector, its BSDF samples at the
+    sampled normal."""
     spp = 256
     a = render_checked(lit_scene(memory, bsdf, spp, True, seed=21, radius=radius, kernel=kernel), device)
     b = render_checked(lit_scene(memory, bsdf, spp, False, seed=22, radius=radius, kernel=kernel), device)

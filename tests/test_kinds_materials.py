@@ -108,7 +108,7 @@ def sky_dome():
                 {"environment": False, "at_infinity": True, "area": False,
                  "positioned": False},
                 LightHost(lambda lt: {"radiance": lt["radiance"]},
-                          lambda fields, radius: 0.0))   # like a constant environment
+                          lambda fields, radius, lobe=None: 0.0))   # like a constant sky
 
 
 @pytest.fixture(scope="module")

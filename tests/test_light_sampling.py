@@ -16,6 +16,7 @@ from gpiscl.host.compile.scene import compile_scene
 from gpiscl.host.kinds.lights import LIGHTS
 from gpiscl.host.scene.loading import load_scene
 from gpiscl.scenes import default_scene, furnace_sphere
+from gpiscl.testing.scenes import function_space_sampler, gpis_scene
 from gpiscl.testing.stats import assert_agree, image_mean_se, z_threshold
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -71,10 +72,10 @@ def two_lamps(resolution=16):
 
 
 def uniform_choice(fields, kinds, radius):
-    """The old estimator's choice: every light alike."""
+    """The old estimator's choice: every light alike, at every vertex (both tables)."""
     n = len(kinds)
     out = light_choice(fields, kinds, radius)
-    out["pmf"], out["threshold"], out["alias"] = 1.0 / n, 1.0, np.arange(n)
+    out["pmf"], out["threshold"], out["alias"] = 1.0 / n, 1.0, np.tile(np.arange(n), 2)
     return out
 
 
@@ -91,6 +92,22 @@ def agree(a, b, what):
     assert d < z_threshold(2) * image_mean_se(a.stderr, b.stderr), (what, d)
 
 
+def mirror_ball_under_four_lights(resolution=16):
+    """test_fs_render's rough function-space mirror ball under a 10 degree sun, a 50
+    degree dome, a spherical lamp and the sky map: its vertices take the narrow lobe's
+    table (sun and lamp only), whose pmf the escaped and emission weights must use."""
+    lights = [{"type": "directional", "direction": [-0.5, 0.7, 0.5], "irradiance": 3.0,
+               "angular_radius": 10.0},
+              {"type": "directional", "direction": [0.7, 0.7, 0.2], "irradiance": 12.0,
+               "angular_radius": 50.0},
+              {"type": "sphere", "center": [1.2, 1.4, 1.6], "radius": 0.8, "radiance": 2.0},
+              {"type": "environment_map", "file": SKY, "scale": 0.5}]
+    scene = gpis_scene(function_space_sampler("renewal_plus"), "mirror", 0.9, lights, spp=64,
+                       max_depth=16, rr_start=3)
+    scene["camera"]["resolution"] = [resolution, resolution]
+    return scene
+
+
 # --- the table -------------------------------------------------------------------------
 
 @pytest.mark.parametrize("scene", [default_scene(), sun_sky_floor(), two_lamps_and_a_map(),
@@ -99,11 +116,13 @@ def agree(a, b, what):
 def test_selection_pmf_sums_to_one_and_follows_the_power(scene):
     s = compile_scene(load_scene(scene).data if hasattr(load_scene(scene), "data")
                       else load_scene(scene))
-    pmf = s.light_choice["pmf"].astype(np.float64)
-    assert abs(pmf.sum() - 1.0) < 1e-6 and np.all(pmf >= 0)
-    # the alias table gives each light exactly its pmf
-    assert np.allclose(implied_pmf(s.light_choice["threshold"], s.light_choice["alias"]),
-                       pmf, atol=1e-6)
+    n = len(s.lights)
+    assert len(s.light_choice) == 2 * n   # the wide lobe's table, then the narrow lobe's
+    for table in (s.light_choice[:n], s.light_choice[n:]):
+        pmf = table["pmf"].astype(np.float64)
+        assert abs(pmf.sum() - 1.0) < 1e-6 and np.all(pmf >= 0)
+        # the alias table gives each light exactly its pmf
+        assert np.allclose(implied_pmf(table["threshold"], table["alias"]), pmf, atol=1e-6)
 
 
 def implied_pmf(threshold, alias):
@@ -169,11 +188,13 @@ def test_power_estimates_in_closed_form():
 # --- unbiasedness ------------------------------------------------------------------------
 
 @pytest.mark.long
-@pytest.mark.parametrize("make", [two_lamps_and_a_map, two_lamps])
+@pytest.mark.parametrize("make", [two_lamps_and_a_map, two_lamps,
+                                  mirror_ball_under_four_lights])
 def test_power_choice_agrees_with_the_uniform_choice(device, monkeypatch, long_run, make):
     """Four light kinds, area lights hit by BSDF samples (emission.cl's weight), a map
-    (escaped_rays.cl's), a point light (NEE only); two lamps chosen 0.9 / 0.1: the new
-    choice's image equals the uniform choice's (per 4x4 block and whole image)."""
+    (escaped_rays.cl's), a point light (NEE only); two lamps chosen 0.9 / 0.1; a
+    function-space mirror's narrow-lobe table: the new choice's image equals the uniform
+    choice's (per 4x4 block and whole image)."""
     spp = 1024 if long_run else 128
     scene = make(16 if not long_run else 32)
     new = render_result(scene, spp=spp, seed=11, device=device)

@@ -18,13 +18,15 @@ import numpy as np
 from ..errors import SceneError
 from ..gp import classical as C
 from ..gp.kernels import NonStationary
+from ..kinds.conductors import eta_k
 from ..kinds.materials import ROUGH_CONDUCTOR
 from ..scene.gpis import FIELD_KEYS
 from .gpis import build_kernel
 
 _ROUGHNESS = ROUGH_CONDUCTOR.fields["roughness"].spec     # rough_conductor's range
 MIN_ROUGHNESS, MAX_ROUGHNESS = _ROUGHNESS.ge, _ROUGHNESS.le
-# mirror has no Fresnel term: a conductor with this k reflects 1 - 4/k^2 at every angle
+# a mirror without a conductor has no Fresnel term: a conductor with this k reflects
+# 1 - 4/k^2 at every angle
 _MIRROR_K = 1.0e4
 
 
@@ -37,8 +39,10 @@ def counterpart_bsdf(micro: dict, alpha: float, source: str, where: str) -> dict
     if kind == "diffuse":
         return dict(micro)
     if kind == "mirror":
-        rough = {"type": "rough_conductor", "material": "Cu", "eta": [1.0] * 3,
-                 "k": [_MIRROR_K] * 3, "albedo": micro["albedo"]}
+        fresnel = micro.get("conductor") is not None or micro.get("eta") is not None
+        eta, k = eta_k(micro, "conductor") if fresnel else ([1.0] * 3, [_MIRROR_K] * 3)
+        rough = {"type": "rough_conductor", "material": "Cu", "eta": list(eta),
+                 "k": list(k), "albedo": micro["albedo"]}
     elif kind == "rough_conductor":
         rough, alpha = dict(micro), math.hypot(alpha, micro["roughness"])
     else:

@@ -5,9 +5,15 @@ table (Walker/Vose) built once per scene. docs/design/light-sampling.md derives 
 The table is the LIGHT_CHOICE records (layout/records.py), one per light: pmf, the
 probability of choosing that light (every MIS weight of a light divides by it); and the
 alias table's threshold and alias: with s = u * n, i = floor(s), light i is chosen when
-s - i < threshold[i], else alias[i].
+s - i < threshold[i], else alias[i]. Two tables of n records each, one after the other
+(kernels_cl/lib/lights.h light_choice_at): for vertices with a cosine-wide BSDF lobe,
+and for those that leave environments to BSDF sampling (function-space mirrors): their
+lobe is narrow, environments get 0 there, and each light's estimate weighs the chance
+that a BSDF sample of a NARROW_LOBE misses it.
 """
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -43,12 +49,26 @@ def alias_table(pmf) -> tuple:
     return threshold, alias
 
 
-def light_choice(fields: list, kinds: list, radius: float) -> np.ndarray:
-    """The LIGHT_CHOICE records of a scene's lights: fields, each light's packed fields
-    (kinds/lights.py); kinds, their kind names; radius, the scene's bounding radius."""
-    powers = [LIGHTS[k].host.power(f, radius) for f, k in zip(fields, kinds)]
+# The solid angle of a function-space mirror's reflection lobe, as a light's estimate
+# sees it: a cone of 30 degrees (normals spread by up to 15: the shipped mirror GPISs have
+# 0.1-16). A light wider than it is found by BSDF sampling as well as by a light sample.
+NARROW_LOBE = 2.0 * math.pi * (1.0 - math.cos(math.radians(30.0)))
+
+
+def _records(powers) -> np.ndarray:
     pmf = selection_pmf(powers)
     threshold, alias = alias_table(pmf)
     out = layouts.LIGHT_CHOICE.zeros(len(pmf))
     out["pmf"], out["threshold"], out["alias"] = pmf, threshold, alias
     return out
+
+
+def light_choice(fields: list, kinds: list, radius: float) -> np.ndarray:
+    """The LIGHT_CHOICE records of a scene's lights, the wide lobe's table then the
+    narrow lobe's: fields, each light's packed fields (kinds/lights.py); kinds, their kind
+    names; radius, the scene's bounding radius."""
+    hosts = [LIGHTS[k].host for k in kinds]
+    wide = [h.power(f, radius) for h, f in zip(hosts, fields)]
+    narrow = [0.0 if LIGHTS[k].traits["environment"] else h.power(f, radius, NARROW_LOBE)
+              for h, f, k in zip(hosts, fields, kinds)]
+    return np.concatenate([_records(wide), _records(narrow)])

@@ -14,8 +14,9 @@ CONDUCTORS = {
 }
 
 
-def eta_k(bsdf: dict):
-    """(eta, k) RGB of a resolved rough_conductor: its own, else its material's."""
+def eta_k(bsdf: dict, preset_key: str = "material"):
+    """(eta, k) RGB of a resolved conductor: its own eta and k, else those of the preset
+    its `preset_key` names (rough_conductor's "material", a mirror's "conductor")."""
     if bsdf.get("eta") is not None:
         return tuple(bsdf["eta"]), tuple(bsdf["k"])
-    return CONDUCTORS[bsdf["material"]]
+    return CONDUCTORS[bsdf[preset_key]]

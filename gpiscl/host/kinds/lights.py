@@ -108,25 +108,28 @@ def pack_directional(lt):
 # scene's bounding sphere), times the chance that BSDF sampling misses them (bsdf_miss):
 # a light that BSDF sampling finds by itself gains little from NEE's choices, which the
 # concentrated lights need (a sun beside a sky on a diffuse floor, 'Measured' there).
-# Arguments: the packer's fields and R.
+# Arguments: the packer's fields, R, and the solid angle of the BSDF lobe the light
+# competes with (pi: a cosine lobe; light_selection.NARROW_LOBE).
 
 def brightness(rgb) -> float:
     """The scalar the estimates rank lights by: the mean of the RGB channels."""
     return float(np.mean(np.asarray(rgb, dtype=np.float64)[:3]))
 
 
-def bsdf_miss(solid_angle: float) -> float:
-    """The chance that a cosine-distributed direction from a surface facing a light of
-    this solid angle (about the normal) misses it: 1 - (its projected solid angle) / pi,
-    taken as 1 - solid_angle / pi, 0 from pi sr on (a constant sky, a wide dome)."""
-    return max(0.0, 1.0 - solid_angle / math.pi)
+def bsdf_miss(solid_angle: float, lobe: float = math.pi) -> float:
+    """The chance that a direction from a BSDF lobe facing a light of this solid angle
+    misses it. A cosine lobe (lobe = pi, a diffuse vertex): 1 - (the light's projected
+    solid angle) / pi, taken as 1 - solid_angle / pi, 0 from pi sr on (a constant sky, a
+    wide dome); a narrow lobe of `lobe` sr (a function-space mirror,
+    light_selection.NARROW_LOBE): 1 - solid_angle / lobe."""
+    return max(0.0, 1.0 - solid_angle / lobe)
 
 
-def environment_power(f, radius):
+def environment_power(f, radius, lobe=math.pi):
     """0 (it covers 4 pi sr): BSDF sampling already follows f cos L for a constant L;
     alone (every estimate 0) it is still chosen: selection_pmf falls back to uniform."""
     irradiance = math.pi * brightness(f["radiance"])
-    return irradiance * math.pi * radius ** 2 * bsdf_miss(4.0 * math.pi)
+    return irradiance * math.pi * radius ** 2 * bsdf_miss(4.0 * math.pi, lobe)
 
 
 # the normals over which a map's greatest plane irradiance is sought: the axes and the
@@ -149,7 +152,7 @@ def _coarse_luminance(rgb) -> np.ndarray:
     return out / (3 * step * step)
 
 
-def environment_map_power(f, radius):
+def environment_map_power(f, radius, lobe=math.pi):
     """Its solid angle for bsdf_miss: that of a patch as bright as the map's brightest
     pixel holding all its radiance (a sun drawn into the map: small; a smooth sky:
     large)."""
@@ -167,35 +170,36 @@ def environment_map_power(f, radius):
     irradiance = (np.maximum(d @ _PLANE_NORMALS.T, 0.0) * weight[:, None]).sum(0).max()
     solid_angle = float(weight.sum() / lum.max())
     return (brightness(f["radiance"]) * float(irradiance) * math.pi * radius ** 2
-            * bsdf_miss(solid_angle))
+            * bsdf_miss(solid_angle, lobe))
 
 
-def point_power(f, radius):
+def point_power(f, radius, lobe=math.pi):
     return 4.0 * math.pi * brightness(f["radiance"])
 
 
-def sphere_power(f, radius):
+def sphere_power(f, radius, lobe=math.pi):
     r = f["p0"][3]
     return math.pi * brightness(f["radiance"]) * 4.0 * math.pi * r * r
 
 
-def rectangle_power(f, radius):
+def rectangle_power(f, radius, lobe=math.pi):
     sides = 2.0 if f["p2"][3] else 1.0
     return math.pi * brightness(f["radiance"]) * f["area"] * sides
 
 
-def directional_power(f, radius):
+def directional_power(f, radius, lobe=math.pi):
     omc = f["p0"][3]   # 1 - cos(angular radius): radiance * pi sin^2 is the irradiance
     irradiance = brightness(f["radiance"]) * (math.pi * omc * (2.0 - omc) if omc else 1.0)
-    return irradiance * math.pi * radius ** 2 * bsdf_miss(2.0 * math.pi * omc)
+    return irradiance * math.pi * radius ** 2 * bsdf_miss(2.0 * math.pi * omc, lobe)
 
 
 @dataclass(frozen=True)
 class LightHost:
     """A light kind's host side. pack: resolved scene object -> Light record fields (see
-    the top); power: (those fields, the scene's radius) -> the power estimate above."""
+    the top); power: (those fields, the scene's radius[, the BSDF lobe's solid angle,
+    pi when not given]) -> the power estimate above."""
     pack: Callable[[dict], dict]
-    power: Callable[[dict, float], float]
+    power: Callable[..., float]
 
     def __call__(self, lt: dict) -> dict:
         return self.pack(lt)

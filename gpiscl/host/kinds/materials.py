@@ -34,9 +34,22 @@ def pack_rough_conductor(bsdf: dict) -> dict:
     return {"albedo": bsdf["albedo"], "eta": eta, "k": k, "roughness": bsdf["roughness"]}
 
 
+def pack_mirror(bsdf: dict) -> dict:
+    if bsdf["conductor"] is None and bsdf["eta"] is None:
+        return {"albedo": bsdf["albedo"]}
+    eta, k = eta_k(bsdf, "conductor")
+    return {"albedo": bsdf["albedo"], "eta": eta, "k": k, "fresnel": 1}
+
+
 def _eta_k_together(b):
     if (b["eta"] is None) != (b["k"] is None):
         return ("k" if b["k"] is None else "eta"), "give both eta and k, or neither"
+    return None
+
+
+def _conductor_or_eta_k(b):
+    if b["conductor"] is not None and b["eta"] is not None:
+        return "eta", "give a conductor preset or eta and k, not both"
     return None
 
 
@@ -54,6 +67,15 @@ ROUGH_CONDUCTOR = Record({"material": Field(Enum(*CONDUCTORS), "Cu"),
                           "albedo": Field(ALBEDO, 1.0)}, [_eta_k_together])
 
 
+# A perfect mirror. Without `conductor` (or `eta` and `k`) it reflects `albedo` at every
+# angle; with one it reflects albedo x the exact unpolarised Fresnel term of that metal
+# (a preset, conductors.py, or explicit RGB eta and k), as rough_conductor does.
+MIRROR = Record({"albedo": Field(ALBEDO, 1.0),
+                 "conductor": Field(Nullable(Enum(*CONDUCTORS)), None),
+                 "eta": Field(Nullable(RGB), None),
+                 "k": Field(Nullable(RGB), None)}, [_eta_k_together, _conductor_or_eta_k])
+
+
 def _traits(micro, delta=False, pass_through=False, random_normal="sampled"):
     return {"micro": micro, "delta": delta, "pass_through": pass_through,
             "random_normal": RANDOM_NORMAL[random_normal]}
@@ -62,13 +84,14 @@ def _traits(micro, delta=False, pass_through=False, random_normal="sampled"):
 MATERIALS = KindTable("material", "MATERIAL", [
     Kind("diffuse", Record({"albedo": Field(ALBEDO, 0.8)}), "lib/bsdf/diffuse.h",
          _traits(micro=True), pack_albedo),
-    Kind("mirror", Record({"albedo": Field(ALBEDO, 1.0)}), "lib/bsdf/mirror.h",
-         _traits(micro=True, delta=True, random_normal="half_vector"), pack_albedo),
+    Kind("mirror", MIRROR, "lib/bsdf/mirror.h",
+         _traits(micro=True, delta=True, random_normal="half_vector"), pack_mirror),
     # pass-through, for bounding proxies: no device file, the pass_through trait is all
     Kind("null", Record({}), None, _traits(micro=False, pass_through=True), pack_nothing),
     Kind("rough_conductor", ROUGH_CONDUCTOR, "lib/bsdf/rough_conductor.h",
          _traits(micro=True, random_normal="pairs"), pack_rough_conductor),
-], traits=("micro", "delta", "pass_through", "random_normal"), family="bsdf")
+], traits=("micro", "delta", "pass_through", "random_normal"), family="bsdf",
+   shared_files=("lib/bsdf/fresnel.h",))
 
 # What the scene's GPIS shapes take (scene/gpis.py).
 MICRO_BSDFS = MATERIALS.schema_where("micro", "micro-BSDF")

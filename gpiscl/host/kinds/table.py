@@ -37,11 +37,14 @@ class Kind:
 class KindTable:
     def __init__(self, axis: str, prefix: str, kinds: Sequence[Kind] = (),
                  traits: Sequence[str] = (), family: str | None = None,
-                 first_id: int = 0, schema: Tagged | None = None):
+                 first_id: int = 0, schema: Tagged | None = None,
+                 shared_files: Sequence[str] = ()):
         """first_id: the id of the first kind (a table sharing its C prefix with another
         starts past it); schema: a Tagged shared with another table (one scene key whose
-        variants two tables declare)."""
+        variants two tables declare); shared_files: device files under kernels_cl/ that
+        several kinds use, joined before every kind's own."""
         self.axis, self.prefix, self.trait_names = axis, prefix, tuple(traits)
+        self.shared_files = tuple(shared_files)
         self.family = family or axis
         self.first_id = first_id
         self._kinds: list[Kind] = []
@@ -170,10 +173,13 @@ class KindTable:
         return f"{head} {{\n  switch (kind) {{\n{cases}\n    default: {tail}\n  }}\n}}"
 
     def device_files(self) -> list:
-        return [k.device_file for k in self._kinds if k.device_file is not None]
+        """The shared files, then every kind's, in the order device_source joins them."""
+        return [*self.shared_files,
+                *(k.device_file for k in self._kinds if k.device_file is not None)]
 
     def device_source(self) -> str:
-        """Every kind's device file in id order, with #line markers for the compiler's
-        messages (the axis's shared header and generated dispatch go around it)."""
-        return "\n".join(f'#line 1 "{k.device_file}"\n{self.device_path(k).read_text()}'
-                         for k in self._kinds if k.device_file is not None)
+        """The shared files, then every kind's device file in id order, with #line markers
+        for the compiler's messages (the axis's shared header and generated dispatch go
+        around it)."""
+        return "\n".join(f'#line 1 "{name}"\n{(KERNELS_CL / name).read_text()}'
+                         for name in self.device_files())

@@ -40,10 +40,11 @@ PRIMITIVE = Struct("Primitive", (
 
 MATERIAL = Struct("Material", (
     ("float4", "albedo"),
-    ("float4", "eta"),       # rough_conductor: complex index eta + i k (RGB)
+    ("float4", "eta"),       # conductors: complex index eta + i k (RGB)
     ("float4", "k"),
     ("int", "kind"),
     ("float", "roughness"),  # rough_conductor: Beckmann alpha
+    ("int", "fresnel"),      # mirror: 1 reflects F of eta + i k, 0 the albedo alone
 ))
 
 # Lights: the meaning of the vectors depends on kind (see lib/lights/<kind>.h).

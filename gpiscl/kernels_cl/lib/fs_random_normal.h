@@ -33,12 +33,15 @@ inline float3 fs_random_normal_eval(int mode, __global const Material* mat, FsNo
                                     float* pdf_f, float4* grad)
 {
     if (mode == RANDOM_NORMAL_HALF_VECTOR) {
-        /* the light sample picks the normal: the half vector h */
-        float3 h;
+        /* the light sample picks the normal: the half vector h, where the delta
+         * reflector's own sample gives its reflectance (a mirror's Fresnel term) */
+        float3 h, l;
+        float pdf_delta;
         *pdf_f = fs_mirror_pdf(law, wo, wl, &h);
-        float3 f = albedo * *pdf_f;
-        if (*pdf_f > 0.0f) *grad = (float4)(fs_implied_gradient(law, wo, h), 1.0f);
-        return f;
+        if (!(*pdf_f > 0.0f)) return (float3)(0.0f);
+        *grad = (float4)(fs_implied_gradient(law, wo, h), 1.0f);
+        return material_sample(mat->kind, mat, albedo, h, wo, (float2)(0.0f), &l, &pdf_delta)
+               * *pdf_f;
     }
     return material_eval(mat->kind, mat, albedo, n, wo, wl, pdf_f);
 }

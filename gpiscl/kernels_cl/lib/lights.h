@@ -64,3 +64,13 @@ inline int light_choose(__global const LightChoice* choice, int n, float u)
 #define ENV_NEE_NONE 0
 #define ENV_NEE_OWN 1
 #define ENV_NEE_ABOVE 2
+
+/* The choice table of a vertex (light_selection.py): n records for vertices whose BSDF
+ * lobe is wide, then n for those that leave environments to BSDF sampling (ENV_NEE_NONE:
+ * a function-space mirror, whose lobe is narrow, so that BSDF sampling already finds the
+ * wide lights and its light samples go to the small ones). */
+inline __global const LightChoice* light_choice_at(__global const LightChoice* choice, int n,
+                                                   int env_nee)
+{
+    return choice + ((env_nee == ENV_NEE_NONE) ? n : 0);
+}

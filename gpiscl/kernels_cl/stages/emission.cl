@@ -28,12 +28,15 @@ __kernel void emission(EMISSION_PARAMS)
     float pdf_light;
     float3 Le = light_area_radiance(lights[prim->light].kind, &lights[prim->light], prev.xyz,
                                     x, primitive_normal(prim, x), d, &pdf_light);
-    /* the light strategy's density includes choosing this light (its pmf); after a
+    /* the light strategy's density includes choosing this light (its pmf in the table
+     * of the previous vertex, lights.h light_choice_at); after a
      * random-normal pairs vertex (fs_random_normal.h) it is that of its (normal, light)
      * pairs (fs_normal_pdf.h) */
+    float sel = light_choice_at(light_choice, params->num_lights,
+                                path_prev_env_nee[p])[prim->light].pmf;
     float w = (prev.w > 0.0f && params->nee)
                   ? power_heuristic(prev.w, fs_conductor_light_pdf(
-                        pdf_light * light_choice[prim->light].pmf, path_prev_n[p], path_prev_v[p], d))
+                        pdf_light * sel, path_prev_n[p], path_prev_v[p], d))
                   : 1.0f;
     path_radiance[p] += (float4)(w * path_beta[p].xyz * Le, 0.0f);
 }

@@ -25,7 +25,8 @@ __kernel void escaped_rays(ESCAPED_RAYS_PARAMS)
         int env = LIGHT_IS_ENVIRONMENT(lights[k].kind);
         float w = (pdf_bsdf > 0.0f && params->nee && (env_nee != ENV_NEE_NONE || !env))
                       ? power_heuristic(pdf_bsdf, fs_conductor_light_pdf(
-                            pdf_light * light_choice[k].pmf, path_prev_n[p],
+                            pdf_light * light_choice_at(light_choice, params->num_lights,
+                                                        env_nee)[k].pmf, path_prev_n[p],
                             path_prev_v[p], d))
                       : 1.0f;
         L += w * Le;

@@ -85,8 +85,10 @@ __kernel void scatter(SCATTER_PARAMS)
                   : above ? ENV_NEE_ABOVE : ENV_NEE_OWN;
     if (fs_random_normal_has_density(mat->kind, rn) && params->nee && params->num_lights > 0) {
         float4 ul = rng4(params->seed, pixel, sample, bounce, DIM_LIGHT);
-        int li = light_choose(light_choice, params->num_lights, ul.x);
-        float sel = light_choice[li].pmf;   /* the probability of choosing light li */
+        __global const LightChoice* table = light_choice_at(light_choice, params->num_lights,
+                                                            env_nee);
+        int li = light_choose(table, params->num_lights, ul.x);
+        float sel = table[li].pmf;   /* the probability of choosing light li */
         EnvMap m = {env_texels, env_marginal, env_conditional, params->env_width,
                     params->env_height};
         float3 wl;

@@ -7,21 +7,8 @@
  * Sampling draws m from D(m) cos theta_m (Walter et al. 2007) and reflects v about it:
  *   pdf(l) = D(m) cos theta_m / (4 v.m),  weight = albedo F G2 (v.m) / (cos v cos theta_m);
  * reflections below the surface end the path (weight 0), which is how a single-scattering
- * microfacet model loses energy. Numpy twin: gpiscl/testing/reference/rough_conductor.py. */
-
-/* exact Fresnel reflectance of a conductor for incidence cosine c (PBRT's FrConductor) */
-inline float3 fresnel_conductor(float c, float3 eta, float3 k)
-{
-    c = clamp(c, 0.0f, 1.0f);
-    float c2 = c * c, s2 = 1.0f - c2;
-    float3 t0 = eta * eta - k * k - s2;
-    float3 a2b2 = sqrt(t0 * t0 + 4.0f * eta * eta * k * k);
-    float3 a = sqrt(fmax(0.5f * (a2b2 + t0), 0.0f));
-    float3 rs = (a2b2 + c2 - 2.0f * a * c) / (a2b2 + c2 + 2.0f * a * c);
-    float3 t1 = c2 * a2b2 + s2 * s2, t2 = 2.0f * a * c * s2;
-    float3 rp = rs * (t1 - t2) / (t1 + t2);
-    return 0.5f * (rs + rp);
-}
+ * microfacet model loses energy. fresnel_conductor: bsdf/fresnel.h. Numpy twin:
+ * gpiscl/testing/reference/rough_conductor.py. */
 
 /* Smith's Lambda for Beckmann at a direction of cosine c to the normal: with
  * q = c / (alpha sin), (exp(-q^2) / (q sqrt(pi)) - erfc(q)) / 2 (no cancellation) */
