@@ -19,7 +19,7 @@ from gpiscl.testing.stats import assert_agree, image_mean_se, z_threshold
 
 MIRROR = {"type": "mirror", "albedo": 1.0}
 GOLD = {"type": "rough_conductor", "material": "Au", "roughness": 0.1}
-GOLD_MIRROR = {"type": "mirror", "albedo": 1.0, "conductor": "Au"}
+GOLD_MIRROR = {"type": "mirror", "albedo": 1.0, "material": "Au"}
 
 
 def sphere_scene(micro, classical=False, spp=64, light="rectangle", kernel=None):

@@ -38,7 +38,7 @@ def test_csg_scene_maps_every_gp_setting():
     assert (s["type"], s["memory"]) == ("function_space", "renewal_plus")  # goldfish: Renewal+
     assert "samples" not in s and "step_corr" not in s   # the step is adaptive
     assert gpis[0]["bsdf"] == {"type": "mirror", "albedo": [0.35, 0.3, 0.9],
-                               "conductor": None, "eta": None, "k": None}   # no Fresnel
+                               "material": None, "eta": None, "k": None}   # no Fresnel
     assert data["render"]["max_depth"] == 20 and data["render"]["spp"] == 1
     assert data["camera"]["fov"] == pytest.approx(20.0)  # square image: vertical = horizontal
     sun = [l for l in data["lights"] if l["type"] == "directional"]

@@ -304,7 +304,7 @@ def lit_scene(memory, bsdf, spp, nee, seed, radius=0.3, kernel=None):
 
 
 MIRROR = {"type": "mirror", "albedo": 0.9}
-GOLD_MIRROR = {"type": "mirror", "albedo": 0.9, "conductor": "Au"}
+GOLD_MIRROR = {"type": "mirror", "albedo": 0.9, "material": "Au"}
 CONDUCTOR = {"type": "rough_conductor", "material": "Au", "roughness": 0.3}
 
 

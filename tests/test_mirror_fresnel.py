@@ -32,16 +32,16 @@ def _packed(bsdf):
 
 def test_a_mirror_without_a_conductor_packs_no_fresnel_term():
     assert set(_packed(_mirror())) == {"albedo"}   # Material.fresnel stays 0
-    au = _packed(_mirror(conductor="Au"))
+    au = _packed(_mirror(material="Au"))
     assert au["fresnel"] == 1 and (au["eta"], au["k"]) == CONDUCTORS["Au"]
     own = _packed(_mirror(eta=[0.2, 0.9, 1.1], k=[3.9, 2.4, 2.1]))
     assert own["fresnel"] == 1 and own["k"] == (3.9, 2.4, 2.1)
 
 
 @pytest.mark.parametrize("keys, where", [
-    ({"conductor": "Fe"}, "bsdf.conductor"),
+    ({"material": "Fe"}, "bsdf.material"),
     ({"eta": [1.0, 1.0, 1.0]}, "bsdf.k"),
-    ({"conductor": "Au", "eta": 1.0, "k": 2.0}, "bsdf.eta"),
+    ({"material": "Au", "eta": 1.0, "k": 2.0}, "bsdf.eta"),
 ], ids=["unknown preset", "eta without k", "preset and eta"])
 def test_bad_fresnel_keys_are_scene_errors(keys, where):
     with pytest.raises(SceneError) as err:
@@ -77,10 +77,10 @@ def _expected(eta, k, albedo):
 
 
 @pytest.mark.parametrize("keys, eta_k, sampler", [
-    ({"conductor": "Au"}, CONDUCTORS["Au"], None),
+    ({"material": "Au"}, CONDUCTORS["Au"], None),
     ({"eta": [1.5, 0.4, 2.0], "k": [0.2, 3.0, 0.0]}, ((1.5, 0.4, 2.0), (0.2, 3.0, 0.0)), None),
-    ({"conductor": "Au"}, CONDUCTORS["Au"], {"type": "weight_space"}),
-    ({"conductor": "Au"}, CONDUCTORS["Au"], {"type": "function_space"}),
+    ({"material": "Au"}, CONDUCTORS["Au"], {"type": "weight_space"}),
+    ({"material": "Au"}, CONDUCTORS["Au"], {"type": "function_space"}),
 ], ids=["Au", "own eta k", "Au weight-space GPIS", "Au function-space GPIS"])
 def test_mirror_sphere_in_a_unit_environment_reflects_fresnel(device, keys, eta_k, sampler):
     """Every 4x4 block (z from the pixels' sample variances plus the float floor: a

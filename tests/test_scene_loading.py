@@ -63,7 +63,7 @@ def test_shape_and_light_defaults_and_expansion():
                       "bsdf": {"type": "diffuse", "albedo": [0.8, 0.8, 0.8]}}
     assert disk["normal"] == [0.0, 0.0, 1.0]
     assert rect["u"] == [1.0, 0.0, 0.0] and rect["v"] == [0.0, 0.0, -1.0]
-    assert rect["bsdf"] == {"type": "mirror", "albedo": [1.0, 1.0, 1.0], "conductor": None,
+    assert rect["bsdf"] == {"type": "mirror", "albedo": [1.0, 1.0, 1.0], "material": None,
                             "eta": None, "k": None}
     assert box["bsdf"] == {"type": "null"}
     sun, area = data["lights"]

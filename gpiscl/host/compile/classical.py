@@ -39,8 +39,8 @@ def counterpart_bsdf(micro: dict, alpha: float, source: str, where: str) -> dict
     if kind == "diffuse":
         return dict(micro)
     if kind == "mirror":
-        fresnel = micro.get("conductor") is not None or micro.get("eta") is not None
-        eta, k = eta_k(micro, "conductor") if fresnel else ([1.0] * 3, [_MIRROR_K] * 3)
+        fresnel = micro.get("material") is not None or micro.get("eta") is not None
+        eta, k = eta_k(micro) if fresnel else ([1.0] * 3, [_MIRROR_K] * 3)
         rough = {"type": "rough_conductor", "material": "Cu", "eta": list(eta),
                  "k": list(k), "albedo": micro["albedo"]}
     elif kind == "rough_conductor":

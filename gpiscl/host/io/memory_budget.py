@@ -126,8 +126,8 @@ def _kib(text: str) -> int:
 
 
 def size_text(n: float) -> str:
-    """Bytes in the largest binary unit that keeps the number >= 1: '192 MiB', '10 KiB'
-    (a --max-memory 10K budget read '9.54e-06 GiB')."""
+    """Bytes in the largest binary unit that keeps the number >= 1: `192 MiB`, `10 KiB`
+    (a --max-memory 10K budget read `9.54e-06 GiB`)."""
     for shift, unit in ((40, "TiB"), (30, "GiB"), (20, "MiB"), (10, "KiB")):
         if abs(n) >= 1 << shift:
             return f"{n / (1 << shift):.3g} {unit}"

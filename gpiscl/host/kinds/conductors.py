@@ -14,9 +14,9 @@ CONDUCTORS = {
 }
 
 
-def eta_k(bsdf: dict, preset_key: str = "material"):
-    """(eta, k) RGB of a resolved conductor: its own eta and k, else those of the preset
-    its `preset_key` names (rough_conductor's "material", a mirror's "conductor")."""
+def eta_k(bsdf: dict):
+    """(eta, k) RGB of a resolved conductor (rough_conductor, or a mirror with a Fresnel
+    term): its own eta and k, else those of the preset its "material" names."""
     if bsdf.get("eta") is not None:
         return tuple(bsdf["eta"]), tuple(bsdf["k"])
-    return CONDUCTORS[bsdf[preset_key]]
+    return CONDUCTORS[bsdf["material"]]

@@ -35,9 +35,9 @@ def pack_rough_conductor(bsdf: dict) -> dict:
 
 
 def pack_mirror(bsdf: dict) -> dict:
-    if bsdf["conductor"] is None and bsdf["eta"] is None:
+    if bsdf["material"] is None and bsdf["eta"] is None:
         return {"albedo": bsdf["albedo"]}
-    eta, k = eta_k(bsdf, "conductor")
+    eta, k = eta_k(bsdf)
     return {"albedo": bsdf["albedo"], "eta": eta, "k": k, "fresnel": 1}
 
 
@@ -48,8 +48,8 @@ def _eta_k_together(b):
 
 
 def _conductor_or_eta_k(b):
-    if b["conductor"] is not None and b["eta"] is not None:
-        return "eta", "give a conductor preset or eta and k, not both"
+    if b["material"] is not None and b["eta"] is not None:
+        return "eta", "give a preset `material` or eta and k, not both"
     return None
 
 
@@ -67,11 +67,11 @@ ROUGH_CONDUCTOR = Record({"material": Field(Enum(*CONDUCTORS), "Cu"),
                           "albedo": Field(ALBEDO, 1.0)}, [_eta_k_together])
 
 
-# A perfect mirror. Without `conductor` (or `eta` and `k`) it reflects `albedo` at every
-# angle; with one it reflects albedo x the exact unpolarised Fresnel term of that metal
-# (a preset, conductors.py, or explicit RGB eta and k), as rough_conductor does.
+# A perfect mirror. Without `material` (a conductor preset, conductors.py) or `eta` and
+# `k` it reflects `albedo` at every angle; with either it reflects albedo x the exact
+# unpolarised Fresnel term of that metal, as rough_conductor does.
 MIRROR = Record({"albedo": Field(ALBEDO, 1.0),
-                 "conductor": Field(Nullable(Enum(*CONDUCTORS)), None),
+                 "material": Field(Nullable(Enum(*CONDUCTORS)), None),
                  "eta": Field(Nullable(RGB), None),
                  "k": Field(Nullable(RGB), None)}, [_eta_k_together, _conductor_or_eta_k])
 
