@@ -77,7 +77,7 @@ class RenderStats:
     nan_paths: int = 0
     truncated_paths: int = 0
     killed_paths: int = 0      # GPIS hits whose sampled normal faced away from the ray
-    gpis_failed: int = 0       # GPIS root searches that could not decide (counted, no hit)
+    gpis_failed: int = 0       # GPIS flights that failed: undecided root, capped track (no hit)
     depth_cut_paths: int = 0   # paths that would have scattered again but reached max_depth
     fs_flights: int = 0        # function space: free flights through one object
     fs_samples: int = 0        # ... GP values they drew, and step-rule moment evaluations
@@ -106,7 +106,8 @@ class RenderStats:
                          f"{self.truncated_paths} cut at the wavefront iteration limit, "
                          f"{self.depth_cut_paths} ended by max_depth, "
                          f"{self.killed_paths} killed at a GPIS normal facing away; "
-                         f"{self.gpis_failed} undecided GPIS root searches")
+                         f"{self.gpis_failed} failed GPIS flights (an undecided root search "
+                         "or a classical medium's capped track)")
         return "\n".join(lines)
 
 
