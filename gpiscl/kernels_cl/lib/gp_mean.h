@@ -54,6 +54,17 @@ inline float gp_grid_sample(GP_MEAN_SPACE const MeanNode* payload, int j)
     return ((GP_MEAN_SPACE const float*)(payload + r))[j - r * GP_MEAN_GRID_PAYLOAD_FLOATS];
 }
 
+/* The eight samples of the cell whose lowest corner is sample b (sx, sy: the x and y
+ * strides), component 4 dx + 2 dy + dz: .s0 = c000, .s1 = c001, ..., .s7 = c111. */
+inline float8 gp_grid_corners(GP_MEAN_SPACE const MeanNode* payload, int b, int sx, int sy)
+{
+    return (float8)(gp_grid_sample(payload, b), gp_grid_sample(payload, b + 1),
+                    gp_grid_sample(payload, b + sy), gp_grid_sample(payload, b + sy + 1),
+                    gp_grid_sample(payload, b + sx), gp_grid_sample(payload, b + sx + 1),
+                    gp_grid_sample(payload, b + sx + sy),
+                    gp_grid_sample(payload, b + sx + sy + 1));
+}
+
 /* The trilinear cell of index coordinates u in a grid of `dims` samples per axis (x index
  * first): u clamped to the sample box, its cell (floor, the last cell at the far faces),
  * the weights t inside it, the first sample's index and the x and y strides. Shared by
@@ -85,16 +96,11 @@ inline float gp_grid_trilinear(GP_MEAN_SPACE const MeanNode* n, float3 u, float3
     GP_MEAN_SPACE const MeanNode* payload = n + 1;
     GpGridCell q = gp_grid_cell(n->p1.xyz, u);
     float3 t = q.t;
-    int b = q.base, sx = q.sx, nz = q.sy;
-    float c000 = gp_grid_sample(payload, b), c001 = gp_grid_sample(payload, b + 1);
-    float c010 = gp_grid_sample(payload, b + nz), c011 = gp_grid_sample(payload, b + nz + 1);
-    float c100 = gp_grid_sample(payload, b + sx), c101 = gp_grid_sample(payload, b + sx + 1);
-    float c110 = gp_grid_sample(payload, b + sx + nz);
-    float c111 = gp_grid_sample(payload, b + sx + nz + 1);
-    float x0 = mix(mix(c000, c001, t.z), mix(c010, c011, t.z), t.y);
-    float x1 = mix(mix(c100, c101, t.z), mix(c110, c111, t.z), t.y);
-    float gy = mix(mix(c010 - c000, c011 - c001, t.z), mix(c110 - c100, c111 - c101, t.z), t.x);
-    float gz = mix(mix(c001 - c000, c011 - c010, t.y), mix(c101 - c100, c111 - c110, t.y), t.x);
+    float8 c = gp_grid_corners(payload, q.base, q.sx, q.sy);
+    float x0 = mix(mix(c.s0, c.s1, t.z), mix(c.s2, c.s3, t.z), t.y);
+    float x1 = mix(mix(c.s4, c.s5, t.z), mix(c.s6, c.s7, t.z), t.y);
+    float gy = mix(mix(c.s2 - c.s0, c.s3 - c.s1, t.z), mix(c.s6 - c.s4, c.s7 - c.s5, t.z), t.x);
+    float gz = mix(mix(c.s1 - c.s0, c.s3 - c.s2, t.y), mix(c.s5 - c.s4, c.s7 - c.s6, t.y), t.x);
     *out = u - q.c;
     *grad = select((float3)(x1 - x0, gy, gz), (float3)(0.0f), isnotequal(*out, (float3)(0.0f)));
     return mix(x0, x1, t.x);
@@ -396,17 +402,9 @@ inline float gp_mean_monotone_reach(GP_MEAN_SPACE const MeanNode* n, float3 p, f
     int cells = left.x + left.y + left.z + 1, sign = 0;
     float t = 0.0f;                                   /* where the current cell starts */
     for (int k = 0; k < cells; ++k) {
-        int base = (c.x * ny + c.y) * nz + c.z;
-        float c000 = gp_grid_sample(payload, base), c001 = gp_grid_sample(payload, base + 1);
-        float c010 = gp_grid_sample(payload, base + nz);
-        float c011 = gp_grid_sample(payload, base + nz + 1);
-        float c100 = gp_grid_sample(payload, base + sx);
-        float c101 = gp_grid_sample(payload, base + sx + 1);
-        float c110 = gp_grid_sample(payload, base + sx + nz);
-        float c111 = gp_grid_sample(payload, base + sx + nz + 1);
-        float4 ex = (float4)(c100 - c000, c101 - c001, c110 - c010, c111 - c011);
-        float4 ey = (float4)(c010 - c000, c011 - c001, c110 - c100, c111 - c101);
-        float4 ez = (float4)(c001 - c000, c011 - c010, c101 - c100, c111 - c110);
+        float8 s = gp_grid_corners(payload, (c.x * ny + c.y) * nz + c.z, sx, nz);
+        /* the cell's edge differences along x, y and z */
+        float4 ex = s.s4567 - s.s0123, ey = s.s2367 - s.s0145, ez = s.s1357 - s.s0246;
         float3 lo = (float3)(fmin(fmin(ex.x, ex.y), fmin(ex.z, ex.w)),
                              fmin(fmin(ey.x, ey.y), fmin(ey.z, ey.w)),
                              fmin(fmin(ez.x, ez.y), fmin(ez.z, ez.w)));
