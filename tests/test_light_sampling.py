@@ -16,24 +16,11 @@ from gpiscl.host.compile.scene import compile_scene
 from gpiscl.host.kinds.lights import LIGHTS
 from gpiscl.host.scene.loading import load_scene
 from gpiscl.scenes import default_scene, furnace_sphere
-from gpiscl.testing.scenes import function_space_sampler, gpis_scene
+from gpiscl.testing.scenes import function_space_sampler, gpis_scene, sun_sky_floor
 from gpiscl.testing.stats import assert_agree, image_mean_se, z_threshold
 
 ROOT = Path(__file__).resolve().parent.parent
 SKY = str(ROOT / "scenes" / "assets" / "sky.exr")
-
-
-def sun_sky_floor(resolution=16, sun_radius=0.265):
-    return {"camera": {"position": [0, 2, 4], "look_at": [0, 0, 0], "up": [0, 1, 0],
-                       "fov": 40, "resolution": [resolution, resolution]},
-            "render": {"spp": 64, "seed": 3, "max_depth": 5},
-            "shapes": [{"type": "rectangle", "center": [0, 0, 0], "u": [20, 0, 0],
-                        "v": [0, 0, -20], "bsdf": {"type": "diffuse", "albedo": 0.5}},
-                       {"type": "sphere", "center": [0, 0.5, 0], "radius": 0.5,
-                        "bsdf": {"type": "diffuse", "albedo": 0.8}}],
-            "lights": [{"type": "directional", "direction": [0.3, 1, 0.2],
-                        "irradiance": 3.0, "angular_radius": sun_radius},
-                       {"type": "environment", "radiance": 0.5}]}
 
 
 def two_lamps_and_a_map(resolution=16):

@@ -34,20 +34,6 @@ SCENES = ("cornell", "scenes/fs_sphere_se.json", "scenes/knob.json",
           "scenes/csg_two_spheres.json", "sun_sky_floor")
 
 
-def sun_sky_floor() -> dict:
-    """A diffuse floor and sphere under a sun and a constant sky (issue 31's case)."""
-    return {"camera": {"position": [0, 2, 4], "look_at": [0, 0, 0], "up": [0, 1, 0],
-                       "fov": 40, "resolution": [32, 32]},
-            "render": {"spp": 64, "seed": 1, "max_depth": 6},
-            "shapes": [{"type": "rectangle", "center": [0, 0, 0], "u": [20, 0, 0],
-                        "v": [0, 0, -20], "bsdf": {"type": "diffuse", "albedo": 0.5}},
-                       {"type": "sphere", "center": [0, 0.5, 0], "radius": 0.5,
-                        "bsdf": {"type": "diffuse", "albedo": 0.8}}],
-            "lights": [{"type": "directional", "direction": [0.3, 1, 0.2],
-                        "irradiance": 3.0},
-                       {"type": "environment", "radiance": 0.5}]}
-
-
 def mirror_ball_map() -> dict:
     """fs_mirror_ball_sun's function-space mirror ball under the sky map instead."""
     scene = json.loads((ROOT / "scenes" / "fs_mirror_ball_sun.json").read_text())
@@ -58,7 +44,8 @@ def mirror_ball_map() -> dict:
 
 def _scene(name: str):
     if name == "sun_sky_floor":
-        return sun_sky_floor()
+        from gpiscl.testing.scenes import sun_sky_floor
+        return sun_sky_floor(resolution=32, seed=1, max_depth=6)
     if name == "mirror_ball_map":
         return mirror_ball_map()
     if name == "cornell":

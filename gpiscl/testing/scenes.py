@@ -107,3 +107,18 @@ def posterior_tables(post=None, lead=3):
         g["posterior_first"], g["posterior_count"], g["posterior_doubles"] = lead, len(r), lead
         rows, doubles = np.concatenate([rows, r]), np.concatenate([doubles, d])
     return g, rows, doubles
+
+
+def sun_sky_floor(resolution=16, seed=3, max_depth=5, sun_radius=0.265):
+    """A diffuse floor and sphere under a sun (angular radius in degrees) and a constant
+    sky: issue 31's light-choice case, for its tests and tools/bench_light_sampling.py."""
+    return {"camera": {"position": [0, 2, 4], "look_at": [0, 0, 0], "up": [0, 1, 0],
+                       "fov": 40, "resolution": [resolution, resolution]},
+            "render": {"spp": 64, "seed": seed, "max_depth": max_depth},
+            "shapes": [{"type": "rectangle", "center": [0, 0, 0], "u": [20, 0, 0],
+                        "v": [0, 0, -20], "bsdf": {"type": "diffuse", "albedo": 0.5}},
+                       {"type": "sphere", "center": [0, 0.5, 0], "radius": 0.5,
+                        "bsdf": {"type": "diffuse", "albedo": 0.8}}],
+            "lights": [{"type": "directional", "direction": [0.3, 1, 0.2],
+                        "irradiance": 3.0, "angular_radius": sun_radius},
+                       {"type": "environment", "radiance": 0.5}]}
