@@ -355,10 +355,15 @@ def _stored_scenes(folder):
 
 
 def test08_posterior_renders_match_the_stored_images(device, tmp_path):
-    """Bit for bit the images stored in tests/data/posterior_images.npz (rendered before the
-    posterior moved from the mean-node array to its own tables, and again with the light
-    choice of issue 31 by the code before that move): no example scene has a posterior, so
-    tests/test_images_unchanged.py does not see this path."""
+    """The images stored in tests/data/posterior_images.npz (rendered before the posterior
+    moved from the mean-node array to its own tables, and again with the light choice of
+    issue 31 by the code before that move): no example scene has a posterior, so
+    tests/test_images_unchanged.py does not see this path. Counts bit for bit, values to
+    2e-3 relative: the posterior's factor and weights are solved on the host by numpy's
+    BLAS, whose kernels (AVX2 or AVX-512) round differently from CPU to CPU, and that
+    rounding reaches the normals (measured between two machines: 6e-4 relative at most,
+    on 28 of 144 pixels; the weight-space image 2e-4); a changed path moves a pixel by
+    the noise, 1e-2 or more."""
     from gpiscl import render_result
     from gpiscl.host.compile.scene import compile_scene
     from gpiscl.host.render.integrator import WavefrontIntegrator
@@ -373,5 +378,10 @@ def test08_posterior_renders_match_the_stored_images(device, tmp_path):
                                         batch_size=batch)
             image = integ.render(int(data["render"]["spp"])).image
         for field in ("mean", "stderr", "count"):
-            assert np.array_equal(getattr(image, field), stored[f"{name}.{field}"]), \
-                (name, field)
+            got, want = getattr(image, field), stored[f"{name}.{field}"]
+            if field == "count":
+                assert np.array_equal(got, want), (name, field)
+            else:   # stderr to the pixel's mean: it is a difference of squares
+                scale = np.abs(stored[f"{name}.mean"])
+                assert np.all(np.abs(got - want) <= 2e-3 * scale), \
+                    (name, field, np.abs(got - want).max())
