@@ -283,3 +283,32 @@ def test10_sphere_tracing_from_ball_to_ball_stops_at_a_thin_feature(device, flig
     out = flights(device, flight_prg, kern, slab, 2000, memory="renewal_plus", d=d, t1=12.0,
                   seed=6)
     assert_every_ray_hits_at(out, 5.9, 0.1)
+
+
+@pytest.mark.parametrize("angle", [0.0, 60.0])
+def test11_steps_the_mean_certifies_keep_the_first_passage_law(device, flight_prg, angle):
+    """A trilinear grid ramp (slope 1.7 along x) under SE sigma 0.1, l 0.5: head-on its
+    slope is above FS_MONO_R g = 1.6, so fs_mean_step certifies the steps by the prior
+    mean alone (far-zone balls, then the monotone stretch) and the rule is not evaluated;
+    at 60 degrees (slope 0.85) the rule decides. First hits against a dense joint sample
+    (spacing l / 50): two-sample KS, Bonferroni over both angles."""
+    from gpiscl.host.gp.means import GridMean
+    h = 0.05
+    x = -0.5 + h * np.arange(int(round(3.0 / h)) + 1)
+    ny = int(round(3.0 / h)) + 1                       # y in [-0.5, 2.5]: the 60-degree ray
+    values = np.repeat(np.repeat((1.7 * (1.0 - x))[:, None, None], ny, axis=1), 2, axis=2)
+    grid = GridMean(values.astype(np.float32), (-0.5, -0.5, -0.5 * h), h)
+    kern = SquaredExponential(sigma=0.1, length_scale=0.5)
+    a = math.radians(angle)
+    d = (math.cos(a), math.sin(a), 0.0)
+    t1 = 1.6 / d[0]
+    n = 8000
+    dense = FS.dense_first_hits(kern, grid, (0, 0, 0), d, 0.0, t1, int(t1 / 0.01) + 1, n,
+                                np.random.default_rng(31 + int(angle)))
+    dense = np.where(np.isfinite(dense), dense, -1.0)
+    out = flights(device, flight_prg, kern, grid, n, memory="renewal", o=(0, 0, 0), d=d,
+                  t1=t1, seed=32 + int(angle))
+    D, crit = ks_two_sample(out[:, 0], dense, 2)
+    print(f"angle {angle}: hit fraction {np.mean(out[:, 0] >= 0):.4f} vs "
+          f"{np.mean(dense >= 0):.4f}, KS {D:.4f} (critical {crit:.4f})")
+    assert D < crit

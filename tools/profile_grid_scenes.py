@@ -88,7 +88,8 @@ def report(name, st, c, stages, sec):
           f"{c['fs_cap_end'] / steps:.1%}; near the zero set (|m| < (Z + kappa) sd) "
           f"{c['fs_near_steps'] / steps:.1%}")
     print(f"  monotone stretch (fs_mean_step): {c['fs_mono_scans'] / fl:.2f} slope-range "
-          f"scans a flight, cap lifted on {c['fs_mono_steps'] / steps:.1%} of the steps")
+          f"scans a flight, cap lifted on {c['fs_mono_steps'] / steps:.1%} of the steps, "
+          f"steps certified by the mean alone (no rule) {c['fs_cert_steps'] / steps:.1%}")
     print("  stage device seconds: " + ", ".join(
         f"{k} {v:.2f} ({v / total:.0%})" for k, v in sorted(stages.items(), key=lambda kv: -kv[1])
         if v / total >= 0.02))

@@ -13,7 +13,10 @@
  *    is at most miss_tolerance * h / l_d. Hence a ray's expected misses are at most
  *    tol * length / l_d. Steps grow by 2, 1.5 or 1.1, are capped at FS_H_MAX l_d, at the
  *    ray's end and at fs_mean_step (the prior mean must not change faster than the nodes
- *    see), and halve on rejection down to FS_H_MIN l_d. The rule's moments come from a
+ *    see), and halve on rejection down to FS_H_MIN l_d. A try that fs_mean_step certifies
+ *    by the prior mean alone (|mean| >= FS_MEAN_Z sd, or monotone with slope >= FS_MONO_R
+ *    g, on all of it) is taken without the rule: the prior's expected crossings there are
+ *    far below the tolerance (fs_mean_step). The rule's moments come from a
  *    small system (FS_RULE_MEMORY memory rows, the last FS_RULE_SAMPLES samples): only
  *    the step length, never a value's law, depends on it.
  *  - Hit. The first sample below 0 after one at or above 0 brackets the crossing; points
@@ -250,13 +253,20 @@ inline double fs_downcrossing_slope(double mean, double sd, double2 u)
  * dn, > 0 only for stationary priors without a posterior; gp_mean_monotone_reach) cannot
  * dip and come back, and the crossings it could hide are negligible: the cap extends to
  * the end of that stretch (after the far one sphere tracing certified). Returns the first
- * try's length: hg (the growth ladder's), or less where the mean needs it. Why kappa is
+ * try's length: hg (the growth ladder's), or less where the mean needs it; *certified
+ * when the far and monotone stretches cover the whole try. Such a try needs no rule: every
+ * certified stretch lies in a set fixed by the ray and the prior alone (|mean| >=
+ * FS_MEAN_Z sd, or monotone with |slope| >= FS_MONO_R g), whose expected crossings under
+ * the prior bound the chance of any miss there: ~2e-9 per l_d and psi(8) / 8 = 1e-17 per
+ * monotone piece, against the rule's 2e-6 per l_d (the rule accepted every such try of
+ * the example scenes with r < 0.05, so the steps, and the images, stayed the same). Why kappa is
  * 6, with the paired renders that chose it: docs/design/function-space-march.md, "The
  * mean cap"; the monotone stretch: docs/design/grid-means.md. */
 inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
                            FsRay ray, double3 dn, double ta, double hg, double m, double sd,
-                           double lip, int grid, double g FS_PROF_PARAM)
+                           double lip, int grid, double g, int* certified FS_PROF_PARAM)
 {
+    *certified = 0;
     if (!(lip > 0.0)) return hg;
     double reach = fmax(FS_MEAN_KAPPA * sd, fabs(m) - FS_MEAN_Z * sd), cap = reach / lip;
     /* a try past t1 is clipped to it (then any cap >= he takes the same step as hg) */
@@ -279,7 +289,7 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
         for (int k = 0; k < FS_MEAN_HOPS; ++k) {
             double hop = (mz - FS_MEAN_Z * sd) / lip;
             s += hop;
-            if (s >= he) return hg;
+            if (s >= he) { *certified = 1; return hg; }
             /* converging onto the near zone, or out of hops */
             if (hop < 0.25 * FS_MEAN_KAPPA * sd / lip || k + 1 == FS_MEAN_HOPS) break;
             double mk = fs_prior_mean(mean, mc, ray.o + (ta + s) * ray.d, dn, FS_OBS_VALUE);
@@ -288,6 +298,7 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
             mz = fabs(mk);
         }
         far = s;
+        *certified = s >= cap;
         cap = fmax(cap, s);
     }
     if (g > 0.0) {
@@ -304,10 +315,12 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
             (float)(FS_MONO_R * g), (float)ma, (float)(FS_MEAN_Z * sd));
         if (mono >= 1.0) {
             FS_PROF_ADD(MONO_STEPS, 1);
+            *certified = 1;
             return hg;
         }
         double end = far + mono * (he - far);
         FS_PROF_ADD(MONO_STEPS, end > cap);
+        *certified = end >= cap && end > 0.0;
         cap = fmax(cap, end);
     }
     return cap;
@@ -445,8 +458,9 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
                 ? fs_start_mean(p, mean, mc, S, fixed, n, ray.o + ta * ray.d, dn, &sd0
                                 FS_PROF_PASS) : 0.0;
             double hg = fmin(grow * h, FS_H_MAX * ell);
-            h = fs_mean_step(p, mean, mc, S, ray, dn, ta, hg, m0, sd0, lip, grid, gslope
-                             FS_PROF_PASS);
+            int certified;
+            h = fs_mean_step(p, mean, mc, S, ray, dn, ta, hg, m0, sd0, lip, grid, gslope,
+                             &certified FS_PROF_PASS);
 #ifdef FS_PROFILE
             /* what set the first try: the ray's end, the mean cap, FS_H_MAX, the growth */
             if (ta + fmin(h, hg) >= ray.t1) res.prof[FS_PROF_CAP_END]++;
@@ -456,12 +470,19 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
             res.prof[FS_PROF_NEAR_STEPS] += lip > 0.0
                 && fabs(m0) < (FS_MEAN_Z + FS_MEAN_KAPPA) * sd0;
 #endif
-            if (r_new > FS_RULE_SAMPLES) {
+            if (certified) {
+                /* the prior mean alone bounds the try's crossings (fs_mean_step): no rule */
+                tb = ta + h >= ray.t1 ? ray.t1 : ta + h;
+                grow = 2.0;
+                r_new = FS_RULE_SAMPLES + 1;     /* R is not kept up: rebuilt when needed */
+                FS_PROF_ADD(STEPS, 1);
+                FS_PROF_ADD(CERT_STEPS, 1);
+            } else if (r_new > FS_RULE_SAMPLES) {
                 nr = fs_rule_build(p, mean, mc, S, R, fixed, n, ray, ta,
                                    FS_H_MAX * ell, ell, &st);
                 r_new = 0;
             }
-            for (; !st;) {
+            for (; !st && !certified;) {
                 int clipped = ta + h >= ray.t1;
                 double hs = clipped ? ray.t1 - ta : h;
                 /* Gauss-Radau with nu(ta) = 0: the mean rate over the step (per length)
