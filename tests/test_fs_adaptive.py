@@ -312,3 +312,33 @@ def test11_steps_the_mean_certifies_keep_the_first_passage_law(device, flight_pr
     print(f"angle {angle}: hit fraction {np.mean(out[:, 0] >= 0):.4f} vs "
           f"{np.mean(dense >= 0):.4f}, KS {D:.4f} (critical {crit:.4f})")
     assert D < crit
+
+
+def test12_far_balls_under_a_sigma_field_see_where_sigma_grows(device, flight_prg):
+    """fs_mean_step's far balls under a sigma(x) field: the mean (0.5, nearly flat) is 50
+    sd above 0 where the ray starts (sigma 0.01), but a radial field raises sigma to 1 in
+    a ball (x in [2.4, 3.1]) where f < 0 about 40% of the time. Each ball must be sized by
+    the sd's bound over it (fs_sd_over), not by the sd at its start: that certifies tries
+    of the growth ladder across the ball without the rule, and every hit is lost (hit
+    fraction 0 against 0.41). First hits against a dense joint sample (the field's width,
+    0.12, is a quarter of l: sharper rises of sigma than the step sees are another matter,
+    docs/design/grid-means.md "Sigma fields")."""
+    from gpiscl.host.gp.kernels import NonStationary, RadialField
+    from gpiscl.host.gp.means import GridMean
+    h = 0.1
+    x = -0.5 + h * np.arange(int(round(6.0 / h)) + 1)
+    values = np.repeat(np.repeat((0.5 + 0.01 * x)[:, None, None], 3, axis=1), 2, axis=2)
+    grid = GridMean(values.astype(np.float32), (-0.5, -h, -0.5 * h), h)
+    kern = NonStationary(SquaredExponential(sigma=1.0, length_scale=0.5),
+                         sigma_field=RadialField(center=(2.75, 0.0, 0.0), radius=0.35,
+                                                 width=0.12, inner=1.0, outer=0.01))
+    n = 8000
+    dense = FS.dense_first_hits(kern, grid, (1.5, 0, 0), (1, 0, 0), 0.0, 3.5, 351, n,
+                                np.random.default_rng(41))
+    dense = np.where(np.isfinite(dense), dense, -1.0)
+    out = flights(device, flight_prg, kern, grid, n, memory="renewal", o=(1.5, 0, 0), t1=3.5,
+                  seed=42)
+    D, crit = ks_two_sample(out[:, 0], dense, 1)
+    print(f"hit fraction {np.mean(out[:, 0] >= 0):.4f} vs {np.mean(dense >= 0):.4f}, "
+          f"KS {D:.4f} (critical {crit:.4f})")
+    assert D < crit

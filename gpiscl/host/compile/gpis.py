@@ -122,6 +122,12 @@ def occupancy_level(g: dict, kernel: K.Kernel | None = None) -> float:
     eps = (g.get("bounds") or {}).get("occupancy")
     if eps is None:
         return 0.0
+    level = NormalDist().inv_cdf(1.0 - eps) * sigma_max(g, kernel)
+    return float(np.nextafter(np.float32(level), np.float32(np.inf)))
+
+
+def sigma_max(g: dict, kernel: K.Kernel | None = None) -> float:
+    """The largest sigma(x) over the object's proxy (sigma itself without a sigma field)."""
     if kernel is None:
         kernel = build_kernel(g["kernel"], g["proxy"])
     base = kernel.base if isinstance(kernel, K.NonStationary) else kernel
@@ -133,8 +139,7 @@ def occupancy_level(g: dict, kernel: K.Kernel | None = None) -> float:
     elif sf is not None:   # max of a linear field = -(min of its negation)
         neg = dict(sf, value=-sf["value"], gradient=[-c for c in sf["gradient"]])
         m_max = -field_minimum(neg, g["proxy"])
-    level = NormalDist().inv_cdf(1.0 - eps) * math.sqrt(base.variance) * m_max
-    return float(np.nextafter(np.float32(level), np.float32(np.inf)))
+    return math.sqrt(base.variance) * m_max
 
 
 def _warn_if_cut(g: dict, mean: M.Mean, kernel: K.Kernel, source: str, key: str) -> None:
@@ -202,6 +207,9 @@ def compile_object(g: dict, o, kernel_record: np.ndarray, source: str, key: str,
     kernel_record (GpKernel, 1) and o's occupancy level."""
     kernel = build_kernel(g["kernel"], g["proxy"])
     kernel_record[:] = pack_kernel(kernel)
+    if g["kernel"].get("sigma_field") is not None:   # rounded up: the device's bound
+        kernel_record["sigma_top"] = np.nextafter(np.float32(sigma_max(g, kernel)),
+                                                  np.float32(np.inf))
     try:
         mean = build_mean(g["mean"], bakes)
         records = pack_mean_parts(mean)

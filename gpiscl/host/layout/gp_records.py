@@ -38,6 +38,8 @@ GP_KERNEL = Struct("GpKernel", (
     ("int", "sigma_field"),
     ("int", "ls_field"),
     ("float", "ls_step"),           # smallest l(x) where rays sample: the step rule's l
+    ("float", "sigma_top"),         # largest sigma(x) over the proxy (sigma fields; host):
+                                    # fs_mean_step's far balls
     ("int", "sigma_grid"),
     ("int", "ls_grid"),
     ("float4", "sigma_p0"),

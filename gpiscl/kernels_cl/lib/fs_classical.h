@@ -77,48 +77,6 @@ inline double fs_cl_rate(FsClKernel k, double mu, double m, double ms, double ml
     return fs_cl_hazard(mu / sigma) * s * fs_cl_negative_part(m / s) / sigma;
 }
 
-/* The smallest and largest of a kernel grid field over the segment [a, b]: the samples
- * of every trilinear cell (gp_grid_cell) the segment's index box meets, padded for the
- * float map. The tracker keeps stretches within a voxel, so at most 3^3 samples. */
-inline double2 fs_cl_grid_range(__global const MeanNode* n, double3 a, double3 b)
-{
-    float3 fa = convert_float3(a), fb = convert_float3(b);
-    float3 ua = (float3)(dot(n->row0.xyz, fa) + n->row0.w, dot(n->row1.xyz, fa) + n->row1.w,
-                         dot(n->row2.xyz, fa) + n->row2.w);
-    float3 ub = (float3)(dot(n->row0.xyz, fb) + n->row0.w, dot(n->row1.xyz, fb) + n->row1.w,
-                         dot(n->row2.xyz, fb) + n->row2.w);
-    float3 pad = 2e-3f + 4.0f * FLT_EPSILON * fmax(fabs(ua), fabs(ub));
-    float3 top = n->p1.xyz - 1.0f;
-    int3 c0 = convert_int3(fmin(floor(fmin(fmax(fmin(ua, ub) - pad, 0.0f), top)), top - 1.0f));
-    int3 c1 = convert_int3(fmin(floor(fmin(fmax(fmax(ua, ub) + pad, 0.0f), top)), top - 1.0f)) + 1;
-    int ny = (int)n->p1.y, nz = (int)n->p1.z;
-    double lo = INFINITY, hi = -INFINITY;
-    for (int i = c0.x; i <= c1.x; ++i)
-        for (int j = c0.y; j <= c1.y; ++j)
-            for (int q = c0.z; q <= c1.z; ++q) {
-                double v = gp_grid_sample(n + 1, (i * ny + j) * nz + q);
-                lo = fmin(lo, v);
-                hi = fmax(hi, v);
-            }
-    return (double2)(lo, hi);
-}
-
-/* The range of one field multiplier over the segment [a, b]: 1 without a field, a linear
- * field's end values, a radial one's inner and outer levels (it blends between them), a
- * grid's samples (fs_cl_grid_range). */
-inline double2 fs_cl_field_range(int kind, float4 p0, float4 p1,
-                                 __global const MeanNode* grid, double3 a, double3 b)
-{
-    double3 g;
-    if (kind == GP_FIELD_LINEAR) {
-        double va = gp_field(kind, p0, p1, a, &g), vb = gp_field(kind, p0, p1, b, &g);
-        return (double2)(fmin(va, vb), fmax(va, vb));
-    }
-    if (kind == GP_FIELD_RADIAL) return (double2)(fmin(p1.x, p1.y), fmax(p1.x, p1.y));
-    if (kind == GP_FIELD_GRID) return fs_cl_grid_range(grid, a, b);
-    return (double2)(1.0);
-}
-
 /* The longest stretch from a along unit d over which the bounds stay tight: the mean
  * moves by at most FS_CL_STRETCH sigma (slope bound lip), a linear field by that fraction
  * of itself, and a grid field's index point by at most one voxel (fs_cl_grid_range). */
@@ -212,8 +170,8 @@ inline FsResult fs_classical_tracked_flight(GpKernel p, __global const MeanNode*
             }
         }
         double3 b = a + L * dn;
-        double2 ms = fs_cl_field_range(p.sigma_field, p.sigma_p0, p.sigma_p1, sgrid, a, b);
-        double2 ml = fs_cl_field_range(p.ls_field, p.ls_p0, p.ls_p1, lgrid, a, b);
+        double2 ms = fs_field_range(p.sigma_field, p.sigma_p0, p.sigma_p1, sgrid, a, b);
+        double2 ml = fs_field_range(p.ls_field, p.ls_p0, p.ls_p1, lgrid, a, b);
         /* the mean in float: its rounding, ~1e-7 relative, is padded */
         double mu_lo = mu - lip * L - 1e-6 * (1.0 + fabs(mu));
         double z_lo = mu_lo / (k.sigma0 * (mu_lo >= 0.0 ? ms.y : ms.x));

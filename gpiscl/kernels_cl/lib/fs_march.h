@@ -239,6 +239,25 @@ inline double fs_downcrossing_slope(double mean, double sd, double2 u)
     return -sd * fmax(y, DBL_MIN);
 }
 
+/* An upper bound of the prior sd on [ta, tb] of the ray, for fs_mean_step's far balls:
+ * sd itself without a sigma(x) field (sd is the same all along), else sigma times the
+ * field's largest value there (fs_field_range; a grid field's cells only up to
+ * FS_SD_BOX_SAMPLES samples, past that GpKernel.sigma_top, the largest over the proxy,
+ * which the scene compiler sets: 0, unset, bounds nothing). */
+#define FS_SD_BOX_SAMPLES 64
+inline double fs_sd_over(GpKernel p, __global const MeanNode* mean, FsRay ray, double ta,
+                         double tb, double sd)
+{
+    if (!p.sigma_field) return sd;
+    double top = p.sigma_top > 0.0f ? (double)p.sigma_top : INFINITY;
+    __global const MeanNode* grid = mean + p.sigma_grid;
+    double3 a = ray.o + ta * ray.d, b = ray.o + tb * ray.d;
+    if (p.sigma_field == GP_FIELD_GRID && fs_grid_box_samples(grid, a, b) > FS_SD_BOX_SAMPLES)
+        return top;
+    return fmin(top, sqrt((double)p.sigma2)
+                     * fs_field_range(p.sigma_field, p.sigma_p0, p.sigma_p1, grid, a, b).y);
+}
+
 /* The longest step the prior mean allows: the rule sees the process only at its nodes
  * and at the step's ends, so a mean that dips to 0 between them (a feature thinner than
  * the step, with sigma << l: the knob) would hide the rate's peak. With the mean's
@@ -267,34 +286,57 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
                            double lip, int grid, double g, int* certified FS_PROF_PARAM)
 {
     *certified = 0;
-    if (!(lip > 0.0)) return hg;
-    double reach = fmax(FS_MEAN_KAPPA * sd, fabs(m) - FS_MEAN_Z * sd), cap = reach / lip;
     /* a try past t1 is clipped to it (then any cap >= he takes the same step as hg) */
     double he = fmin(hg, ray.t1 - ta);
-    if (cap >= he) return hg;
+    if (!(lip > 0.0)) return hg;
+    /* the sd's bound over the try (sd itself without a sigma(x) field) */
+    double sdh = fs_sd_over(p, mean, ray, ta, ta + he, sd);
+    /* the far balls trace the prior mean, which a posterior's is not: none there */
+    int balls = !S.post.n;
+    double reach = fmax(FS_MEAN_KAPPA * sd, fabs(m) - FS_MEAN_Z * sdh), cap = reach / lip;
+    /* the start's ball alone covers the try: certified */
+    if (cap >= he) {
+        *certified = balls && fabs(m) - FS_MEAN_Z * sdh >= he * lip;
+        return hg;
+    }
     if (grid) {
         FS_PROF_ADD(LIP_SCANS, 1);
         lip = (double)gp_mean_lipschitz_on(mean, mc, convert_float3(ray.o + ta * ray.d),
                                            convert_float3(ray.o + (ta + he) * ray.d))
               * length(ray.d);
-        if (!(lip > 0.0)) return hg;
+        if (!(lip > 0.0)) {           /* a constant mean on the try */
+            *certified = balls && fabs(m) > FS_MEAN_Z * sdh;
+            return hg;
+        }
         cap = reach / lip;
-        if (cap >= he) return hg;
+        if (cap >= he) {
+            *certified = balls && fabs(m) - FS_MEAN_Z * sdh >= he * lip;
+            return hg;
+        }
     }
     double far = 0.0;
-    if (fabs(m) > FS_MEAN_Z * sd && !S.post.n && !gp_kernel_nonstationary(p)) {
+    if (balls && fabs(m) > FS_MEAN_Z * sd) {
         /* sphere tracing on, from ball to ball: each ends where the next starts, so
-         * |mean| >= FS_MEAN_Z sd (one sign) on all of [ta, ta + s] */
-        double s = 0.0, mz = fabs(m);
+         * |mean| >= FS_MEAN_Z sd (one sign) on all of [ta, ta + s]; under a sigma(x)
+         * field each ball is sized by the sd's bound over it (fs_sd_over), found for the
+         * ball the last bound would give (the bound over a longer stretch holds on a
+         * shorter one) */
+        double s = 0.0, mz = fabs(m), sdk = sd;
         for (int k = 0; k < FS_MEAN_HOPS; ++k) {
-            double hop = (mz - FS_MEAN_Z * sd) / lip;
+            double hop = (mz - FS_MEAN_Z * sdk) / lip;
+            if (p.sigma_field) {
+                if (!(hop > 0.0)) break;
+                sdk = fs_sd_over(p, mean, ray, ta + s, ta + s + fmin(hop, he - s), sdk);
+                hop = (mz - FS_MEAN_Z * sdk) / lip;
+                if (!(hop > 0.0)) break;
+            }
             s += hop;
             if (s >= he) { *certified = 1; return hg; }
             /* converging onto the near zone, or out of hops */
-            if (hop < 0.25 * FS_MEAN_KAPPA * sd / lip || k + 1 == FS_MEAN_HOPS) break;
+            if (hop < 0.25 * FS_MEAN_KAPPA * sdk / lip || k + 1 == FS_MEAN_HOPS) break;
             double mk = fs_prior_mean(mean, mc, ray.o + (ta + s) * ray.d, dn, FS_OBS_VALUE);
             FS_PROF_ADD(HOPS, 1);
-            if (!(mk * m > 0.0) || !(fabs(mk) > FS_MEAN_Z * sd)) break;
+            if (!(mk * m > 0.0) || !(fabs(mk) > FS_MEAN_Z * sdk)) break;
             mz = fabs(mk);
         }
         far = s;

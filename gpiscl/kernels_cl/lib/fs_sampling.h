@@ -297,6 +297,64 @@ inline GpFieldsAt fs_fields(GpKernel p, __global const MeanNode* mean, double3 x
     return f;
 }
 
+/* The smallest and largest of a kernel grid field over the segment [a, b]: the samples
+ * of every trilinear cell (gp_grid_cell) the segment's index box meets, padded for the
+ * float map. fs_classical.h's tracker keeps stretches within a voxel (at most 3^3
+ * samples); fs_mean_step's balls may be longer and check fs_grid_box_samples first. */
+inline void fs_grid_box(__global const MeanNode* n, double3 a, double3 b, int3* c0, int3* c1)
+{
+    float3 fa = convert_float3(a), fb = convert_float3(b);
+    float3 ua = (float3)(dot(n->row0.xyz, fa) + n->row0.w, dot(n->row1.xyz, fa) + n->row1.w,
+                         dot(n->row2.xyz, fa) + n->row2.w);
+    float3 ub = (float3)(dot(n->row0.xyz, fb) + n->row0.w, dot(n->row1.xyz, fb) + n->row1.w,
+                         dot(n->row2.xyz, fb) + n->row2.w);
+    float3 pad = 2e-3f + 4.0f * FLT_EPSILON * fmax(fabs(ua), fabs(ub));
+    float3 top = n->p1.xyz - 1.0f;
+    *c0 = convert_int3(fmin(floor(fmin(fmax(fmin(ua, ub) - pad, 0.0f), top)), top - 1.0f));
+    *c1 = convert_int3(fmin(floor(fmin(fmax(fmax(ua, ub) + pad, 0.0f), top)), top - 1.0f)) + 1;
+}
+
+/* How many samples fs_grid_field_range reads for the segment [a, b]. */
+inline int fs_grid_box_samples(__global const MeanNode* n, double3 a, double3 b)
+{
+    int3 c0, c1;
+    fs_grid_box(n, a, b, &c0, &c1);
+    int3 w = c1 - c0 + 1;
+    return w.x * w.y * w.z;
+}
+
+inline double2 fs_grid_field_range(__global const MeanNode* n, double3 a, double3 b)
+{
+    int3 c0, c1;
+    fs_grid_box(n, a, b, &c0, &c1);
+    int ny = (int)n->p1.y, nz = (int)n->p1.z;
+    double lo = INFINITY, hi = -INFINITY;
+    for (int i = c0.x; i <= c1.x; ++i)
+        for (int j = c0.y; j <= c1.y; ++j)
+            for (int q = c0.z; q <= c1.z; ++q) {
+                double v = gp_grid_sample(n + 1, (i * ny + j) * nz + q);
+                lo = fmin(lo, v);
+                hi = fmax(hi, v);
+            }
+    return (double2)(lo, hi);
+}
+
+/* The range of one field multiplier over the segment [a, b]: 1 without a field, a linear
+ * field's end values, a radial one's inner and outer levels (it blends between them), a
+ * grid's samples (fs_grid_field_range). */
+inline double2 fs_field_range(int kind, float4 p0, float4 p1,
+                                 __global const MeanNode* grid, double3 a, double3 b)
+{
+    double3 g;
+    if (kind == GP_FIELD_LINEAR) {
+        double va = gp_field(kind, p0, p1, a, &g), vb = gp_field(kind, p0, p1, b, &g);
+        return (double2)(fmin(va, vb), fmax(va, vb));
+    }
+    if (kind == GP_FIELD_RADIAL) return (double2)(fmin(p1.x, p1.y), fmax(p1.x, p1.y));
+    if (kind == GP_FIELD_GRID) return fs_grid_field_range(grid, a, b);
+    return (double2)(1.0);
+}
+
 inline void fs_store_fields(FsScratch S, int i, GpFieldsAt f)
 {
     __global double* q = S.fields + 8 * i;
