@@ -25,7 +25,7 @@ from ..scene.proxies import analyse, bounding_proxy
 
 CELLS_PER_LENGTH = 4        # cells across one length scale of the kernel
 CELLS_PER_EXTENT = 64       # cells across the proxy's largest extent, at least
-MAX_CELLS = 1 << 21         # ~128^3: about 2 s of numpy for a CSG mean on one core
+MAX_CELLS = 1 << 21         # ~128^3: 2.7 s for the tests' CSG mean (loaded 2-core host)
 EVAL_CHUNK = 1 << 18        # points per mean evaluation (bounds the gradient arrays)
 
 
@@ -72,7 +72,8 @@ def mean_gradients(mean: Mean, points: np.ndarray) -> np.ndarray:
 
 
 def zero_set_mesh(mean: Mean, proxy: dict, length_scale: float) -> ZeroSetMesh:
-    """{mean = 0} inside a box, sphere or mesh proxy (a scene proxy: its box)."""
+    """{mean = 0} inside a box, sphere or convex mesh proxy (classical.py refuses a scene
+    proxy: its box is known only when the scene compiles)."""
     import igl
     box = bounding_proxy(proxy)
     if box["type"] == "box":
