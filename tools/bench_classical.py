@@ -3,15 +3,26 @@
 (mu/sigma = 2, Rice mean free path 0.5, function space, renewal), the same counterpart
 through the tracked (heterogeneous) flight (a sigma field of 1 everywhere), the
 heterogeneous counterpart of a sphere-mean GPIS (sigma 0.1, l 0.02, a linear sigma
-field), and the surface counterpart of a sphere-mean GPIS (sigma/l = 0.1, weight space
-and function space). Each scene renders once to warm the build, then once timed.
+field), the surface counterpart of a sphere-mean GPIS (sigma/l = 0.1, weight space
+and function space), and the zero-set mesh counterpart of a CSG-mean GPIS (a rotated
+smooth union of a box and a sphere, sigma/l = 0.1; the time to build its mesh is printed
+too). Each scene renders once to warm the build, then once timed.
 
-Usage: python tools/bench_classical.py [--spp 64] [--resolution 64] [--only medium,het,surface]"""
+Usage: python tools/bench_classical.py [--spp 64] [--resolution 64]
+                                       [--only medium,het,surface,mesh]"""
 import argparse
+import time
 
 from gpiscl import render_result
 from gpiscl.host.gp import SquaredExponential
+from gpiscl.host.compile.classical import with_counterparts
 from gpiscl.host.gp import classical as C
+from gpiscl.host.scene.loading import load_scene
+
+CSG = {"type": "transform", "rotate": [20, 30, 0],
+       "child": {"type": "union", "k": 0.1,
+                 "left": {"type": "box", "half_extents": [0.6, 0.4, 0.5]},
+                 "right": {"type": "sphere", "center": [0.4, 0.3, 0.2], "radius": 0.45}}}
 
 
 def medium(classical, res, spp, tracked=False):
@@ -47,6 +58,22 @@ def surface(classical, sampler, res, spp):
     return scene(g, classical and "surface", res, spp)
 
 
+def csg_surface(classical, sampler, res, spp):
+    g = {"type": "gpis", "proxy": {"type": "sphere", "center": [0, 0, 0], "radius": 1.2},
+         "mean": CSG,
+         "kernel": {"type": "squared_exponential", "sigma": 0.01, "length_scale": 0.1},
+         "sampler": {"type": sampler},
+         "bsdf": {"type": "rough_conductor", "material": "Au", "roughness": 0.1}}
+    return scene(g, classical and "surface", res, spp)
+
+
+def mesh_build_seconds(doc) -> str:
+    data = load_scene(doc).data
+    t = time.perf_counter()
+    shapes = with_counterparts(data)["shapes"]
+    return f"{time.perf_counter() - t:.2f} s for {len(shapes)} mesh shape(s)"
+
+
 def scene(g, classical, res, spp):
     if classical:
         g["classical"] = classical
@@ -62,8 +89,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--resolution", type=int, default=64)
-    ap.add_argument("--only", default="medium,het,surface",
-                    help="comma-separated groups of cases: medium, het, surface")
+    ap.add_argument("--only", default="medium,het,surface,mesh",
+                    help="comma-separated groups of cases: medium, het, surface, mesh")
     a = ap.parse_args()
     groups, cases = a.only.split(","), []
     if "medium" in groups:
@@ -77,6 +104,13 @@ def main():
         cases += [(f"surface: GPIS {sampler}", surface(False, sampler, a.resolution, a.spp)),
                   (f"surface: counterpart ({sampler} scene)",
                    surface(True, sampler, a.resolution, a.spp))]
+    for sampler in ("weight_space", "function_space") if "mesh" in groups else ():
+        cases += [(f"csg: GPIS {sampler}", csg_surface(False, sampler, a.resolution, a.spp)),
+                  (f"csg: mesh counterpart ({sampler} scene)",
+                   csg_surface(True, sampler, a.resolution, a.spp))]
+    if "mesh" in groups:
+        print("csg: zero-set mesh built in",
+              mesh_build_seconds(csg_surface(True, "weight_space", a.resolution, a.spp)))
     for name, doc in cases:
         render_result(doc, spp=1)
         r = render_result(doc)
