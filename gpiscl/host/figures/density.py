@@ -1,7 +1,8 @@
 """The GPIS density as data and pictures (docs/design/classical-limits.md): free flights
 and first-hit normals of one GPIS object along one ray, drawn by the renderer's own
-function-space sampler under each memory model, against the closed forms of its classical
-counterparts (the exponential of Rice's entry rate, the Beckmann slope law); and the two
+function-space sampler under each memory model and by its classical medium counterpart,
+against the closed forms of its classical counterparts (the medium's transmittance
+exp(-int sigma_t) along the ray, Rice's entry rate, the Beckmann slope law); and the two
 limits as series (free flights vs l, normals vs alpha).
 
 Data functions need numpy only; plot_* need matplotlib (the optional `plots` extra),
@@ -15,12 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SceneError
+from ..errors import CLI_SOURCE, SceneError
 from ..gp import classical as C
-from ..gp.kernels import Kernel
+from ..gp.kernels import Kernel, NonStationary
 from ..gp.means import Constant, Mean, Plane
+from ..layout.function_space_records import STATUS
 from ..render.device import Device, shared_device
-from ..render.flight_samples import flights
+from ..render.flight_samples import PackedGpis, flights, pack_scene_object
 from .plotting import pyplot
 from .samples import resolve_target
 
@@ -67,14 +69,49 @@ def free_path_fit(t, length: float):
     return float(np.where(hit, t, length).sum() / max(hit.sum(), 1)), int(hit.sum())
 
 
-def flight_summary(kernel: Kernel, mean: Mean, ray: Ray, runs: dict) -> list:
+def counterpart_law(kernel: Kernel, mean: Mean, ray: Ray, nodes: int = 20001):
+    """(t, sigma_t, optical depth) on `nodes` points of the ray: the medium counterpart's
+    first flight has P(T > t) = exp(-optical depth) (gp/classical.optical_depth, whose
+    trapezoidal rule this is) and density sigma_t exp(-optical depth)."""
+    t = np.linspace(0.0, ray.length, nodes)
+    with np.errstate(all="ignore"):
+        rate = C.local_extinction(kernel, mean, ray.origin + t[:, None] * ray.direction,
+                                  ray.direction)
+    # Deep inside the mean (mu / sigma < -37) Phi underflows and the reference gives
+    # inf or nan where fs_cl_hazard takes its series; a ray from outside has gathered a
+    # depth above 600 (int |z| dz) before it gets there, so the light is gone by then
+    # and any depth past exp's underflow (745) is the same.
+    rate = np.where(np.isfinite(rate), rate, np.inf)
+    steps = 0.5 * (rate[1:] + rate[:-1]) * np.diff(t)
+    depth = np.minimum(np.concatenate([[0.0], np.cumsum(steps)]), 800.0)
+    return t, rate, depth
+
+
+def ks_with_misses(t, law) -> float:
+    """One-sample KS distance of first flights t (-1: no hit within the ray) to the
+    counterpart_law: a miss is a flight beyond the ray's end, so the empirical CDF's last
+    step, up to the end, counts against 1 - exp(-depth(end))."""
+    grid, _, depth = law
+    n, hits = len(t), np.sort(np.asarray(t, float)[np.asarray(t) >= 0])
+    cdf = -np.expm1(-np.interp(hits, grid, depth))
+    i = np.arange(1, len(hits) + 1)
+    end = abs(len(hits) / n + np.expm1(-depth[-1]))
+    if not len(hits):
+        return float(end)
+    return float(max(np.max(i / n - cdf), np.max(cdf - (i - 1) / n), end))
+
+
+def flight_summary(kernel: Kernel, mean: Mean, ray: Ray, runs: dict, law=None) -> list:
     """One row per memory model and flight: hits, the fitted mean free path, its KS
-    distance to that exponential (hits only, the law truncated at the ray's end), the Rice
-    entry rate at the ray's start (the medium counterpart's extinction where the mean is
-    constant; 0 where the start is far outside a shape mean), and for the first hit the Beckmann alpha and its fit."""
-    level, grad = mean.value_and_gradient(ray.origin[None])
-    rate = float(C.entry_rate(kernel, float(level[0]), ray.direction,
-                              float(grad[0] @ ray.direction)))
+    distance to that exponential (hits only, the law truncated at the ray's end), the
+    medium counterpart's extinction at the ray's start (Rice's entry rate, Eq. 3 of the
+    note, with the local mean, its slope and fields; 0 where the start is far outside a
+    shape mean); for the first flight the counterpart's transmittance exp(-int sigma_t)
+    along the ray and the KS distance of the flights to its law (classical_medium: noise
+    only; the memory models: how far the GPIS is from its counterpart), and for the first
+    hit the Beckmann alpha and its fit. law: counterpart_law's, if already computed."""
+    law = law or counterpart_law(kernel, mean, ray)
+    rate = float(law[1][0])
     rows = []
     for memory, out in runs.items():
         for b in range(out.shape[1]):
@@ -88,6 +125,8 @@ def flight_summary(kernel: Kernel, mean: Mean, ray: Ray, runs: dict) -> list:
                    "rice_entry_rate": rate,
                    "rice_mean_free_path": 1.0 / rate if rate > 0 else float("inf")}
             if b == 0:
+                row.update({"counterpart_transmittance": math.exp(-law[2][-1]),
+                            "ks_counterpart": ks_with_misses(t, law)})
                 row.update(normal_summary(kernel, mean, ray, out[t >= 0, 0]))
             rows.append(row)
     return rows
@@ -102,8 +141,9 @@ def slopes_at_hits(grad, direction):
 
 
 def normal_summary(kernel: Kernel, mean: Mean, ray: Ray, hits) -> dict:
-    """The first hits' slopes against Beckmann with the alpha of the mean's gradient at
-    the mean hit point (a tangent perpendicular to the ray for anisotropic kernels)."""
+    """The first hits' slopes against Beckmann with the alpha of the mean's gradient and
+    of the GP's gradient variance at the mean hit point (a tangent perpendicular to the
+    ray for anisotropic kernels; sigma and l fields taken there)."""
     if len(hits) == 0:
         return {}
     x = ray.origin + np.mean(hits[:, 0]) * ray.direction
@@ -114,23 +154,52 @@ def normal_summary(kernel: Kernel, mean: Mean, ray: Ray, hits) -> dict:
     tangent = np.cross(ray.direction, [1.0, 0.0, 0.0])
     if np.linalg.norm(tangent) < 1e-6:
         tangent = np.cross(ray.direction, [0.0, 1.0, 0.0])
-    alpha = C.beckmann_alpha(kernel, tangent, gn)
+    tangent = tangent / np.linalg.norm(tangent)
+    # C.beckmann_alpha at x: a field's kernel is not the same at the origin
+    alpha = math.sqrt(2.0 * float(kernel.cov_dd(x, tangent, x, tangent))) / gn
     tan2 = slopes_at_hits(hits[:, 1:4], ray.direction)
     return {"beckmann_alpha": alpha, "alpha_fit": float(math.sqrt(np.mean(tan2))),
             "ks_beckmann": C.ks_to_cdf(tan2 / alpha ** 2, lambda v: -np.expm1(-v))}
 
 
+class FlightsFailed(RuntimeError):
+    """Some flights ended with a solver status (the renderer counts them as failed)."""
+
+
 def density_data(kernel: Kernel, mean: Mean, ray: Ray, paths: int = 20000, bounces: int = 2,
-                 seed: int = 1, memories=MEMORIES, device: Device | None = None) -> dict:
-    """Flights per memory model ((paths, bounces, 5) arrays of flight_samples.flights)
-    and their summary rows."""
+                 seed: int = 1, memories=MEMORIES, device: Device | None = None,
+                 packed: PackedGpis | None = None) -> dict:
+    """Flights per memory model ((paths, bounces, 5) arrays of flight_samples.flights),
+    their summary rows, and the medium counterpart's first-flight density along the ray
+    ("counterpart": t, sigma_t exp(-optical depth), its transmittance). packed: the
+    object's device records as the renderer compiles them (flight_samples.
+    pack_scene_object); None packs kernel and mean. FlightsFailed if a flight failed."""
     device = device or shared_device()
     runs = {m: flights(device, kernel, mean, ray.origin, ray.direction, ray.length, paths,
-                       memory=m, bounces=bounces, seed=seed) for m in memories}
-    bad = {m: int(np.count_nonzero(o[:, :, 4])) for m, o in runs.items()}
-    if any(bad.values()):
-        raise RuntimeError(f"the sampler failed on some flights: {bad}")
-    return {"ray": ray, "runs": runs, "summary": flight_summary(kernel, mean, ray, runs)}
+                       memory=m, bounces=bounces, seed=seed, packed=packed)
+            for m in memories}
+    names = {v: k for k, v in STATUS.items()}
+    bad = {m: sorted({names.get(int(v), str(v)) for v in o[:, :, 4].ravel() if v})
+           for m, o in runs.items() if np.any(o[:, :, 4])}
+    if bad:
+        raise FlightsFailed("; ".join(
+            f"{m}: {int(np.count_nonzero(runs[m][:, :, 4]))} of {paths} paths failed "
+            f"({', '.join(v)})" for m, v in bad.items()))
+    law = counterpart_law(kernel, mean, ray)
+    t, rate, depth = law
+    with np.errstate(invalid="ignore"):      # inf rate x exp(-800) = 0
+        density = np.where(np.isfinite(rate), rate * np.exp(-depth), 0.0)
+    return {"ray": ray, "runs": runs, "summary": flight_summary(kernel, mean, ray, runs, law),
+            "counterpart": {"t": t, "density": density,
+                            "transmittance": math.exp(-depth[-1])},
+            "homogeneous": is_homogeneous(kernel, mean)}
+
+
+def is_homogeneous(kernel: Kernel, mean: Mean) -> bool:
+    """The medium counterpart is one exponential everywhere and in every direction (as
+    fs_classical_flight's homogeneous branch): a constant mean, no fields, isotropic."""
+    return (isinstance(mean, Constant) and not isinstance(kernel, NonStationary)
+            and len(set(np.ravel(kernel.aniso))) == 1)
 
 
 def medium_limit_series(kernel_of, lengths, level: float, paths: int, seed: int = 1,
@@ -261,12 +330,15 @@ def write_flights_csv(runs: dict, path) -> None:
 
 
 def plot_density(data: dict, title: str, out_dir) -> list:
-    """free_flight.png (each flight's distance per memory model, the fitted exponential and
-    Rice's) and normals.png (tan theta_m at the first hit against Beckmann)."""
+    """free_flight.png (each flight's distance per memory model, the fitted exponential;
+    on the first flight the medium counterpart's closed form along the ray, on later ones
+    Rice's exponential where the counterpart is homogeneous) and normals.png (tan theta_m
+    at the first hit against Beckmann)."""
     plt = pyplot()
     ray, runs, summary = data["ray"], data["runs"], data["summary"]
     bounces = next(iter(runs.values())).shape[1]
     rate = summary[0]["rice_entry_rate"]
+    law = data["counterpart"]
     fig, axes = plt.subplots(1, bounces, figsize=(5 * bounces, 3.8), squeeze=False)
     for b, ax in enumerate(axes[0]):
         top = 0.0
@@ -275,15 +347,21 @@ def plot_density(data: dict, title: str, out_dir) -> list:
             if len(t):
                 top = max(top, np.quantile(t, 0.99))
         edges = np.linspace(0.0, top or ray.length, 60)
-        for memory, out in runs.items():
+        for i, (memory, out) in enumerate(runs.items()):
             t = out[out[:, b, 0] >= 0, b, 0]
-            ax.hist(t, edges, density=True, histtype="step", label=memory)
+            if len(t):      # a model's colour is the same in every panel
+                ax.hist(t, edges, density=True, histtype="step", color=f"C{i}", label=memory)
         row = next(r for r in summary if r["flight"] == b + 1 and r["memory"] == "renewal"
                    ) if "renewal" in runs else summary[b]
         x = np.linspace(0.0, edges[-1], 200)
         m = row["mean_free_path"]
         ax.plot(x, np.exp(-x / m) / m, "k-", lw=1, label=f"exp, same mean ({m:.3g})")
-        if rate > 0:
+        if b == 0 and law["transmittance"] < 1.0:
+            # the hits' law, as the histograms show hits only
+            keep = law["t"] <= edges[-1]
+            ax.plot(law["t"][keep], law["density"][keep] / (1.0 - law["transmittance"]),
+                    "k--", lw=1, label="medium counterpart, exact")
+        elif rate > 0 and data["homogeneous"]:
             ax.plot(x, rate * np.exp(-rate * x), "k--", lw=1,
                     label=f"exp, Rice ({1 / rate:.3g})")
         ax.set_xlabel("free-flight distance t")
@@ -351,22 +429,51 @@ def plot_limits(medium: dict, surface: dict, path) -> None:
     plt.close(fig)
 
 
-def write_density(scene: str, obj: int, out_dir, ray: Ray | None = None, paths: int = 20000,
-                  bounces: int = 2, seed: int = 1, device: Device | None = None) -> list:
-    """Everything `density` writes for GPIS number obj of a scene file: flights.csv,
-    summary.csv, free_flight.png, normals.png (a mean with a gradient only). The medium
-    counterpart joins the memory models for a constant mean. Returns the paths."""
-    pyplot()   # fail before any work if matplotlib is missing
+def scene_object(scene: str, obj: int) -> tuple:
+    """(resolved shape, key path) of GPIS number obj of a scene file that resolve_target
+    has accepted."""
+    from ..scene.loading import load_scene
+    shapes = load_scene(scene).data["shapes"]
+    i = [k for k, s in enumerate(shapes) if s["type"] == "gpis"][obj]
+    return shapes[i], f"shapes[{i}]"
+
+
+def scene_density(scene: str, obj: int, ray: Ray | None = None, paths: int = 20000,
+                  bounces: int = 2, seed: int = 1, device: Device | None = None) -> tuple:
+    """(density_data, title) of GPIS number obj of a scene file, every memory model and
+    the medium counterpart, with the object's device records as the renderer compiles
+    them. SceneError (one line) for a missing file or object, or failed flights."""
+    if not Path(scene).is_file():
+        raise SceneError(CLI_SOURCE, "SCENE", f"not an existing scene file (got {scene!r})")
     target = resolve_target(scene, obj)
     if target.mean is None:
-        raise SceneError("<command line>", "SCENE", "density needs a scene file")
+        raise SceneError(CLI_SOURCE, "SCENE", "density needs a scene file")
+    shape, key = scene_object(scene, obj)
+    packed = pack_scene_object(shape, scene, key)
     ray = ray or default_ray(target.mean, target.center, target.half_extent)
-    # the medium counterpart exists for constant means only (compile/classical.py)
-    memories = MEMORIES if isinstance(target.mean, Constant) else MEMORIES[:-1]
-    data = density_data(target.kernel, target.mean, ray, paths, bounces, seed, memories,
-                        device)
+    try:
+        data = density_data(target.kernel, target.mean, ray, paths, bounces, seed, MEMORIES,
+                            device, packed)
+    except FlightsFailed as exc:
+        raise SceneError(scene, key, f"density: flights failed as the renderer would count "
+                         f"them (RenderStats.gpis_failed): {exc}") from None
+    return data, target.name
+
+
+def write_density_tables(data: dict, out_dir) -> list:
+    """flights.csv (every hit) and summary.csv (flight_summary's rows) of density_data."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_flights_csv(data["runs"], out / "flights.csv")
     write_csv(data["summary"], out / "summary.csv")
-    return [out / "flights.csv", out / "summary.csv", *plot_density(data, target.name, out)]
+    return [out / "flights.csv", out / "summary.csv"]
+
+
+def write_density(scene: str, obj: int, out_dir, ray: Ray | None = None, paths: int = 20000,
+                  bounces: int = 2, seed: int = 1, device: Device | None = None) -> list:
+    """Everything `density` writes for GPIS number obj of a scene file: flights.csv,
+    summary.csv, free_flight.png, normals.png (a mean with a gradient only), each with
+    every memory model and the medium counterpart (classical_medium). Returns the paths."""
+    pyplot()   # fail before any work if matplotlib is missing
+    data, title = scene_density(scene, obj, ray, paths, bounces, seed, device)
+    return [*write_density_tables(data, out_dir), *plot_density(data, title, out_dir)]

@@ -6,9 +6,14 @@ flies again from the vertex, so the second and later flights show what each memo
 "memory" classical_medium runs the medium counterpart's flight (fs_classical.h) instead."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pyopencl as cl
 
+from ..compile.gpis import compile_gpis
+from ..gp.kernels import Kernel
+from ..gp.means import Mean
 from ..layout import function_space_records as FL
 from ..layout import gp_records
 from ..layout.records import GPIS_MEMORIES
@@ -79,15 +84,47 @@ def _buf(device, a):
                      hostbuf=np.ascontiguousarray(a))
 
 
+@dataclass
+class PackedGpis:
+    """What the device reads of one GPIS object, as the renderer lays it out."""
+    kernel: np.ndarray      # its GpKernel record (1,)
+    nodes: np.ndarray       # MeanNode records: the mean program, then the kernel's grid
+                            # fields at the record's sigma_grid / ls_grid offsets
+    mean_count: int         # records of the mean program
+
+
+def pack_scene_object(shape: dict, source: str, key: str) -> PackedGpis:
+    """The records the renderer compiles for a resolved "gpis" shape (compile_gpis on that
+    shape alone): the kernel built with its proxy (a linear l field's step), grid means'
+    payloads and the kernel's grid fields. source and key name it in compile errors.
+    Observations are left out (the flights are the prior's), and so is the proxy-cut
+    warning (the flights run along the ray, not clipped to the proxy)."""
+    shape = dict(shape, clip=True, observations=None)
+    c = compile_gpis([shape], lambda bsdf: 0, source, [key])
+    return PackedGpis(c.kernels[:1], c.mean_nodes, int(c.objects[0]["mean_count"]))
+
+
+def pack_model(kernel: Kernel, mean: Mean) -> PackedGpis:
+    """pack_scene_object's records for host kernel and mean objects: compile_object's own
+    steps (the mean program, then the kernel's grid fields after it)."""
+    record = gp_records.pack_kernel(kernel)
+    parts = gp_records.pack_mean_parts(mean)
+    count = sum(len(p) for p in parts)
+    parts += gp_records.pack_kernel_grids(kernel, record, count)
+    return PackedGpis(record, np.concatenate(parts), count)
+
+
 def flights(device: Device, kernel, mean, origin, direction, length: float, n: int,
             memory: str = "renewal", bounces: int = 2, seed: int = 1, cap: int = 64,
             refine: int = 0, tol: float = FL.DEFAULT_MISS_TOLERANCE,
-            later_length: float | None = None, mirror: bool = False) -> np.ndarray:
+            later_length: float | None = None, mirror: bool = False,
+            packed: PackedGpis | None = None) -> np.ndarray:
     """(n, bounces, 5): per path and flight the hit distance (-1: none, and every later
     flight -1), the sampled gradient at the hit and the solver status (0: fine). The
     first flight runs along origin + t direction, t in [0, length]; later ones are
     later_length (default: length) long from the previous hit. mirror: each hit reflects
-    the ray about its sampled normal instead of the Lambertian turn."""
+    the ray about its sampled normal instead of the Lambertian turn. packed: the object's
+    records (pack_scene_object); None packs kernel and mean (pack_model)."""
     if memory not in GPIS_MEMORIES:
         raise ValueError(f"memory must be one of {sorted(GPIS_MEMORIES)}, got {memory!r}")
     if not 1 <= cap <= CAP_MAX:
@@ -97,8 +134,8 @@ def flights(device: Device, kernel, mean, origin, direction, length: float, n: i
     q = device.queue
     later = float(length if later_length is None else later_length)
     ray = _buf(device, np.array([*np.asarray(origin, float), *d, 0.0, float(length), later]))
-    mean_nodes = gp_records.pack_mean(mean)
-    kp, mb = _buf(device, gp_records.pack_kernel(kernel)), _buf(device, mean_nodes)
+    packed = packed or pack_model(kernel, mean)
+    kp, mb = _buf(device, packed.kernel), _buf(device, packed.nodes)
     stride = FL.scratch_doubles(FL.max_rows(WINDOW_MAX, CAP_MAX))
     chunk = max(1, min(n, (256 << 20) // (8 * stride)))
     scratch = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, 8 * stride * chunk)
@@ -109,7 +146,7 @@ def flights(device: Device, kernel, mean, origin, direction, length: float, n: i
     for first in range(0, n, chunk):
         m = min(chunk, n - first)
         ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 8 * PER_FLIGHT * bounces * m)
-        run(q, (m,), None, kp, mb, np.int32(len(mean_nodes)), np.int32(0),
+        run(q, (m,), None, kp, mb, np.int32(packed.mean_count), np.int32(0),
             np.int32(GPIS_MEMORIES[memory]), np.int32(cap), np.int32(refine),
             np.float64(tol), ray, np.uint32(seed), np.int32(first), np.int32(bounces),
             np.int32(mirror), scratch, rings, ob)
