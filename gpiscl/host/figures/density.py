@@ -21,6 +21,7 @@ from ..gp import classical as C
 from ..gp.kernels import Kernel, NonStationary
 from ..gp.means import Constant, Mean, Plane
 from ..layout.function_space_records import STATUS
+from ..layout.random_slots import FS_TRACK_CAP
 from ..render.device import Device, shared_device
 from ..render.flight_samples import PackedGpis, flights, pack_scene_object
 from .plotting import pyplot
@@ -69,11 +70,17 @@ def free_path_fit(t, length: float):
     return float(np.where(hit, t, length).sum() / max(hit.sum(), 1)), int(hit.sum())
 
 
-def counterpart_law(kernel: Kernel, mean: Mean, ray: Ray, nodes: int = 20001):
-    """(t, sigma_t, optical depth) on `nodes` points of the ray: the medium counterpart's
-    first flight has P(T > t) = exp(-optical depth) (gp/classical.optical_depth, whose
-    trapezoidal rule this is) and density sigma_t exp(-optical depth)."""
-    t = np.linspace(0.0, ray.length, nodes)
+def counterpart_law(kernel: Kernel, mean: Mean, ray: Ray, nodes: int = 20001,
+                    interval=None):
+    """(t, sigma_t, optical depth) on `nodes` points of the ray within interval (t0, t1)
+    (the part the proxy keeps, PackedGpis.interval; default the whole ray): the medium
+    counterpart's first flight has P(T > t) = exp(-optical depth) (gp/classical.
+    optical_depth, whose trapezoidal rule this is; np.interp holds the depth constant
+    outside) and density sigma_t exp(-optical depth)."""
+    t0, t1 = interval or (0.0, ray.length)
+    if not t1 > t0:        # the ray misses the proxy: no medium on it
+        return np.array([0.0, ray.length]), np.zeros(2), np.zeros(2)
+    t = np.linspace(t0, t1, nodes)
     with np.errstate(all="ignore"):
         rate = C.local_extinction(kernel, mean, ray.origin + t[:, None] * ray.direction,
                                   ray.direction)
@@ -104,12 +111,12 @@ def ks_with_misses(t, law) -> float:
 def flight_summary(kernel: Kernel, mean: Mean, ray: Ray, runs: dict, law=None) -> list:
     """One row per memory model and flight: hits, the fitted mean free path, its KS
     distance to that exponential (hits only, the law truncated at the ray's end), the
-    medium counterpart's extinction at the ray's start (Rice's entry rate, Eq. 3 of the
-    note, with the local mean, its slope and fields; 0 where the start is far outside a
-    shape mean); for the first flight the counterpart's transmittance exp(-int sigma_t)
-    along the ray and the KS distance of the flights to its law (classical_medium: noise
-    only; the memory models: how far the GPIS is from its counterpart), and for the first
-    hit the Beckmann alpha and its fit. law: counterpart_law's, if already computed."""
+    medium counterpart's extinction where the ray enters the proxy (Rice's entry rate,
+    Eq. 3 of the note, with the local mean, its slope and fields; 0 where that is far
+    outside a shape mean); for the first flight the counterpart's transmittance
+    exp(-int sigma_t) along the ray and the KS distance of the flights to its law
+    (classical_medium: noise only; the memory models: how far the GPIS is from its
+    counterpart), and for the first hit the Beckmann alpha and its fit. law: counterpart_law's, if already computed."""
     law = law or counterpart_law(kernel, mean, ray)
     rate = float(law[1][0])
     rows = []
@@ -185,7 +192,8 @@ def density_data(kernel: Kernel, mean: Mean, ray: Ray, paths: int = 20000, bounc
         raise FlightsFailed("; ".join(
             f"{m}: {int(np.count_nonzero(runs[m][:, :, 4]))} of {paths} paths failed "
             f"({', '.join(v)})" for m, v in bad.items()))
-    law = counterpart_law(kernel, mean, ray)
+    law = counterpart_law(kernel, mean, ray, interval=packed and packed.interval(
+        ray.origin, ray.direction, ray.length))
     t, rate, depth = law
     with np.errstate(invalid="ignore"):      # inf rate x exp(-800) = 0
         density = np.where(np.isfinite(rate), rate * np.exp(-depth), 0.0)
@@ -431,20 +439,27 @@ def plot_limits(medium: dict, surface: dict, path) -> None:
 
 def scene_object(scene: str, obj: int) -> tuple:
     """(resolved shape, key path) of GPIS number obj of a scene file that resolve_target
-    has accepted."""
+    has accepted; a "scene" proxy bounded by the scene's box, as the renderer does."""
+    from ..compile.scene import bound_scene_proxies
     from ..scene.loading import load_scene
-    shapes = load_scene(scene).data["shapes"]
-    i = [k for k, s in enumerate(shapes) if s["type"] == "gpis"][obj]
-    return shapes[i], f"shapes[{i}]"
+    data = load_scene(scene).data
+    i = [k for k, s in enumerate(data["shapes"]) if s["type"] == "gpis"][obj]
+    return bound_scene_proxies(data)[obj], f"shapes[{i}]"
+
+
+def require_scene_file(scene: str) -> None:
+    if not Path(scene).is_file():
+        raise SceneError(CLI_SOURCE, "SCENE", f"not an existing scene file (got {scene!r})")
 
 
 def scene_density(scene: str, obj: int, ray: Ray | None = None, paths: int = 20000,
-                  bounces: int = 2, seed: int = 1, device: Device | None = None) -> tuple:
-    """(density_data, title) of GPIS number obj of a scene file, every memory model and
-    the medium counterpart, with the object's device records as the renderer compiles
-    them. SceneError (one line) for a missing file or object, or failed flights."""
-    if not Path(scene).is_file():
-        raise SceneError(CLI_SOURCE, "SCENE", f"not an existing scene file (got {scene!r})")
+                  bounces: int = 2, seed: int = 1, device: Device | None = None,
+                  memories=MEMORIES) -> tuple:
+    """(density_data, title) of GPIS number obj of a scene file under each of `memories`
+    (default: every memory model and the medium counterpart), with the object's device
+    records as the renderer compiles them. SceneError (one line) for a missing file or
+    object, or failed flights."""
+    require_scene_file(scene)
     target = resolve_target(scene, obj)
     if target.mean is None:
         raise SceneError(CLI_SOURCE, "SCENE", "density needs a scene file")
@@ -452,11 +467,14 @@ def scene_density(scene: str, obj: int, ray: Ray | None = None, paths: int = 200
     packed = pack_scene_object(shape, scene, key)
     ray = ray or default_ray(target.mean, target.center, target.half_extent)
     try:
-        data = density_data(target.kernel, target.mean, ray, paths, bounces, seed, MEMORIES,
+        data = density_data(target.kernel, target.mean, ray, paths, bounces, seed, memories,
                             device, packed)
     except FlightsFailed as exc:
+        hint = (f"; the medium counterpart's tracker stops after {FS_TRACK_CAP} stretches "
+                "(each 0.375 sigma / mean slope long at most) or tentative collisions: try a "
+                "shorter --ray") if "track_cap" in str(exc) else ""
         raise SceneError(scene, key, f"density: flights failed as the renderer would count "
-                         f"them (RenderStats.gpis_failed): {exc}") from None
+                         f"them (RenderStats.gpis_failed): {exc}{hint}") from None
     return data, target.name
 
 
@@ -474,6 +492,7 @@ def write_density(scene: str, obj: int, out_dir, ray: Ray | None = None, paths: 
     """Everything `density` writes for GPIS number obj of a scene file: flights.csv,
     summary.csv, free_flight.png, normals.png (a mean with a gradient only), each with
     every memory model and the medium counterpart (classical_medium). Returns the paths."""
+    require_scene_file(scene)
     pyplot()   # fail before any work if matplotlib is missing
     data, title = scene_density(scene, obj, ray, paths, bounces, seed, device)
     return [*write_density_tables(data, out_dir), *plot_density(data, title, out_dir)]
