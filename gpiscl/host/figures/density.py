@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import math
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -100,6 +101,8 @@ def ks_with_misses(t, law) -> float:
     step, up to the end, counts against 1 - exp(-depth(end))."""
     grid, _, depth = law
     n, hits = len(t), np.sort(np.asarray(t, float)[np.asarray(t) >= 0])
+    if n == 0:
+        return float("nan")
     cdf = -np.expm1(-np.interp(hits, grid, depth))
     i = np.arange(1, len(hits) + 1)
     end = abs(len(hits) / n + np.expm1(-depth[-1]))
@@ -116,7 +119,9 @@ def flight_summary(kernel: Kernel, mean: Mean, ray: Ray, runs: dict, law=None) -
     outside a shape mean); for the first flight the counterpart's transmittance
     exp(-int sigma_t) along the ray and the KS distance of the flights to its law
     (classical_medium: noise only; the memory models: how far the GPIS is from its
-    counterpart), and for the first hit the Beckmann alpha and its fit. law: counterpart_law's, if already computed."""
+    counterpart), and for the first hit the Beckmann alpha and its fit. Flights that
+    failed (a solver status: `failed`, the paths end there) are in no statistic; the
+    flights after a hit that failed are not started. law: counterpart_law's, if computed."""
     law = law or counterpart_law(kernel, mean, ray)
     rate = float(law[1][0])
     rows = []
@@ -124,16 +129,17 @@ def flight_summary(kernel: Kernel, mean: Mean, ray: Ray, runs: dict, law=None) -
         for b in range(out.shape[1]):
             t = out[:, b, 0]
             started = np.full(len(t), True) if b == 0 else out[:, b - 1, 0] >= 0
-            mfp, hits = free_path_fit(t[started], ray.length)
+            failed = out[:, b, 4] != 0
+            mfp, hits = free_path_fit(t[started & ~failed], ray.length)
             ks = C.ks_to_cdf(t[t >= 0], lambda x, m=mfp: -np.expm1(-x / m)
                              / -np.expm1(-ray.length / m)) if hits else float("nan")
             row = {"memory": memory, "flight": b + 1, "paths": int(started.sum()), "hits": hits,
-                   "mean_free_path": mfp, "ks_exponential": ks,
+                   "failed": int(np.count_nonzero(failed)), "mean_free_path": mfp, "ks_exponential": ks,
                    "rice_entry_rate": rate,
                    "rice_mean_free_path": 1.0 / rate if rate > 0 else float("inf")}
             if b == 0:
                 row.update({"counterpart_transmittance": math.exp(-law[2][-1]),
-                            "ks_counterpart": ks_with_misses(t, law)})
+                            "ks_counterpart": ks_with_misses(t[~failed], law)})
                 row.update(normal_summary(kernel, mean, ray, out[t >= 0, 0]))
             rows.append(row)
     return rows
@@ -169,10 +175,6 @@ def normal_summary(kernel: Kernel, mean: Mean, ray: Ray, hits) -> dict:
             "ks_beckmann": C.ks_to_cdf(tan2 / alpha ** 2, lambda v: -np.expm1(-v))}
 
 
-class FlightsFailed(RuntimeError):
-    """Some flights ended with a solver status (the renderer counts them as failed)."""
-
-
 def density_data(kernel: Kernel, mean: Mean, ray: Ray, paths: int = 20000, bounces: int = 2,
                  seed: int = 1, memories=MEMORIES, device: Device | None = None,
                  packed: PackedGpis | None = None) -> dict:
@@ -180,18 +182,11 @@ def density_data(kernel: Kernel, mean: Mean, ray: Ray, paths: int = 20000, bounc
     their summary rows, and the medium counterpart's first-flight density along the ray
     ("counterpart": t, sigma_t exp(-optical depth), its transmittance). packed: the
     object's device records as the renderer compiles them (flight_samples.
-    pack_scene_object); None packs kernel and mean. FlightsFailed if a flight failed."""
+    pack_scene_object); None packs kernel and mean."""
     device = device or shared_device()
     runs = {m: flights(device, kernel, mean, ray.origin, ray.direction, ray.length, paths,
                        memory=m, bounces=bounces, seed=seed, packed=packed)
             for m in memories}
-    names = {v: k for k, v in STATUS.items()}
-    bad = {m: sorted({names.get(int(v), str(v)) for v in o[:, :, 4].ravel() if v})
-           for m, o in runs.items() if np.any(o[:, :, 4])}
-    if bad:
-        raise FlightsFailed("; ".join(
-            f"{m}: {int(np.count_nonzero(runs[m][:, :, 4]))} of {paths} paths failed "
-            f"({', '.join(v)})" for m, v in bad.items()))
     law = counterpart_law(kernel, mean, ray, interval=packed and packed.interval(
         ray.origin, ray.direction, ray.length))
     t, rate, depth = law
@@ -201,6 +196,16 @@ def density_data(kernel: Kernel, mean: Mean, ray: Ray, paths: int = 20000, bounc
             "counterpart": {"t": t, "density": density,
                             "transmittance": math.exp(-depth[-1])},
             "homogeneous": is_homogeneous(kernel, mean)}
+
+
+def failures(runs: dict) -> str:
+    """'' if every flight ended well, else per model the paths whose flight failed and
+    the statuses (layout/function_space_records.STATUS names)."""
+    names = {v: k for k, v in STATUS.items()}
+    return "; ".join(
+        f"{m} {int(np.count_nonzero(o[:, :, 4]))} of {len(o)} paths "
+        f"({', '.join(sorted({names.get(int(v), str(v)) for v in o[:, :, 4].ravel() if v}))})"
+        for m, o in runs.items() if np.any(o[:, :, 4]))
 
 
 def is_homogeneous(kernel: Kernel, mean: Mean) -> bool:
@@ -458,7 +463,8 @@ def scene_density(scene: str, obj: int, ray: Ray | None = None, paths: int = 200
     """(density_data, title) of GPIS number obj of a scene file under each of `memories`
     (default: every memory model and the medium counterpart), with the object's device
     records as the renderer compiles them. SceneError (one line) for a missing file or
-    object, or failed flights."""
+    object; failed flights (which the renderer would count as failed, RenderStats.
+    gpis_failed) are one warning line on stderr and the summary's `failed` column."""
     require_scene_file(scene)
     target = resolve_target(scene, obj)
     if target.mean is None:
@@ -466,15 +472,16 @@ def scene_density(scene: str, obj: int, ray: Ray | None = None, paths: int = 200
     shape, key = scene_object(scene, obj)
     packed = pack_scene_object(shape, scene, key)
     ray = ray or default_ray(target.mean, target.center, target.half_extent)
-    try:
-        data = density_data(target.kernel, target.mean, ray, paths, bounces, seed, memories,
-                            device, packed)
-    except FlightsFailed as exc:
+    data = density_data(target.kernel, target.mean, ray, paths, bounces, seed, memories,
+                        device, packed)
+    failed = failures(data["runs"])
+    if failed:
         hint = (f"; the medium counterpart's tracker stops after {FS_TRACK_CAP} stretches "
-                "(each 0.375 sigma / mean slope long at most) or tentative collisions: try a "
-                "shorter --ray") if "track_cap" in str(exc) else ""
-        raise SceneError(scene, key, f"density: flights failed as the renderer would count "
-                         f"them (RenderStats.gpis_failed): {exc}{hint}") from None
+                "(each at most 0.375 sigma / mean slope long) or tentative collisions"
+                ) if "track_cap" in failed else ""
+        print(f"gpiscl: warning: {scene}: {key}: density: flights failed, as the renderer "
+              f"would count them (RenderStats.gpis_failed): {failed}{hint}; summary.csv's "
+              f"`failed` column counts them, and no statistic includes them", file=sys.stderr)
     return data, target.name
 
 
