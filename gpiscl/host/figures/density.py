@@ -134,7 +134,8 @@ def flight_summary(kernel: Kernel, mean: Mean, ray: Ray, runs: dict, law=None) -
             ks = C.ks_to_cdf(t[t >= 0], lambda x, m=mfp: -np.expm1(-x / m)
                              / -np.expm1(-ray.length / m)) if hits else float("nan")
             row = {"memory": memory, "flight": b + 1, "paths": int(started.sum()), "hits": hits,
-                   "failed": int(np.count_nonzero(failed)), "mean_free_path": mfp, "ks_exponential": ks,
+                   "failed": int(np.count_nonzero(failed)), "mean_free_path": mfp,
+                   "ks_exponential": ks,
                    "rice_entry_rate": rate,
                    "rice_mean_free_path": 1.0 / rate if rate > 0 else float("inf")}
             if b == 0:
@@ -182,7 +183,8 @@ def density_data(kernel: Kernel, mean: Mean, ray: Ray, paths: int = 20000, bounc
     their summary rows, and the medium counterpart's first-flight density along the ray
     ("counterpart": t, sigma_t exp(-optical depth), its transmittance). packed: the
     object's device records as the renderer compiles them (flight_samples.
-    pack_scene_object); None packs kernel and mean."""
+    pack_scene_object); None packs kernel and mean. Failed flights are counted, not
+    raised: the summary's `failed`, failures(runs)."""
     device = device or shared_device()
     runs = {m: flights(device, kernel, mean, ray.origin, ray.direction, ray.length, paths,
                        memory=m, bounces=bounces, seed=seed, packed=packed)
