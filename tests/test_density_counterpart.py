@@ -147,3 +147,16 @@ def test05_bad_input_is_one_line(device, tmp_path, capsys):
     rows = {r["memory"]: r for r in data["summary"]}
     assert rows["classical_medium"]["failed"] == 20 and rows["classical_medium"]["hits"] == 0
     assert rows["renewal"]["failed"] == 0
+
+
+def test06_the_command_draws_the_counterpart_for_a_shape_mean(device, tmp_path):
+    """With matplotlib (the `plots` extra): `density` on a sphere mean with a sigma field
+    writes both PNGs and a summary with the counterpart's rows."""
+    pytest.importorskip("matplotlib")
+    scene = write_scene(tmp_path, {"sigma_field": LINEAR_SIGMA})
+    out = tmp_path / "d"
+    assert main(["density", scene, "-o", str(out), "--paths", "300"]) == 0
+    for name in ("free_flight.png", "normals.png"):
+        assert (out / name).read_bytes()[:4] == b"\x89PNG"
+    rows = list(csv.DictReader(open(out / "summary.csv")))
+    assert [r["flight"] for r in rows if r["memory"] == "classical_medium"] == ["1", "2"]
