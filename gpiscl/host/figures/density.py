@@ -1,7 +1,8 @@
 """The GPIS density as data and pictures (docs/design/classical-limits.md): free flights
 and first-hit normals of one GPIS object along one ray, drawn by the renderer's own
-function-space sampler under each memory model, against the closed forms of its classical
-counterparts (the exponential of Rice's entry rate, the Beckmann slope law); and the two
+function-space sampler under each memory model and by its classical medium counterpart,
+against the closed forms of its classical counterparts (the medium's transmittance
+exp(-int sigma_t) along the ray, Rice's entry rate, the Beckmann slope law); and the two
 limits as series (free flights vs l, normals vs alpha).
 
 Data functions need numpy only; plot_* need matplotlib (the optional `plots` extra),
@@ -10,17 +11,20 @@ from __future__ import annotations
 
 import csv
 import math
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import SceneError
+from ..errors import CLI_SOURCE, SceneError
 from ..gp import classical as C
-from ..gp.kernels import Kernel
+from ..gp.kernels import Kernel, NonStationary
 from ..gp.means import Constant, Mean, Plane
+from ..layout.function_space_records import STATUS
+from ..layout.random_slots import FS_TRACK_CAP
 from ..render.device import Device, shared_device
-from ..render.flight_samples import flights
+from ..render.flight_samples import PackedGpis, flights, pack_scene_object
 from .plotting import pyplot
 from .samples import resolve_target
 
@@ -67,27 +71,76 @@ def free_path_fit(t, length: float):
     return float(np.where(hit, t, length).sum() / max(hit.sum(), 1)), int(hit.sum())
 
 
-def flight_summary(kernel: Kernel, mean: Mean, ray: Ray, runs: dict) -> list:
+def counterpart_law(kernel: Kernel, mean: Mean, ray: Ray, nodes: int = 20001,
+                    interval=None):
+    """(t, sigma_t, optical depth) on `nodes` points of the ray within interval (t0, t1)
+    (the part the proxy keeps, PackedGpis.interval; default the whole ray): the medium
+    counterpart's first flight has P(T > t) = exp(-optical depth) (gp/classical.
+    optical_depth, whose trapezoidal rule this is; np.interp holds the depth constant
+    outside) and density sigma_t exp(-optical depth)."""
+    t0, t1 = interval or (0.0, ray.length)
+    if not t1 > t0:        # the ray misses the proxy: no medium on it
+        return np.array([0.0, ray.length]), np.zeros(2), np.zeros(2)
+    t = np.linspace(t0, t1, nodes)
+    with np.errstate(all="ignore"):
+        rate = C.local_extinction(kernel, mean, ray.origin + t[:, None] * ray.direction,
+                                  ray.direction)
+    # Deep inside the mean (mu / sigma < -37) Phi underflows and the reference gives
+    # inf or nan where fs_cl_hazard takes its series; a ray from outside has gathered a
+    # depth above 600 (int |z| dz) before it gets there, so the light is gone by then
+    # and any depth past exp's underflow (745) is the same.
+    rate = np.where(np.isfinite(rate), rate, np.inf)
+    steps = 0.5 * (rate[1:] + rate[:-1]) * np.diff(t)
+    depth = np.minimum(np.concatenate([[0.0], np.cumsum(steps)]), 800.0)
+    return t, rate, depth
+
+
+def ks_with_misses(t, law) -> float:
+    """One-sample KS distance of first flights t (-1: no hit within the ray) to the
+    counterpart_law: a miss is a flight beyond the ray's end, so the empirical CDF's last
+    step, up to the end, counts against 1 - exp(-depth(end))."""
+    grid, _, depth = law
+    n, hits = len(t), np.sort(np.asarray(t, float)[np.asarray(t) >= 0])
+    if n == 0:
+        return float("nan")
+    cdf = -np.expm1(-np.interp(hits, grid, depth))
+    i = np.arange(1, len(hits) + 1)
+    end = abs(len(hits) / n + np.expm1(-depth[-1]))
+    if not len(hits):
+        return float(end)
+    return float(max(np.max(i / n - cdf), np.max(cdf - (i - 1) / n), end))
+
+
+def flight_summary(kernel: Kernel, mean: Mean, ray: Ray, runs: dict, law=None) -> list:
     """One row per memory model and flight: hits, the fitted mean free path, its KS
-    distance to that exponential (hits only, the law truncated at the ray's end), the Rice
-    entry rate at the ray's start (the medium counterpart's extinction where the mean is
-    constant; 0 where the start is far outside a shape mean), and for the first hit the Beckmann alpha and its fit."""
-    level, grad = mean.value_and_gradient(ray.origin[None])
-    rate = float(C.entry_rate(kernel, float(level[0]), ray.direction,
-                              float(grad[0] @ ray.direction)))
+    distance to that exponential (hits only, the law truncated at the ray's end), the
+    medium counterpart's extinction where the ray enters the proxy (Rice's entry rate,
+    Eq. 3 of the note, with the local mean, its slope and fields; 0 where that is far
+    outside a shape mean); for the first flight the counterpart's transmittance
+    exp(-int sigma_t) along the ray and the KS distance of the flights to its law
+    (classical_medium: noise only; the memory models: how far the GPIS is from its
+    counterpart), and for the first hit the Beckmann alpha and its fit. Flights that
+    failed (a solver status: `failed`, the paths end there) are in no statistic; the
+    flights after a hit that failed are not started. law: counterpart_law's, if computed."""
+    law = law or counterpart_law(kernel, mean, ray)
+    rate = float(law[1][0])
     rows = []
     for memory, out in runs.items():
         for b in range(out.shape[1]):
             t = out[:, b, 0]
             started = np.full(len(t), True) if b == 0 else out[:, b - 1, 0] >= 0
-            mfp, hits = free_path_fit(t[started], ray.length)
+            failed = out[:, b, 4] != 0
+            mfp, hits = free_path_fit(t[started & ~failed], ray.length)
             ks = C.ks_to_cdf(t[t >= 0], lambda x, m=mfp: -np.expm1(-x / m)
                              / -np.expm1(-ray.length / m)) if hits else float("nan")
             row = {"memory": memory, "flight": b + 1, "paths": int(started.sum()), "hits": hits,
-                   "mean_free_path": mfp, "ks_exponential": ks,
+                   "failed": int(np.count_nonzero(failed)), "mean_free_path": mfp,
+                   "ks_exponential": ks,
                    "rice_entry_rate": rate,
                    "rice_mean_free_path": 1.0 / rate if rate > 0 else float("inf")}
             if b == 0:
+                row.update({"counterpart_transmittance": math.exp(-law[2][-1]),
+                            "ks_counterpart": ks_with_misses(t[~failed], law)})
                 row.update(normal_summary(kernel, mean, ray, out[t >= 0, 0]))
             rows.append(row)
     return rows
@@ -102,8 +155,9 @@ def slopes_at_hits(grad, direction):
 
 
 def normal_summary(kernel: Kernel, mean: Mean, ray: Ray, hits) -> dict:
-    """The first hits' slopes against Beckmann with the alpha of the mean's gradient at
-    the mean hit point (a tangent perpendicular to the ray for anisotropic kernels)."""
+    """The first hits' slopes against Beckmann with the alpha of the mean's gradient and
+    of the GP's gradient variance at the mean hit point (a tangent perpendicular to the
+    ray for anisotropic kernels; sigma and l fields taken there)."""
     if len(hits) == 0:
         return {}
     x = ray.origin + np.mean(hits[:, 0]) * ray.direction
@@ -114,23 +168,53 @@ def normal_summary(kernel: Kernel, mean: Mean, ray: Ray, hits) -> dict:
     tangent = np.cross(ray.direction, [1.0, 0.0, 0.0])
     if np.linalg.norm(tangent) < 1e-6:
         tangent = np.cross(ray.direction, [0.0, 1.0, 0.0])
-    alpha = C.beckmann_alpha(kernel, tangent, gn)
+    tangent = tangent / np.linalg.norm(tangent)
+    # C.beckmann_alpha at x: a field's kernel is not the same at the origin
+    alpha = math.sqrt(2.0 * float(kernel.cov_dd(x, tangent, x, tangent))) / gn
     tan2 = slopes_at_hits(hits[:, 1:4], ray.direction)
     return {"beckmann_alpha": alpha, "alpha_fit": float(math.sqrt(np.mean(tan2))),
             "ks_beckmann": C.ks_to_cdf(tan2 / alpha ** 2, lambda v: -np.expm1(-v))}
 
 
 def density_data(kernel: Kernel, mean: Mean, ray: Ray, paths: int = 20000, bounces: int = 2,
-                 seed: int = 1, memories=MEMORIES, device: Device | None = None) -> dict:
-    """Flights per memory model ((paths, bounces, 5) arrays of flight_samples.flights)
-    and their summary rows."""
+                 seed: int = 1, memories=MEMORIES, device: Device | None = None,
+                 packed: PackedGpis | None = None) -> dict:
+    """Flights per memory model ((paths, bounces, 5) arrays of flight_samples.flights),
+    their summary rows, and the medium counterpart's first-flight density along the ray
+    ("counterpart": t, sigma_t exp(-optical depth), its transmittance). packed: the
+    object's device records as the renderer compiles them (flight_samples.
+    pack_scene_object); None packs kernel and mean. Failed flights are counted, not
+    raised: the summary's `failed`, failures(runs)."""
     device = device or shared_device()
     runs = {m: flights(device, kernel, mean, ray.origin, ray.direction, ray.length, paths,
-                       memory=m, bounces=bounces, seed=seed) for m in memories}
-    bad = {m: int(np.count_nonzero(o[:, :, 4])) for m, o in runs.items()}
-    if any(bad.values()):
-        raise RuntimeError(f"the sampler failed on some flights: {bad}")
-    return {"ray": ray, "runs": runs, "summary": flight_summary(kernel, mean, ray, runs)}
+                       memory=m, bounces=bounces, seed=seed, packed=packed)
+            for m in memories}
+    law = counterpart_law(kernel, mean, ray, interval=packed and packed.interval(
+        ray.origin, ray.direction, ray.length))
+    t, rate, depth = law
+    with np.errstate(invalid="ignore"):      # inf rate x exp(-800) = 0
+        density = np.where(np.isfinite(rate), rate * np.exp(-depth), 0.0)
+    return {"ray": ray, "runs": runs, "summary": flight_summary(kernel, mean, ray, runs, law),
+            "counterpart": {"t": t, "density": density,
+                            "transmittance": math.exp(-depth[-1])},
+            "homogeneous": is_homogeneous(kernel, mean)}
+
+
+def failures(runs: dict) -> str:
+    """'' if every flight ended well, else per model the paths whose flight failed and
+    the statuses (layout/function_space_records.STATUS names)."""
+    names = {v: k for k, v in STATUS.items()}
+    return "; ".join(
+        f"{m} {int(np.count_nonzero(o[:, :, 4]))} of {len(o)} paths "
+        f"({', '.join(sorted({names.get(int(v), str(v)) for v in o[:, :, 4].ravel() if v}))})"
+        for m, o in runs.items() if np.any(o[:, :, 4]))
+
+
+def is_homogeneous(kernel: Kernel, mean: Mean) -> bool:
+    """The medium counterpart is one exponential everywhere and in every direction (as
+    fs_classical_flight's homogeneous branch): a constant mean, no fields, isotropic."""
+    return (isinstance(mean, Constant) and not isinstance(kernel, NonStationary)
+            and len(set(np.ravel(kernel.aniso))) == 1)
 
 
 def medium_limit_series(kernel_of, lengths, level: float, paths: int, seed: int = 1,
@@ -261,12 +345,15 @@ def write_flights_csv(runs: dict, path) -> None:
 
 
 def plot_density(data: dict, title: str, out_dir) -> list:
-    """free_flight.png (each flight's distance per memory model, the fitted exponential and
-    Rice's) and normals.png (tan theta_m at the first hit against Beckmann)."""
+    """free_flight.png (each flight's distance per memory model, the fitted exponential;
+    on the first flight the medium counterpart's closed form along the ray, on later ones
+    Rice's exponential where the counterpart is homogeneous) and normals.png (tan theta_m
+    at the first hit against Beckmann)."""
     plt = pyplot()
     ray, runs, summary = data["ray"], data["runs"], data["summary"]
     bounces = next(iter(runs.values())).shape[1]
     rate = summary[0]["rice_entry_rate"]
+    law = data["counterpart"]
     fig, axes = plt.subplots(1, bounces, figsize=(5 * bounces, 3.8), squeeze=False)
     for b, ax in enumerate(axes[0]):
         top = 0.0
@@ -275,15 +362,21 @@ def plot_density(data: dict, title: str, out_dir) -> list:
             if len(t):
                 top = max(top, np.quantile(t, 0.99))
         edges = np.linspace(0.0, top or ray.length, 60)
-        for memory, out in runs.items():
+        for i, (memory, out) in enumerate(runs.items()):
             t = out[out[:, b, 0] >= 0, b, 0]
-            ax.hist(t, edges, density=True, histtype="step", label=memory)
+            if len(t):      # a model's colour is the same in every panel
+                ax.hist(t, edges, density=True, histtype="step", color=f"C{i}", label=memory)
         row = next(r for r in summary if r["flight"] == b + 1 and r["memory"] == "renewal"
                    ) if "renewal" in runs else summary[b]
         x = np.linspace(0.0, edges[-1], 200)
         m = row["mean_free_path"]
         ax.plot(x, np.exp(-x / m) / m, "k-", lw=1, label=f"exp, same mean ({m:.3g})")
-        if rate > 0:
+        if b == 0 and law["transmittance"] < 1.0:
+            # the hits' law, as the histograms show hits only
+            keep = law["t"] <= edges[-1]
+            ax.plot(law["t"][keep], law["density"][keep] / (1.0 - law["transmittance"]),
+                    "k--", lw=1, label="medium counterpart, exact")
+        elif rate > 0 and data["homogeneous"]:
             ax.plot(x, rate * np.exp(-rate * x), "k--", lw=1,
                     label=f"exp, Rice ({1 / rate:.3g})")
         ax.set_xlabel("free-flight distance t")
@@ -351,22 +444,64 @@ def plot_limits(medium: dict, surface: dict, path) -> None:
     plt.close(fig)
 
 
-def write_density(scene: str, obj: int, out_dir, ray: Ray | None = None, paths: int = 20000,
-                  bounces: int = 2, seed: int = 1, device: Device | None = None) -> list:
-    """Everything `density` writes for GPIS number obj of a scene file: flights.csv,
-    summary.csv, free_flight.png, normals.png (a mean with a gradient only). The medium
-    counterpart joins the memory models for a constant mean. Returns the paths."""
-    pyplot()   # fail before any work if matplotlib is missing
+def scene_object(scene: str, obj: int) -> tuple:
+    """(resolved shape, key path) of GPIS number obj of a scene file that resolve_target
+    has accepted; a "scene" proxy bounded by the scene's box, as the renderer does."""
+    from ..compile.scene import bound_scene_proxies
+    from ..scene.loading import load_scene
+    data = load_scene(scene).data
+    i = [k for k, s in enumerate(data["shapes"]) if s["type"] == "gpis"][obj]
+    return bound_scene_proxies(data)[obj], f"shapes[{i}]"
+
+
+def require_scene_file(scene: str) -> None:
+    if not Path(scene).is_file():
+        raise SceneError(CLI_SOURCE, "SCENE", f"not an existing scene file (got {scene!r})")
+
+
+def scene_density(scene: str, obj: int, ray: Ray | None = None, paths: int = 20000,
+                  bounces: int = 2, seed: int = 1, device: Device | None = None,
+                  memories=MEMORIES) -> tuple:
+    """(density_data, title) of GPIS number obj of a scene file under each of `memories`
+    (default: every memory model and the medium counterpart), with the object's device
+    records as the renderer compiles them. SceneError (one line) for a missing file or
+    object; failed flights (which the renderer would count as failed, RenderStats.
+    gpis_failed) are one warning line on stderr and the summary's `failed` column."""
+    require_scene_file(scene)
     target = resolve_target(scene, obj)
     if target.mean is None:
-        raise SceneError("<command line>", "SCENE", "density needs a scene file")
+        raise SceneError(CLI_SOURCE, "SCENE", "density needs a scene file")
+    shape, key = scene_object(scene, obj)
+    packed = pack_scene_object(shape, scene, key)
     ray = ray or default_ray(target.mean, target.center, target.half_extent)
-    # the medium counterpart exists for constant means only (compile/classical.py)
-    memories = MEMORIES if isinstance(target.mean, Constant) else MEMORIES[:-1]
     data = density_data(target.kernel, target.mean, ray, paths, bounces, seed, memories,
-                        device)
+                        device, packed)
+    failed = failures(data["runs"])
+    if failed:
+        hint = (f"; the medium counterpart's tracker stops after {FS_TRACK_CAP} stretches "
+                "(each at most 0.375 sigma / mean slope long) or tentative collisions"
+                ) if "track_cap" in failed else ""
+        print(f"gpiscl: warning: {scene}: {key}: density: flights failed, as the renderer "
+              f"would count them (RenderStats.gpis_failed): {failed}{hint}; summary.csv's "
+              f"`failed` column counts them, and no statistic includes them", file=sys.stderr)
+    return data, target.name
+
+
+def write_density_tables(data: dict, out_dir) -> list:
+    """flights.csv (every hit) and summary.csv (flight_summary's rows) of density_data."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_flights_csv(data["runs"], out / "flights.csv")
     write_csv(data["summary"], out / "summary.csv")
-    return [out / "flights.csv", out / "summary.csv", *plot_density(data, target.name, out)]
+    return [out / "flights.csv", out / "summary.csv"]
+
+
+def write_density(scene: str, obj: int, out_dir, ray: Ray | None = None, paths: int = 20000,
+                  bounces: int = 2, seed: int = 1, device: Device | None = None) -> list:
+    """Everything `density` writes for GPIS number obj of a scene file: flights.csv,
+    summary.csv, free_flight.png, normals.png (a mean with a gradient only), each with
+    every memory model and the medium counterpart (classical_medium). Returns the paths."""
+    require_scene_file(scene)
+    pyplot()   # fail before any work if matplotlib is missing
+    data, title = scene_density(scene, obj, ray, paths, bounces, seed, device)
+    return [*write_density_tables(data, out_dir), *plot_density(data, title, out_dir)]

@@ -2,28 +2,62 @@
 sampler (fs_free_flight and fs_vertex_at_hit of kernels_cl/lib): the data of the GPIS
 density (docs/design/classical-limits.md). After each hit the path scatters off a
 Lambertian facet (cosine-weighted about the sampled normal; or reflects as a mirror) and
-flies again from the vertex, so the second and later flights show what each memory model remembers. The
-"memory" classical_medium runs the medium counterpart's flight (fs_classical.h) instead."""
+flies again from the vertex, so the second and later flights show what each memory model
+remembers. The "memory" classical_medium runs the medium counterpart's flight
+(fs_classical.h) instead. A scene object's flights are clipped to its proxy, as the
+renderer's are (pack_scene_object)."""
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import pyopencl as cl
 
+from ..compile.gpis import compile_gpis
+from ..gp.kernels import Kernel
+from ..gp.means import Mean
 from ..layout import function_space_records as FL
 from ..layout import gp_records
-from ..layout.records import GPIS_MEMORIES
+from ..layout.records import GPIS_MEMORIES, GPIS_PROXIES
 from .device import Device, build_quietly
 from .program_sources import fs_sampler_options, fs_sampler_source, kernel_source
 
 WINDOW_MAX, CAP_MAX = 32, 128
 PER_FLIGHT = 5          # t (-1: no hit), grad x, y, z, solver status
 
+# proxy kinds of the wrapper's clip (PackedGpis.proxy_kind)
+CLIP_NONE, CLIP_BOX, CLIP_SPHERE = 0, 1, 2
+
 # The scatter directions come from Philox stream 1; the sampler's own draws use stream 0.
 _WRAPPER = r"""
+/* Clips r to the proxy as fs_object_flight does before any flight: kind CLIP_BOX = 1 (p:
+ * min, max) or CLIP_SPHERE = 2 (p: centre, radius); 0 if nothing of the ray is left. */
+inline int clip_to_proxy(int kind, __global const double* p, FsRay* r)
+{
+    double t0 = r->t0, t1 = r->t1;
+    if (kind == 1) {
+        double3 inv = 1.0 / r->d;
+        double3 ta = (vload3(0, p) - r->o) * inv, tb = (vload3(0, p + 4) - r->o) * inv;
+        double3 near = fmin(ta, tb), far = fmax(ta, tb);
+        t0 = fmax(t0, fmax(near.x, fmax(near.y, near.z)));
+        t1 = fmin(t1, fmin(far.x, fmin(far.y, far.z)));
+    } else if (kind == 2) {
+        double3 oc = r->o - vload3(0, p);
+        double a = dot(r->d, r->d), b = dot(oc, r->d), c = dot(oc, oc) - p[3] * p[3];
+        double disc = b * b - a * c;
+        if (disc < 0.0) return 0;
+        t0 = fmax(t0, (-b - sqrt(disc)) / a);
+        t1 = fmin(t1, (-b + sqrt(disc)) / a);
+    }
+    r->t0 = t0;
+    r->t1 = t1;
+    return t0 < t1;
+}
+
 __kernel void theory_flights(__global const GpKernel* kp, __global const MeanNode* mean,
                              int mc, int window, int memory, int cap, int refine, double tol,
                              __global const double* ray, uint seed, int first, int bounces,
-                             int mirror,
+                             int mirror, int proxy_kind, __global const double* proxy,
                              __global double* scratch, __global FsObs* rings,
                              __global double* out)
 {
@@ -40,6 +74,7 @@ __kernel void theory_flights(__global const GpKernel* kp, __global const MeanNod
     }
     for (int b = 0; b < bounces; ++b) {
         rng.bounce = turn.bounce = (uint)b;
+        if (!clip_to_proxy(proxy_kind, proxy, &r)) break;
         FsResult res = GPIS_MEMORY_IS_EXPONENTIAL(memory)
             ? fs_classical_flight(kp[0], mean, mc, r, rng)
             : fs_free_flight(kp[0], mean, mc, prm, r, v, rings + (size_t)i * cap, rng, S);
@@ -79,15 +114,76 @@ def _buf(device, a):
                      hostbuf=np.ascontiguousarray(a))
 
 
+@dataclass
+class PackedGpis:
+    """What the device reads of one GPIS object, as the renderer lays it out."""
+    kernel: np.ndarray      # its GpKernel record (1,)
+    nodes: np.ndarray       # MeanNode records: the mean program, then the kernel's grid
+                            # fields at the record's sigma_grid / ls_grid offsets
+    mean_count: int         # records of the mean program
+    proxy_kind: int = CLIP_NONE     # flights clipped to: CLIP_BOX (proxy: min, max) or
+    proxy: tuple = (0.0,) * 8       # CLIP_SPHERE (proxy: centre, radius), as 8 doubles
+
+    def interval(self, origin, direction, length: float) -> tuple:
+        """(t0, t1) of origin + t direction (unit), t in [0, length], that the wrapper's
+        clip keeps (t0 >= t1: none)."""
+        o, d = np.asarray(origin, float), np.asarray(direction, float)
+        p = np.asarray(self.proxy)
+        t0, t1 = 0.0, float(length)
+        if self.proxy_kind == CLIP_BOX:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ta, tb = (p[:3] - o) / d, (p[4:7] - o) / d
+            # nan: along a face (0 / 0), which the slab does not limit (as fmin on the device)
+            t0 = float(np.nanmax([t0, *np.fmin(ta, tb)]))
+            t1 = float(np.nanmin([t1, *np.fmax(ta, tb)]))
+        elif self.proxy_kind == CLIP_SPHERE:
+            oc = o - p[:3]
+            b, c = float(oc @ d), float(oc @ oc) - p[3] ** 2
+            disc = b * b - c
+            if disc < 0.0:
+                return 0.0, 0.0
+            t0, t1 = max(t0, -b - disc ** 0.5), min(t1, -b + disc ** 0.5)
+        return t0, t1
+
+
+def pack_scene_object(shape: dict, source: str, key: str) -> PackedGpis:
+    """The records the renderer compiles for a resolved "gpis" shape (compile_gpis on that
+    shape alone): the kernel built with its proxy (a linear l field's step), grid means'
+    payloads and the kernel's grid fields. source and key name it in compile errors.
+    Flights are clipped to the proxy as the renderer's are (a mesh proxy to its bounding
+    box, the compiled record's). Observations are left out (the flights are the prior's),
+    and so is the proxy-cut warning (the flights ask for no image)."""
+    shape = dict(shape, clip=True, observations=None)
+    c = compile_gpis([shape], lambda bsdf: 0, source, [key])
+    o = c.objects[0]
+    sphere = o["proxy_kind"] == GPIS_PROXIES["sphere"]
+    return PackedGpis(c.kernels[:1], c.mean_nodes, int(o["mean_count"]),
+                      CLIP_SPHERE if sphere else CLIP_BOX,
+                      tuple(float(v) for v in (*o["proxy_p0"], *o["proxy_p1"])))
+
+
+def pack_model(kernel: Kernel, mean: Mean) -> PackedGpis:
+    """pack_scene_object's records for host kernel and mean objects: compile_object's own
+    steps (the mean program, then the kernel's grid fields after it)."""
+    record = gp_records.pack_kernel(kernel)
+    parts = gp_records.pack_mean_parts(mean)
+    count = sum(len(p) for p in parts)
+    parts += gp_records.pack_kernel_grids(kernel, record, count)
+    return PackedGpis(record, np.concatenate(parts), count)
+
+
 def flights(device: Device, kernel, mean, origin, direction, length: float, n: int,
             memory: str = "renewal", bounces: int = 2, seed: int = 1, cap: int = 64,
             refine: int = 0, tol: float = FL.DEFAULT_MISS_TOLERANCE,
-            later_length: float | None = None, mirror: bool = False) -> np.ndarray:
+            later_length: float | None = None, mirror: bool = False,
+            packed: PackedGpis | None = None) -> np.ndarray:
     """(n, bounces, 5): per path and flight the hit distance (-1: none, and every later
     flight -1), the sampled gradient at the hit and the solver status (0: fine). The
     first flight runs along origin + t direction, t in [0, length]; later ones are
     later_length (default: length) long from the previous hit. mirror: each hit reflects
-    the ray about its sampled normal instead of the Lambertian turn."""
+    the ray about its sampled normal instead of the Lambertian turn. packed: the object's
+    records and proxy (pack_scene_object); None packs kernel and mean (pack_model) and
+    clips nothing."""
     if memory not in GPIS_MEMORIES:
         raise ValueError(f"memory must be one of {sorted(GPIS_MEMORIES)}, got {memory!r}")
     if not 1 <= cap <= CAP_MAX:
@@ -97,8 +193,9 @@ def flights(device: Device, kernel, mean, origin, direction, length: float, n: i
     q = device.queue
     later = float(length if later_length is None else later_length)
     ray = _buf(device, np.array([*np.asarray(origin, float), *d, 0.0, float(length), later]))
-    mean_nodes = gp_records.pack_mean(mean)
-    kp, mb = _buf(device, gp_records.pack_kernel(kernel)), _buf(device, mean_nodes)
+    packed = packed or pack_model(kernel, mean)
+    kp, mb = _buf(device, packed.kernel), _buf(device, packed.nodes)
+    proxy = _buf(device, np.asarray(packed.proxy, np.float64))
     stride = FL.scratch_doubles(FL.max_rows(WINDOW_MAX, CAP_MAX))
     chunk = max(1, min(n, (256 << 20) // (8 * stride)))
     scratch = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, 8 * stride * chunk)
@@ -109,9 +206,9 @@ def flights(device: Device, kernel, mean, origin, direction, length: float, n: i
     for first in range(0, n, chunk):
         m = min(chunk, n - first)
         ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, 8 * PER_FLIGHT * bounces * m)
-        run(q, (m,), None, kp, mb, np.int32(len(mean_nodes)), np.int32(0),
+        run(q, (m,), None, kp, mb, np.int32(packed.mean_count), np.int32(0),
             np.int32(GPIS_MEMORIES[memory]), np.int32(cap), np.int32(refine),
             np.float64(tol), ray, np.uint32(seed), np.int32(first), np.int32(bounces),
-            np.int32(mirror), scratch, rings, ob)
+            np.int32(mirror), np.int32(packed.proxy_kind), proxy, scratch, rings, ob)
         cl.enqueue_copy(q, out[first:first + m], ob)
     return out
