@@ -15,7 +15,7 @@ from ..gp import means as M
 from ..scene.proxies import analyse, bounding_proxy
 from ..scene.transforms import transform_matrix
 from ..gp.spectral import pack_order_tables
-from ..layout.gp_records import (GP_KERNEL, MEAN_NODE, pack_kernel, pack_kernel_grids,
+from ..layout.gp_records import (GP_KERNEL, MEAN_NODE, pack_kernel, pack_kernel_grids, sigma_top,
                                  pack_mean_parts)
 from ..scene.gpis import DEFAULT_OCCUPANCY, FIELD_KEYS, field_minimum
 from .colour_fields import pack_field
@@ -131,15 +131,21 @@ def sigma_max(g: dict, kernel: K.Kernel | None = None) -> float:
     if kernel is None:
         kernel = build_kernel(g["kernel"], g["proxy"])
     base = kernel.base if isinstance(kernel, K.NonStationary) else kernel
-    m_max, sf = 1.0, g["kernel"].get("sigma_field")
-    if sf is not None and sf["type"] == "radial":
-        m_max = max(sf["inner"], sf["outer"])
-    elif sf is not None and sf["type"] == "grid":
-        m_max = kernel.sigma_field.maximum()
-    elif sf is not None:   # max of a linear field = -(min of its negation)
-        neg = dict(sf, value=-sf["value"], gradient=[-c for c in sf["gradient"]])
-        m_max = -field_minimum(neg, g["proxy"])
-    return math.sqrt(base.variance) * m_max
+    return math.sqrt(base.variance) * sigma_field_max(g, kernel)
+
+
+def sigma_field_max(g: dict, kernel: K.Kernel) -> float:
+    """The sigma field's largest value over the object's proxy (1 without one)."""
+    sf = g["kernel"].get("sigma_field")
+    if sf is None:
+        return 1.0
+    if sf["type"] == "radial":
+        return max(sf["inner"], sf["outer"])
+    if sf["type"] == "grid":
+        return kernel.sigma_field.maximum()
+    # max of a linear field = -(min of its negation)
+    neg = dict(sf, value=-sf["value"], gradient=[-c for c in sf["gradient"]])
+    return -field_minimum(neg, g["proxy"])
 
 
 def _warn_if_cut(g: dict, mean: M.Mean, kernel: K.Kernel, source: str, key: str) -> None:
@@ -207,9 +213,8 @@ def compile_object(g: dict, o, kernel_record: np.ndarray, source: str, key: str,
     kernel_record (GpKernel, 1) and o's occupancy level."""
     kernel = build_kernel(g["kernel"], g["proxy"])
     kernel_record[:] = pack_kernel(kernel)
-    if g["kernel"].get("sigma_field") is not None:   # rounded up: the device's bound
-        kernel_record["sigma_top"] = np.nextafter(np.float32(sigma_max(g, kernel)),
-                                                  np.float32(np.inf))
+    if g["kernel"].get("sigma_field") is not None:   # over the proxy: linear fields too
+        kernel_record["sigma_top"] = sigma_top(kernel, sigma_field_max(g, kernel))
     try:
         mean = build_mean(g["mean"], bakes)
         records = pack_mean_parts(mean)

@@ -127,11 +127,25 @@ def _pack_field(field):
     return FIELD_KINDS[field.kind], p0, p1
 
 
+def sigma_top(kernel: K.NonStationary, field_max: float | None = None) -> np.float32:
+    """GpKernel.sigma_top: the largest sigma(x), rounded up to float32 (the device's
+    bound); field_max: the sigma field's largest value where rays sample (a linear field
+    has one only over a proxy: compile/gpis.py passes it), else the field's own largest
+    value (grid, radial; 0, no bound, for a linear field)."""
+    f = kernel.sigma_field
+    if field_max is None:
+        field_max = (f.maximum() if isinstance(f, K.GridField)
+                     else max(f.inner, f.outer) if isinstance(f, K.RadialField) else 0.0)
+    top = float(np.sqrt(kernel.base.variance)) * field_max
+    return np.nextafter(np.float32(top), np.float32(np.inf)) if top > 0.0 else np.float32(0.0)
+
+
 def pack_kernel(kernel: K.Kernel) -> np.ndarray:
     if isinstance(kernel, K.NonStationary):
         out = pack_kernel(kernel.base)
         if kernel.sigma_field is not None:
             out["sigma_field"], out["sigma_p0"], out["sigma_p1"] = _pack_field(kernel.sigma_field)
+            out["sigma_top"] = sigma_top(kernel)
         if kernel.length_scale_field is not None:
             out["ls_field"], out["ls_p0"], out["ls_p1"] = _pack_field(kernel.length_scale_field)
             step = kernel.step_length_scale
