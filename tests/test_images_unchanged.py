@@ -3,10 +3,14 @@ define-once redesign, bit for bit, on the device the reference was made on.
 
 The reference (tests/data/unchanged_images.npz) holds each scene's mean image, standard
 error and sample counts at 8x6 pixels, 4 spp, seed 7, with AOVs (film sums included), made by
-`python tests/test_images_unchanged.py` on the commit before the redesign. On another
-device kind (other rounding of exp, another vector width) a path can take another branch,
-so there the test asks for agreement within noise: the whole image's summed difference
-against its standard error, |z| < 5.
+`python tests/test_images_unchanged.py` on the commit before the redesign and made again,
+in commits that say so, for intended changes (with paired renders that show them within
+noise) and for a new CI machine (the device name is stored with it; on 2026-12-07 for
+PoCL's haswell target, after checking this device renders the earlier code and the new
+bit for bit alike except the two scenes a change meant to alter). On another device kind
+(other rounding of exp, another vector width) a path can take another branch, so there
+the test asks for agreement within noise: the whole image's summed difference against
+its standard error, |z| < 5.
 """
 import sys
 from pathlib import Path
