@@ -52,8 +52,9 @@ def test_progress_arrives_at_least_once_a_second_and_time_limit_holds(device):
     assert st.seconds < 2.0 + 1.0, st.seconds                  # within one batch
     gaps = np.diff([start] + [t for t, _ in calls])
     # the first gap includes compiling the scene; then batches aim at 0.5 s (the margin is
-    # for a loaded CI machine)
-    assert len(calls) >= 3 and gaps[1:].max() < 1.5, gaps
+    # for a loaded CI machine: 1.55 s seen with two test workers on 2 cores; the bug this
+    # guards left 13.9 s between progress lines)
+    assert len(calls) >= 3 and gaps[1:].max() < 2.5, gaps
     assert sum(n for _, n in calls) == st.paths > 0
     assert elapsed < 30
 
