@@ -15,6 +15,7 @@ from gpiscl.host.gp import SquaredExponential
 from gpiscl.host.gp import classical as C
 from gpiscl.host.kinds.conductors import CONDUCTORS
 from gpiscl.host.scene.loading import load_scene
+from gpiscl.testing.scenes import classical_stage
 from gpiscl.testing.stats import assert_agree, image_mean_se, z_threshold
 
 MIRROR = {"type": "mirror", "albedo": 1.0}
@@ -29,13 +30,7 @@ def sphere_scene(micro, classical=False, spp=64, light="rectangle", kernel=None)
          "bsdf": micro}
     if classical:
         g["classical"] = "surface"
-    lights = ([{"type": "environment", "radiance": 1.0}] if light == "furnace" else
-              [{"type": "environment", "radiance": 0.2},
-               {"type": "rectangle", "center": [1.5, 2.5, 1.5], "u": [1, 0, 0], "v": [0, 0, 1],
-                "radiance": 8.0}])
-    return {"camera": {"position": [0, 0, 4], "look_at": [0, 0, 0], "up": [0, 1, 0],
-                       "fov": 40, "resolution": [32, 32]},
-            "render": {"spp": spp, "seed": 3, "max_depth": 32}, "shapes": [g], "lights": lights}
+    return classical_stage(g, spp, 3, light)
 
 
 def counterpart(doc):

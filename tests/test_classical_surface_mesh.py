@@ -16,6 +16,7 @@ from gpiscl.host.compile.zero_set_mesh import zero_set_mesh
 from gpiscl.host.errors import SceneError
 from gpiscl.host.io.meshes import closed_mesh, load_mesh
 from gpiscl.host.scene.loading import load_scene
+from gpiscl.testing.scenes import classical_stage
 from gpiscl.testing.stats import assert_agree, block_means, image_mean_se, z_threshold
 
 MIRROR = {"type": "mirror", "albedo": 1.0}
@@ -36,14 +37,7 @@ PROXY = {"type": "sphere", "center": [0, 0, 0], "radius": 1.1}
 def scene(mean, micro=MIRROR, spp=256, light="rectangle", proxy=PROXY):
     g = {"type": "gpis", "proxy": proxy, "mean": mean, "kernel": SE, "bsdf": micro,
          "classical": "surface"}
-    lights = ([{"type": "environment", "radiance": 1.0}] if light == "furnace" else
-              [{"type": "environment", "radiance": 0.2},
-               {"type": "rectangle", "center": [1.5, 2.5, 1.5], "u": [1, 0, 0], "v": [0, 0, 1],
-                "radiance": 8.0}])
-    return {"camera": {"position": [0, 0, 4], "look_at": [0, 0, 0], "up": [0, 1, 0],
-                       "fov": 40, "resolution": [32, 32]},
-            "render": {"spp": spp, "seed": 5, "max_depth": 32}, "shapes": [g],
-            "lights": lights}
+    return classical_stage(g, spp, 5, light)
 
 
 def counterparts(doc):

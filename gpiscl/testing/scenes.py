@@ -122,3 +122,16 @@ def sun_sky_floor(resolution=16, seed=3, max_depth=5, sun_radius=0.265):
             "lights": [{"type": "directional", "direction": [0.3, 1, 0.2],
                         "irradiance": 3.0, "angular_radius": sun_radius},
                        {"type": "environment", "radiance": 0.5}]}
+
+
+def classical_stage(shape: dict, spp: int, seed: int, light: str = "rectangle") -> dict:
+    """One GPIS shape before the classical counterparts' camera (32x32): lit by a dim sky
+    and a rectangle light, or by a white constant environment alone (light="furnace")."""
+    lights = ([{"type": "environment", "radiance": 1.0}] if light == "furnace" else
+              [{"type": "environment", "radiance": 0.2},
+               {"type": "rectangle", "center": [1.5, 2.5, 1.5], "u": [1, 0, 0], "v": [0, 0, 1],
+                "radiance": 8.0}])
+    return {"camera": {"position": [0, 0, 4], "look_at": [0, 0, 0], "up": [0, 1, 0],
+                       "fov": 40, "resolution": [32, 32]},
+            "render": {"spp": spp, "seed": seed, "max_depth": 32}, "shapes": [shape],
+            "lights": lights}
