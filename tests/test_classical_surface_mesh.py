@@ -159,3 +159,33 @@ def test05_box_proxy_cuts_the_surface_open():
     assert verts.min() >= -1 - 1e-12 and verts.max() <= 1 + 1e-12 and not closed_mesh(verts[faces])
     n = np.asarray(plane["normal"]) / np.linalg.norm(plane["normal"])
     assert np.abs((verts - plane["point"]) @ n).max() < 1e-9
+
+
+def test06_sigma_and_length_fields_scale_each_faces_roughness():
+    """With sigma(x) and l(x) fields the slope's sd is sigma m_s(x) / (l m_l(x)) (local
+    stationarity): each face's alpha carries m_s / m_l at its centroid. A constant sigma
+    field of 2 on half the sigma gives the analytic sphere's alpha (one band); a radial
+    sigma field from 1 (inside radius 0.6 about (0, 0.8, 0)) to 3 (outside) spreads the
+    bands over that range; an l field of 2 halves the alpha."""
+    alpha = counterparts(scene(SPHERE))[0]["bsdf"]["roughness"]   # sigma 0.01, l 0.1
+
+    def with_kernel(kernel):
+        g = dict(scene(SPHERE)["shapes"][0], kernel=kernel,
+                 sampler={"type": "function_space"})
+        return counterparts(dict(scene(SPHERE), shapes=[g]))
+
+    shapes = with_kernel(dict(SE, sigma=0.005, sigma_field={
+        "type": "linear", "value": 2.0, "gradient": [0.0, 0.0, 0.0]}))
+    assert len(shapes) == 1 and shapes[0]["type"] == "mesh"
+    assert shapes[0]["bsdf"]["roughness"] == pytest.approx(alpha, rel=2e-2)
+    shapes = with_kernel(dict(SE, length_scale_field={
+        "type": "linear", "value": 2.0, "gradient": [0.0, 0.0, 0.0]}))
+    assert shapes[0]["bsdf"]["roughness"] == pytest.approx(alpha / 2.0, rel=2e-2)
+    shapes = with_kernel(dict(SE, sigma=0.005, sigma_field={
+        "type": "radial", "center": [0.0, 0.8, 0.0], "radius": 0.6, "width": 0.2,
+        "inner": 1.0, "outer": 3.0}))
+    rough = sorted(s["bsdf"]["roughness"] for s in shapes)
+    assert len(shapes) > 3
+    # alpha at m_s = 1 is alpha / 2 here; the faces' fields span about [1, 3]
+    assert 0.49 * alpha < rough[0] < 0.7 * alpha and 1.25 * alpha < rough[-1] < 1.51 * alpha, \
+        (rough, alpha)

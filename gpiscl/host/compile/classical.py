@@ -102,7 +102,20 @@ def alpha_bands(alpha: np.ndarray, weight: np.ndarray) -> tuple:
     return band, np.sqrt(a2)
 
 
-def _mesh_counterparts(shape: dict, proxy: dict, alpha_unit: float, source: str,
+def _field_scale(kernel, x: np.ndarray) -> np.ndarray:
+    """The factor sigma(x) / l(x) puts on the slope's sd, relative to the base kernel's
+    (local stationarity, as the medium counterpart: docs/design/classical-limits.md 4.2);
+    1 without fields."""
+    scale = np.ones(len(x))
+    if isinstance(kernel, NonStationary):
+        if kernel.sigma_field is not None:
+            scale = scale * np.asarray(kernel.sigma_field.eval(x)[0], float)
+        if kernel.length_scale_field is not None:
+            scale = scale / np.asarray(kernel.length_scale_field.eval(x)[0], float)
+    return scale
+
+
+def _mesh_counterparts(shape: dict, proxy: dict, kernel, alpha_unit: float, source: str,
                        where: str) -> list:
     """The zero set of any mean inside its proxy as mesh shapes, one per alpha band."""
     if proxy["type"] == "scene":    # its box is known only once the scene is compiled
@@ -126,7 +139,8 @@ def _mesh_counterparts(shape: dict, proxy: dict, alpha_unit: float, source: str,
     if shape["bsdf"]["type"] == "diffuse":    # alpha does not enter: one mesh
         band, alphas = np.zeros(len(zs.faces), np.int64), np.array([alpha_unit])
     else:
-        band, alphas = alpha_bands(alpha_unit / zs.slopes, area)
+        scale = _field_scale(kernel, tri.mean(axis=1))
+        band, alphas = alpha_bands(alpha_unit * scale / zs.slopes, area)
     folder = cache_dir("surface")
     shapes = []
     for b, alpha in enumerate(alphas):
@@ -152,25 +166,25 @@ def surface_counterpart(shape: dict, source: str, where: str) -> list:
                              '"classical": "surface"')
     mean, proxy = shape["mean"], shape["proxy"]
     fields = [k for k in FIELD_KEYS if shape["kernel"].get(k) is not None]
-    if fields:
-        raise SceneError(source, f"{where}.kernel.{fields[0]}", "the surface counterpart has "
-                         "one roughness: give constant sigma and length_scale")
-    kernel = build_kernel(shape["kernel"])
-    lam = kernel.gradient_variance()
+    kernel = build_kernel(shape["kernel"], proxy)
+    base = kernel.base if isinstance(kernel, NonStationary) else kernel
+    lam = base.gradient_variance()
     if not np.allclose(lam, lam[0], rtol=1e-9):
         raise SceneError(source, f"{where}.kernel.aniso", "the surface counterpart is an "
                          "isotropic Beckmann BSDF: give an isotropic kernel")
     try:
-        alpha_unit = C.beckmann_alpha(kernel, (1.0, 0.0, 0.0), 1.0)   # at |grad mu| = 1
+        alpha_unit = C.beckmann_alpha(base, (1.0, 0.0, 0.0), 1.0)   # at |grad mu| = 1
     except ValueError as exc:
         raise SceneError(source, f"{where}.kernel", str(exc)) from None
+    if fields:          # the roughness varies over the surface: the mesh's alpha bands
+        return _mesh_counterparts(shape, proxy, kernel, alpha_unit, source, where)
     if mean["type"] == "sphere":
         geometry, slope = {"type": "sphere", "center": list(mean["center"]),
                            "radius": mean["radius"]}, 1.0
     elif mean["type"] == "plane" and _plane_fits_box(mean, proxy):
         geometry, slope = _plane_in_box(mean, proxy, source, where), mean["scale"]
     else:
-        return _mesh_counterparts(shape, proxy, alpha_unit, source, where)
+        return _mesh_counterparts(shape, proxy, kernel, alpha_unit, source, where)
     return [{**geometry, "bsdf": counterpart_bsdf(shape["bsdf"], alpha_unit / slope,
                                                   source, where)}]
 
