@@ -164,17 +164,20 @@ def test_the_command_line_prints_progress_lines_into_a_pipe(tmp_path):
     scene = tmp_path / "slow.json"
     scene.write_text(json.dumps(e10_scene()))
     r = subprocess.run([sys.executable, "-m", "gpiscl", "render", str(scene), "-o",
-                        str(tmp_path / "out.exr"), "--time-limit", "11"],
+                        str(tmp_path / "out.exr"), "--time-limit", "13"],
                        capture_output=True, text=True, env=ENV, cwd=ROOT, timeout=300)
     assert r.returncode == 0, r.stderr
     lines = r.stderr.splitlines()
     assert "Traceback" not in r.stderr and "\r" not in r.stderr, r.stderr
     progress = [line for line in lines if line.startswith("rendering: ")]
-    assert len(progress) == 1, r.stderr     # one every 10 s
-    assert re.fullmatch(r"rendering: [0-9.e-]+/1000000 spp \(0 %\), 1[01] s, ETA .+, "
+    # one every 10 s, written when a batch ends: 13 s leaves room for a batch that a
+    # loaded machine stretches past the 10-s mark (an 11-s limit saw none: the batch
+    # running at 10 s ran into the limit)
+    assert len(progress) == 1, r.stderr
+    assert re.fullmatch(r"rendering: [0-9.e-]+/1000000 spp \(0 %\), 1[0-2] s, ETA .+, "
                         r"[0-9.e+]+ paths/s", progress[0]), progress[0]
     summary = next(line for line in lines if line.startswith("paths: "))
-    assert float(summary.split("time: ")[1].split(" s")[0]) < 12.5, summary
+    assert float(summary.split("time: ")[1].split(" s")[0]) < 14.5, summary
 
 
 def test_a_fixed_cost_per_batch_does_not_keep_batches_small():
