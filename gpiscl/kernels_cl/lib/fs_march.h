@@ -318,16 +318,17 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
     if (balls && fabs(m) > FS_MEAN_Z * sd) {
         /* sphere tracing on, from ball to ball: each ends where the next starts, so
          * |mean| >= FS_MEAN_Z sd (one sign) on all of [ta, ta + s]; under a sigma(x)
-         * field each ball is sized by the sd's bound over it (fs_sd_over), found for the
-         * ball the last bound would give (the bound over a longer stretch holds on a
-         * shorter one) */
+         * field each ball is the one the last bound would give, cut to what the sd's
+         * bound over that stretch allows (fs_sd_over: the bound holds on the stretch it
+         * was taken over, so the ball never reaches past it) */
         double s = 0.0, mz = fabs(m), sdk = sd;
         for (int k = 0; k < FS_MEAN_HOPS; ++k) {
             double hop = (mz - FS_MEAN_Z * sdk) / lip;
             if (p.sigma_field) {
                 if (!(hop > 0.0)) break;
-                sdk = fs_sd_over(p, mean, ray, ta + s, ta + s + fmin(hop, he - s), sdk);
-                hop = (mz - FS_MEAN_Z * sdk) / lip;
+                double seg = fmin(hop, he - s);
+                sdk = fs_sd_over(p, mean, ray, ta + s, ta + s + seg, sdk);
+                hop = fmin((mz - FS_MEAN_Z * sdk) / lip, seg);
                 if (!(hop > 0.0)) break;
             }
             s += hop;
