@@ -49,7 +49,7 @@ def test_progress_arrives_at_least_once_a_second_and_time_limit_holds(device):
     elapsed = time.perf_counter() - start
     st = res.stats
     assert st.time_limited and not st.interrupted
-    assert st.seconds < 2.0 + 1.0, st.seconds                  # within one batch
+    assert st.seconds < 2.0 + 2.0, st.seconds      # within a batch, slowed by other work
     gaps = np.diff([start] + [t for t, _ in calls])
     # the first gap includes compiling the scene; then batches aim at 0.5 s (the margin is
     # for a loaded CI machine: 1.55 s seen with two test workers on 2 cores; the bug this

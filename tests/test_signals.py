@@ -30,6 +30,13 @@ def start_render(tmp_path, *args, scene=None):
                             cwd=ROOT, env=env, stderr=subprocess.PIPE, text=True)
 
 
+# a stop acts between bounces and between a bake's chunks (well under a second on an idle
+# machine); 4 s leaves room for a CI machine shared with other work (a full suite at load
+# average ~4.7 on 2 cores broke the old 2.5-3 s bounds), far below the minutes this guards
+# against
+STOP_SECONDS = 4.0
+
+
 def wait_for_line(proc, fragment, timeout=60):
     deadline = time.monotonic() + timeout
     lines = []
@@ -63,7 +70,7 @@ def test_signal_mid_render_writes_the_samples_so_far(tmp_path, signum):
     time.sleep(2.5)                       # compile, and a few batches
     seconds, err = stop(proc, signum)
     assert proc.returncode == 128 + signum, err
-    assert seconds < 2.5, seconds
+    assert seconds < STOP_SECONDS, seconds
     assert "Traceback" not in err
     name = signal.Signals(signum).name
     assert f"interrupted by {name} at " in err and " of 1000000 spp" in err, err
@@ -85,7 +92,7 @@ def test_signal_during_start_up_writes_nothing_and_keeps_an_old_output(tmp_path)
         time.sleep(delay)
         seconds, err = stop(proc, signal.SIGINT)
         assert proc.returncode == 130, err
-        assert seconds < 2.5 and "Traceback" not in err, err
+        assert seconds < STOP_SECONDS and "Traceback" not in err, err
         # one report of the interrupt, whatever else (progress, a compiler's build log)
         # was written before it
         reports = [ln for ln in err.splitlines() if "interrupted by SIGINT" in ln]
@@ -136,7 +143,7 @@ def test_signal_during_an_sdf_bake_acts_at_once_and_leaves_no_files(tmp_path):
     time.sleep(4.0)                       # imports, loading: the bake takes minutes
     seconds, err = stop(proc, signal.SIGINT)
     assert proc.returncode == 130, err
-    assert seconds < 3.0, seconds
+    assert seconds < STOP_SECONDS, seconds
     assert "Traceback" not in err and "nothing written" in err, err
     assert not (tmp_path / "b.exr").exists()
     assert not cache.exists() or not any(p.is_file() for p in cache.rglob("*"))
