@@ -7,6 +7,7 @@ Tolerances: KS at 1e-3 and a binomial z for the transmittance, Bonferroni over t
 import csv
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,6 +20,8 @@ from gpiscl.host.figures.samples import resolve_target
 from gpiscl.host.gp import classical as C
 from gpiscl.host.render.flight_samples import pack_model, pack_scene_object
 from gpiscl.testing.stats import z_threshold
+
+ROOT = Path(__file__).resolve().parent.parent
 
 N = 20000
 SEED = 5
@@ -160,3 +163,21 @@ def test06_the_command_draws_the_counterpart_for_a_shape_mean(device, tmp_path):
         assert (out / name).read_bytes()[:4] == b"\x89PNG"
     rows = list(csv.DictReader(open(out / "summary.csv")))
     assert [r["flight"] for r in rows if r["memory"] == "classical_medium"] == ["1", "2"]
+
+
+def test07_a_mesh_proxy_clips_the_flights_to_its_faces(device):
+    """wedge_volume's object sits in a prism (a mesh proxy): the flights are clipped by the
+    renderer's gpis_proxy_clip, the closed-form law over PackedGpis.interval's stretch (its
+    host twin), so the two must agree: the medium counterpart's share of first flights
+    that leave the stretch is its transmittance within binomial noise, and the distances
+    follow the law (one-sample KS). With the law taken over the prism's bounding box (a
+    host twin that ignores the faces) the transmittance's z was +17."""
+    paths = 4000
+    data, _ = scene_density(str(ROOT / "scenes" / "wedge_volume.json"), 0, paths=paths,
+                            bounces=1, seed=5, device=device, memories=("classical_medium",))
+    row = next(r for r in data["summary"] if r["flight"] == 1)
+    T = row["counterpart_transmittance"]
+    assert 0.05 < T < 0.95 and row["failed"] == 0, row
+    z = (1.0 - row["hits"] / paths - T) / math.sqrt(T * (1.0 - T) / paths)
+    assert abs(z) < z_threshold(2), (z, row)
+    assert row["ks_counterpart"] < C.ks_critical(paths, 1e-3 / 2), row

@@ -18,46 +18,20 @@ from ..gp.kernels import Kernel
 from ..gp.means import Mean
 from ..layout import function_space_records as FL
 from ..layout import gp_records
-from ..layout.records import GPIS_MEMORIES, GPIS_PROXIES
+from ..layout.records import GPIS_MEMORIES, GPIS_OBJECT, GPIS_PROXIES
 from .device import Device, build_quietly
 from .program_sources import fs_sampler_options, fs_sampler_source, kernel_source
 
 WINDOW_MAX, CAP_MAX = 32, 128
 PER_FLIGHT = 5          # t (-1: no hit), grad x, y, z, solver status
 
-# proxy kinds of the wrapper's clip (PackedGpis.proxy_kind)
-CLIP_NONE, CLIP_BOX, CLIP_SPHERE = 0, 1, 2
-
 # The scatter directions come from Philox stream 1; the sampler's own draws use stream 0.
 _WRAPPER = r"""
-/* Clips r to the proxy as fs_object_flight does before any flight: kind CLIP_BOX = 1 (p:
- * min, max) or CLIP_SPHERE = 2 (p: centre, radius); 0 if nothing of the ray is left. */
-inline int clip_to_proxy(int kind, __global const double* p, FsRay* r)
-{
-    double t0 = r->t0, t1 = r->t1;
-    if (kind == 1) {
-        double3 inv = 1.0 / r->d;
-        double3 ta = (vload3(0, p) - r->o) * inv, tb = (vload3(0, p + 4) - r->o) * inv;
-        double3 near = fmin(ta, tb), far = fmax(ta, tb);
-        t0 = fmax(t0, fmax(near.x, fmax(near.y, near.z)));
-        t1 = fmin(t1, fmin(far.x, fmin(far.y, far.z)));
-    } else if (kind == 2) {
-        double3 oc = r->o - vload3(0, p);
-        double a = dot(r->d, r->d), b = dot(oc, r->d), c = dot(oc, oc) - p[3] * p[3];
-        double disc = b * b - a * c;
-        if (disc < 0.0) return 0;
-        t0 = fmax(t0, (-b - sqrt(disc)) / a);
-        t1 = fmin(t1, (-b + sqrt(disc)) / a);
-    }
-    r->t0 = t0;
-    r->t1 = t1;
-    return t0 < t1;
-}
-
 __kernel void theory_flights(__global const GpKernel* kp, __global const MeanNode* mean,
                              int mc, int window, int memory, int cap, int refine, double tol,
                              __global const double* ray, uint seed, int first, int bounces,
-                             int mirror, int proxy_kind, __global const double* proxy,
+                             int mirror, int clip, __global const GpisObject* obj,
+                             __global const float4* planes,
                              __global double* scratch, __global FsObs* rings,
                              __global double* out)
 {
@@ -74,7 +48,13 @@ __kernel void theory_flights(__global const GpKernel* kp, __global const MeanNod
     }
     for (int b = 0; b < bounces; ++b) {
         rng.bounce = turn.bounce = (uint)b;
-        if (!clip_to_proxy(proxy_kind, proxy, &r)) break;
+        if (clip) {     /* the renderer's clip (gpis_proxy.h), before any flight */
+            float t0 = (float)r.t0, t1 = (float)r.t1;
+            if (!gpis_proxy_clip(obj, planes, convert_float3(r.o), convert_float3(r.d),
+                                 &t0, &t1)) break;
+            if (t0 > (float)r.t0) r.t0 = t0;
+            if (t1 < (float)r.t1) r.t1 = t1;
+        }
         FsResult res = GPIS_MEMORY_IS_EXPONENTIAL(memory)
             ? fs_classical_flight(kp[0], mean, mc, r, rng)
             : fs_free_flight(kp[0], mean, mc, prm, r, v, rings + (size_t)i * cap, rng, S);
@@ -103,6 +83,7 @@ _BUILT: dict = {}      # by context: one (slow) build per process
 def _kernel(device: Device):
     if device.ctx not in _BUILT:
         source = fs_sampler_source(f'#line 1 "fs_classical.h"\n{kernel_source("fs_classical.h")}'
+                                   f'\n#line 1 "gpis_proxy.h"\n{kernel_source("gpis_proxy.h")}'
                                    f'\n#line 1 "flight_samples.py"\n{_WRAPPER}')
         _BUILT[device.ctx] = build_quietly(device, source,
                                            fs_sampler_options(WINDOW_MAX, CAP_MAX)).theory_flights
@@ -121,45 +102,54 @@ class PackedGpis:
     nodes: np.ndarray       # MeanNode records: the mean program, then the kernel's grid
                             # fields at the record's sigma_grid / ls_grid offsets
     mean_count: int         # records of the mean program
-    proxy_kind: int = CLIP_NONE     # flights clipped to: CLIP_BOX (proxy: min, max) or
-    proxy: tuple = (0.0,) * 8       # CLIP_SPHERE (proxy: centre, radius), as 8 doubles
+    obj: np.ndarray | None = None   # its GpisObject record (1,): flights are clipped to
+    planes: np.ndarray | None = None    # its proxy (gpis_proxy_clip; a mesh proxy's
+                                        # face planes), None: not clipped
 
     def interval(self, origin, direction, length: float) -> tuple:
         """(t0, t1) of origin + t direction (unit), t in [0, length], that the wrapper's
-        clip keeps (t0 >= t1: none)."""
+        clip keeps (t0 >= t1: none): gpis_proxy_clip's arithmetic in double, for the
+        counterpart's closed-form law over the same stretch."""
         o, d = np.asarray(origin, float), np.asarray(direction, float)
-        p = np.asarray(self.proxy)
         t0, t1 = 0.0, float(length)
-        if self.proxy_kind == CLIP_BOX:
-            with np.errstate(divide="ignore", invalid="ignore"):
-                ta, tb = (p[:3] - o) / d, (p[4:7] - o) / d
-            # nan: along a face (0 / 0), which the slab does not limit (as fmin on the device)
-            t0 = float(np.nanmax([t0, *np.fmin(ta, tb)]))
-            t1 = float(np.nanmin([t1, *np.fmax(ta, tb)]))
-        elif self.proxy_kind == CLIP_SPHERE:
-            oc = o - p[:3]
-            b, c = float(oc @ d), float(oc @ oc) - p[3] ** 2
+        if self.obj is None:
+            return t0, t1
+        g = self.obj[0]
+        p0, p1 = np.asarray(g["proxy_p0"], float), np.asarray(g["proxy_p1"], float)
+        if g["proxy_kind"] == GPIS_PROXIES["sphere"]:
+            oc = o - p0[:3]
+            b, c = float(oc @ d), float(oc @ oc) - p0[3] ** 2
             disc = b * b - c
             if disc < 0.0:
                 return 0.0, 0.0
-            t0, t1 = max(t0, -b - disc ** 0.5), min(t1, -b + disc ** 0.5)
-        return t0, t1
+            return max(t0, -b - disc ** 0.5), min(t1, -b + disc ** 0.5)
+        if g["proxy_kind"] == GPIS_PROXIES["mesh"]:
+            planes = np.asarray(self.planes, float)[g["proxy_first"]:][:g["proxy_count"]]
+            dn, gap = planes[:, :3] @ d, planes[:, 3] - planes[:, :3] @ o
+            if np.any((dn == 0.0) & (gap < 0.0)):
+                return 0.0, 0.0
+            with np.errstate(divide="ignore", invalid="ignore"):
+                hit = gap / dn
+            return (max(t0, *hit[dn < 0.0]) if np.any(dn < 0.0) else t0,
+                    min(t1, *hit[dn > 0.0]) if np.any(dn > 0.0) else t1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ta, tb = (p0[:3] - o) / d, (p1[:3] - o) / d
+        # nan: along a face (0 / 0), which the slab does not limit (as fmin on the device)
+        return (float(np.nanmax([t0, *np.fmin(ta, tb)])),
+                float(np.nanmin([t1, *np.fmax(ta, tb)])))
 
 
 def pack_scene_object(shape: dict, source: str, key: str) -> PackedGpis:
     """The records the renderer compiles for a resolved "gpis" shape (compile_gpis on that
     shape alone): the kernel built with its proxy (a linear l field's step), grid means'
     payloads and the kernel's grid fields. source and key name it in compile errors.
-    Flights are clipped to the proxy as the renderer's are (a mesh proxy to its bounding
-    box, the compiled record's). Observations are left out (the flights are the prior's),
-    and so is the proxy-cut warning (the flights ask for no image)."""
+    Flights are clipped to the proxy by the renderer's gpis_proxy_clip. Observations are
+    left out (the flights are the prior's), and so is the proxy-cut warning (the flights
+    ask for no image)."""
     shape = dict(shape, clip=True, observations=None)
     c = compile_gpis([shape], lambda bsdf: 0, source, [key])
-    o = c.objects[0]
-    sphere = o["proxy_kind"] == GPIS_PROXIES["sphere"]
-    return PackedGpis(c.kernels[:1], c.mean_nodes, int(o["mean_count"]),
-                      CLIP_SPHERE if sphere else CLIP_BOX,
-                      tuple(float(v) for v in (*o["proxy_p0"], *o["proxy_p1"])))
+    return PackedGpis(c.kernels[:1], c.mean_nodes, int(c.objects[0]["mean_count"]),
+                      c.objects[:1], c.proxy_planes)
 
 
 def pack_model(kernel: Kernel, mean: Mean) -> PackedGpis:
@@ -195,7 +185,10 @@ def flights(device: Device, kernel, mean, origin, direction, length: float, n: i
     ray = _buf(device, np.array([*np.asarray(origin, float), *d, 0.0, float(length), later]))
     packed = packed or pack_model(kernel, mean)
     kp, mb = _buf(device, packed.kernel), _buf(device, packed.nodes)
-    proxy = _buf(device, np.asarray(packed.proxy, np.float64))
+    clip = packed.obj is not None
+    obj = _buf(device, packed.obj if clip else GPIS_OBJECT.zeros(1))
+    planes = packed.planes if clip and len(packed.planes) else np.zeros((1, 4), np.float32)
+    planes = _buf(device, planes)
     stride = FL.scratch_doubles(FL.max_rows(WINDOW_MAX, CAP_MAX))
     chunk = max(1, min(n, (256 << 20) // (8 * stride)))
     scratch = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, 8 * stride * chunk)
@@ -209,6 +202,6 @@ def flights(device: Device, kernel, mean, origin, direction, length: float, n: i
         run(q, (m,), None, kp, mb, np.int32(packed.mean_count), np.int32(0),
             np.int32(GPIS_MEMORIES[memory]), np.int32(cap), np.int32(refine),
             np.float64(tol), ray, np.uint32(seed), np.int32(first), np.int32(bounces),
-            np.int32(mirror), np.int32(packed.proxy_kind), proxy, scratch, rings, ob)
+            np.int32(mirror), np.int32(clip), obj, planes, scratch, rings, ob)
         cl.enqueue_copy(q, out[first:first + m], ob)
     return out
