@@ -148,9 +148,10 @@ def _mesh_counterparts(shape: dict, proxy: dict, kernel, alpha_unit: float, sour
         used = np.unique(faces)
         try:
             path = write_obj(zs.vertices[used], np.searchsorted(used, faces), folder)
-        except OSError as exc:
+        except (OSError, SceneError) as exc:
+            reason = exc.strerror if isinstance(exc, OSError) else exc.reason
             raise SceneError(source, f"{where}.classical", f"cannot write the surface "
-                             f"counterpart's mesh in {folder} ({exc.strerror}); set "
+                             f"counterpart's mesh in {folder} ({reason}); set "
                              "GPISCL_CACHE to a writable folder") from None
         shapes.append({"type": "mesh", "file": str(path), "transform": {},
                        "bsdf": counterpart_bsdf(shape["bsdf"], float(alpha), source, where)})

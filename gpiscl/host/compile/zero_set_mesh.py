@@ -14,13 +14,13 @@ h <= extent / CELLS_PER_EXTENT, raised until the grid has at most MAX_CELLS cell
 from __future__ import annotations
 
 import hashlib
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..gp.means import Mean
+from ..io.output_files import write_atomically
 from ..scene.proxies import analyse, bounding_proxy
 
 CELLS_PER_LENGTH = 4        # cells across one length scale of the kernel
@@ -116,17 +116,11 @@ def zero_set_mesh(mean: Mean, proxy: dict, length_scale: float) -> ZeroSetMesh:
 
 def write_obj(verts: np.ndarray, faces: np.ndarray, folder: Path) -> Path:
     """A plain OBJ named by the sha256 of its text in folder (written once, atomically:
-    concurrent renders never see half a file)."""
+    concurrent renders never see half a file). OSError or SceneError if it cannot be."""
     lines = [f"v {a!r} {b!r} {c!r}" for a, b, c in verts.tolist()]
     lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces.tolist()]
     text = ("\n".join(lines) + "\n").encode()
     path = folder / f"{hashlib.sha256(text).hexdigest()[:32]}.obj"
     if not path.exists():
-        folder.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".{os.getpid()}.tmp")
-        try:
-            tmp.write_bytes(text)
-            os.replace(tmp, path)
-        finally:
-            tmp.unlink(missing_ok=True)
+        write_atomically(path, lambda tmp: Path(tmp).write_bytes(text))
     return path
