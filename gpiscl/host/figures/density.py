@@ -76,23 +76,12 @@ def counterpart_law(kernel: Kernel, mean: Mean, ray: Ray, nodes: int = 20001,
     """(t, sigma_t, optical depth) on `nodes` points of the ray within interval (t0, t1)
     (the part the proxy keeps, PackedGpis.interval; default the whole ray): the medium
     counterpart's first flight has P(T > t) = exp(-optical depth) (gp/classical.
-    optical_depth, whose trapezoidal rule this is; np.interp holds the depth constant
-    outside) and density sigma_t exp(-optical depth)."""
+    extinction_profile; np.interp holds the depth constant outside) and density sigma_t
+    exp(-optical depth)."""
     t0, t1 = interval or (0.0, ray.length)
     if not t1 > t0:        # the ray misses the proxy: no medium on it
         return np.array([0.0, ray.length]), np.zeros(2), np.zeros(2)
-    t = np.linspace(t0, t1, nodes)
-    with np.errstate(all="ignore"):
-        rate = C.local_extinction(kernel, mean, ray.origin + t[:, None] * ray.direction,
-                                  ray.direction)
-    # Deep inside the mean (mu / sigma < -37) Phi underflows and the reference gives
-    # inf or nan where fs_cl_hazard takes its series; a ray from outside has gathered a
-    # depth above 600 (int |z| dz) before it gets there, so the light is gone by then
-    # and any depth past exp's underflow (745) is the same.
-    rate = np.where(np.isfinite(rate), rate, np.inf)
-    steps = 0.5 * (rate[1:] + rate[:-1]) * np.diff(t)
-    depth = np.minimum(np.concatenate([[0.0], np.cumsum(steps)]), 800.0)
-    return t, rate, depth
+    return C.extinction_profile(kernel, mean, ray.origin, ray.direction, t0, t1, nodes)
 
 
 def ks_with_misses(t, law) -> float:

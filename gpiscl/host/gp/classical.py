@@ -72,13 +72,27 @@ def local_extinction(kernel: Kernel, mean, points, d) -> np.ndarray:
     return _normal_pdf(z) / sigma * negative_part / _normal_cdf(z)
 
 
-def optical_depth(kernel: Kernel, mean, origin, d, t, nodes: int = 20001) -> np.ndarray:
-    """int_0^t sigma_t along origin + s d (unit d) at each distance in t, by the
-    trapezoidal rule on `nodes` points up to max(t): the reference of the tracked flights."""
+def extinction_profile(kernel: Kernel, mean, origin, d, t0: float, t1: float,
+                       nodes: int = 20001) -> tuple:
+    """(s, sigma_t, optical depth from t0) on `nodes` points of [t0, t1] along origin + s d
+    (unit d), by the trapezoidal rule. Deep inside a mean (mu / sigma < -37) Phi underflows
+    and the rate comes out inf or nan where the device takes its series (fs_cl_hazard):
+    taken as inf, and depths capped at 800, past exp's underflow (745), where a ray from
+    outside has long lost its light (it gathered more than 600 getting there)."""
     d = np.asarray(d, float) / np.linalg.norm(d)
-    s = np.linspace(0.0, float(np.max(t)), nodes)
-    rate = local_extinction(kernel, mean, np.asarray(origin, float) + s[:, None] * d, d)
-    depth = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(s))])
+    s = np.linspace(float(t0), float(t1), nodes)
+    with np.errstate(all="ignore"):
+        rate = local_extinction(kernel, mean, np.asarray(origin, float) + s[:, None] * d, d)
+    rate = np.where(np.isfinite(rate), rate, np.inf)
+    steps = 0.5 * (rate[1:] + rate[:-1]) * np.diff(s)
+    depth = np.minimum(np.concatenate([[0.0], np.cumsum(steps)]), 800.0)
+    return s, rate, depth
+
+
+def optical_depth(kernel: Kernel, mean, origin, d, t, nodes: int = 20001) -> np.ndarray:
+    """int_0^t sigma_t along origin + s d (unit d) at each distance in t, on `nodes` points
+    up to max(t) (extinction_profile): the reference of the tracked flights."""
+    s, _, depth = extinction_profile(kernel, mean, origin, d, 0.0, float(np.max(t)), nodes)
     return np.interp(np.asarray(t, float), s, depth)
 
 
