@@ -344,3 +344,31 @@ def test12_far_balls_under_a_sigma_field_see_where_sigma_grows(device, flight_pr
     print(f"hit fraction {np.mean(out[:, 0] >= 0):.4f} vs {np.mean(dense >= 0):.4f}, "
           f"KS {D:.4f} (critical {crit:.4f})")
     assert D < crit
+
+
+def test13_a_rise_of_sigma_thinner_than_the_step(device, flight_prg):
+    """A radial sigma field from 0.01 to 1 and back across shells 0.05 wide (l = 0.5, the
+    mean 0.5 and nearly flat): f dips below 0 where sigma is large, and where sigma falls
+    again a dip can sit wholly between two nodes of the rule. Without fs_field_cap (sigma
+    may change by at most kappa / z of itself over a try) the default found 38.1% of rays
+    hitting against 41.7% for a dense joint sample, KS 0.042 against a critical 0.022
+    (16000 rays); with it 41.0%, KS 0.013."""
+    from gpiscl.host.gp.kernels import NonStationary, RadialField
+    from gpiscl.host.gp.means import GridMean
+    h = 0.1
+    x = -0.5 + h * np.arange(int(round(6.0 / h)) + 1)
+    values = np.repeat(np.repeat((0.5 + 0.01 * x)[:, None, None], 3, axis=1), 2, axis=2)
+    grid = GridMean(values.astype(np.float32), (-0.5, -h, -0.5 * h), h)
+    kern = NonStationary(SquaredExponential(sigma=1.0, length_scale=0.5),
+                         sigma_field=RadialField(center=(3.0, 0.0, 0.0), radius=0.3,
+                                                 width=0.05, inner=1.0, outer=0.01))
+    n = 16000
+    dense = FS.dense_first_hits(kern, grid, (1.5, 0, 0), (1, 0, 0), 0.0, 3.5, 351, n,
+                                np.random.default_rng(41))
+    dense = np.where(np.isfinite(dense), dense, -1.0)
+    out = flights(device, flight_prg, kern, grid, n, memory="renewal", o=(1.5, 0, 0), t1=3.5,
+                  seed=42)
+    D, crit = ks_two_sample(out[:, 0], dense, 1)
+    print(f"hit fraction {np.mean(out[:, 0] >= 0):.4f} vs {np.mean(dense >= 0):.4f}, "
+          f"KS {D:.4f} (critical {crit:.4f})")
+    assert D < crit

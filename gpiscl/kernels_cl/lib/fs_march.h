@@ -41,10 +41,12 @@
 #define FS_PROF_ADD(k, v) (prof[FS_PROF_##k] += (v))
 #define FS_PROF_PARAM , int* prof
 #define FS_PROF_PASS , res.prof
+#define FS_PROF_FWD , prof
 #else
 #define FS_PROF_ADD(k, v)
 #define FS_PROF_PARAM
 #define FS_PROF_PASS
+#define FS_PROF_FWD
 #endif
 /* FS_WINDOW, FS_H_MAX, FS_H_MIN, FS_ELL_CORR and the step rule's Gauss-Radau quadrature
  * FS_RULE_NODE* / FS_RULE_WEIGHT* (the node nearer the end first, so that most rejected
@@ -244,7 +246,6 @@ inline double fs_downcrossing_slope(double mean, double sd, double2 u)
  * field's largest value there (fs_field_range; a grid field's cells only up to
  * FS_SD_BOX_SAMPLES samples, past that GpKernel.sigma_top, the largest over the proxy,
  * which the scene compiler sets: 0, unset, bounds nothing). */
-#define FS_SD_BOX_SAMPLES 64
 inline double fs_sd_over(GpKernel p, __global const MeanNode* mean, FsRay ray, double ta,
                          double tb, double sd)
 {
@@ -281,11 +282,13 @@ inline double fs_sd_over(GpKernel p, __global const MeanNode* mean, FsRay ray, d
  * the example scenes with r < 0.05, so the steps, and the images, stayed the same). Why kappa is
  * 6, with the paired renders that chose it: docs/design/function-space-march.md, "The
  * mean cap"; the monotone stretch: docs/design/grid-means.md. */
-inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
-                           FsRay ray, double3 dn, double ta, double hg, double m, double sd,
-                           double lip, int grid, double g, int* certified FS_PROF_PARAM)
+inline double fs_mean_cap(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
+                          FsRay ray, double3 dn, double ta, double hg, double m, double sd,
+                          double lip, int grid, double g, int* certified, double* far_out
+                          FS_PROF_PARAM)
 {
     *certified = 0;
+    *far_out = 0.0;
     /* a try past t1 is clipped to it (then any cap >= he takes the same step as hg) */
     double he = fmin(hg, ray.t1 - ta);
     if (!(lip > 0.0)) return hg;
@@ -341,6 +344,7 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
             mz = fabs(mk);
         }
         far = s;
+        *far_out = s;
         *certified = s >= cap;
         cap = fmax(cap, s);
     }
@@ -367,6 +371,52 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
         cap = fmax(cap, end);
     }
     return cap;
+}
+
+/* The longest try a sigma(x) field allows: a crossing of f = mu + sigma e is one of the
+ * unit process e across -mu / sigma, a threshold the rule sees only at its nodes. The mean
+ * cap keeps mu's share of its change over a try within FS_MEAN_KAPPA; this keeps sigma's
+ * within about as much: with z = |mu| / sd at x(ta) (at most FS_MEAN_Z + FS_MEAN_KAPPA:
+ * farther out the far balls, sized by the sd's bound, carry the try), sigma may change by
+ * a fraction FS_MEAN_KAPPA / z of its value at x(ta), at most 1/2 (the sd stays above half
+ * its start's) (fs_field_slope: the field's slope bound on the try, a grid's over at
+ * most FS_SD_BOX_SAMPLES samples, the try halved until it fits). Without it a rise of
+ * sigma thinner than the step hid its crossings from the rule's nodes (docs/design/
+ * grid-means.md, "Sigma fields"). Never below FS_H_MIN l_d, the rule's own floor;
+ * INFINITY without a sigma field. */
+inline double fs_field_cap(GpKernel p, __global const MeanNode* mean, FsRay ray, double ta,
+                           double he, double m, double sd, double ell)
+{
+    if (!p.sigma_field || !(he > 0.0)) return INFINITY;
+    __global const MeanNode* grid = mean + p.sigma_grid;
+    double3 a = ray.o + ta * ray.d;
+    double ms = fs_fields(p, mean, a).ms;
+    double z = sd > 0.0 ? fmin(fabs(m) / sd, FS_MEAN_Z + FS_MEAN_KAPPA)
+                        : FS_MEAN_Z + FS_MEAN_KAPPA;
+    double seg = he, slope = INFINITY;
+    for (int k = 0; k < 16 && isinf(slope); ++k, seg *= 0.5)
+        slope = fs_field_slope(p.sigma_field, p.sigma_p0, p.sigma_p1, grid, a,
+                               ray.o + (ta + seg) * ray.d) / seg;
+    if (isinf(slope)) return FS_H_MIN * ell;
+    seg *= 2.0;                                /* the loop halved once past the last */
+    double cap = slope > 0.0
+        ? fmin(FS_MEAN_KAPPA / z, 0.5) * fabs(ms) / slope : INFINITY;
+    if (cap > seg && seg < he) cap = seg;      /* the bound holds on [ta, ta + seg] only */
+    return fmax(cap, FS_H_MIN * ell);
+}
+
+/* fs_mean_cap's try, shortened by fs_field_cap where the far balls do not carry it */
+inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
+                           FsRay ray, double3 dn, double ta, double hg, double m, double sd,
+                           double lip, int grid, double g, double ell, int* certified
+                           FS_PROF_PARAM)
+{
+    double far;
+    double h = fs_mean_cap(p, mean, mc, S, ray, dn, ta, hg, m, sd, lip, grid, g, certified,
+                           &far FS_PROF_FWD);
+    if (*certified || !p.sigma_field) return h;
+    double fcap = fs_field_cap(p, mean, ray, ta, fmin(h, ray.t1 - ta), m, sd, ell);
+    return fmax(far, fmin(h, fcap));
 }
 
 /* The prior mean and sd at x(ta) for fs_mean_step. A value row of S at exactly that point
@@ -503,7 +553,7 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
             double hg = fmin(grow * h, FS_H_MAX * ell);
             int certified;
             h = fs_mean_step(p, mean, mc, S, ray, dn, ta, hg, m0, sd0, lip, grid, gslope,
-                             &certified FS_PROF_PASS);
+                             ell, &certified FS_PROF_PASS);
 #ifdef FS_PROFILE
             /* what set the first try: the ray's end, the mean cap, FS_H_MAX, the growth */
             if (ta + fmin(h, hg) >= ray.t1) res.prof[FS_PROF_CAP_END]++;

@@ -300,7 +300,9 @@ inline GpFieldsAt fs_fields(GpKernel p, __global const MeanNode* mean, double3 x
 /* The smallest and largest of a kernel grid field over the segment [a, b]: the samples
  * of every trilinear cell (gp_grid_cell) the segment's index box meets, padded for the
  * float map. fs_classical.h's tracker keeps stretches within a voxel (at most 3^3
- * samples); fs_mean_step's balls may be longer and check fs_grid_box_samples first. */
+ * samples); fs_mean_step's balls may be longer and check fs_grid_box_samples first
+ * (FS_SD_BOX_SAMPLES: the most samples one segment's bound reads). */
+#define FS_SD_BOX_SAMPLES 64
 inline void fs_grid_box(__global const MeanNode* n, double3 a, double3 b, int3* c0, int3* c1)
 {
     float3 fa = convert_float3(a), fb = convert_float3(b);
@@ -353,6 +355,52 @@ inline double2 fs_field_range(int kind, float4 p0, float4 p1,
     if (kind == GP_FIELD_RADIAL) return (double2)(fmin(p1.x, p1.y), fmax(p1.x, p1.y));
     if (kind == GP_FIELD_GRID) return fs_grid_field_range(grid, a, b);
     return (double2)(1.0);
+}
+
+/* A bound of |d m / dt| for one field multiplier m along x(t) = a + t d on t in [0, 1]
+ * (d = b - a): a linear field's constant slope; a radial blend's largest tanh slope on
+ * the segment (|q| at most its end's, 1 - tanh^2 at its smallest |argument|); a grid's
+ * largest sample difference along each index axis over the cells the segment's index box
+ * meets (a trilinear cell's partial derivative lies between its four edge differences),
+ * at most FS_SD_BOX_SAMPLES samples, else INFINITY (the caller shortens the segment). */
+inline double fs_field_slope(int kind, float4 p0, float4 p1, __global const MeanNode* grid,
+                             double3 a, double3 b)
+{
+    double3 d = b - a;
+    if (kind == GP_FIELD_LINEAR) return fabs(dot(convert_double3(p0.xyz), d));
+    if (kind == GP_FIELD_RADIAL) {
+        double3 c = convert_double3(p0.xyz), qa = a - c;
+        double R = p0.w, w = p1.z, h = 0.5 * fabs((double)p1.y - (double)p1.x);
+        double dd = dot(d, d);
+        double s = dd > 0.0 ? clamp(-dot(qa, d) / dd, 0.0, 1.0) : 0.0;
+        double3 qn = qa + s * d;
+        double rmin2 = dot(qn, qn), rmax2 = fmax(dot(qa, qa), dot(b - c, b - c));
+        double ulo = (rmin2 - R * R) / (2.0 * R * w), uhi = (rmax2 - R * R) / (2.0 * R * w);
+        double u = ulo <= 0.0 && uhi >= 0.0 ? 0.0 : fmin(fabs(ulo), fabs(uhi));
+        double th = tanh(u);
+        return h * (1.0 - th * th) * sqrt(rmax2) / (R * w) * sqrt(dd);
+    }
+    if (kind != GP_FIELD_GRID) return 0.0;
+    int3 c0, c1;
+    fs_grid_box(grid, a, b, &c0, &c1);
+    int3 wd = c1 - c0 + 1;
+    if (wd.x * wd.y * wd.z > FS_SD_BOX_SAMPLES) return INFINITY;
+    int ny = (int)grid->p1.y, nz = (int)grid->p1.z;
+    double3 top = (double3)(0.0);
+    for (int i = c0.x; i <= c1.x; ++i)
+        for (int j = c0.y; j <= c1.y; ++j)
+            for (int q = c0.z; q <= c1.z; ++q) {
+                int k = (i * ny + j) * nz + q;
+                double v = gp_grid_sample(grid + 1, k);
+                if (i < c1.x) top.x = fmax(top.x, fabs(gp_grid_sample(grid + 1, k + ny * nz) - v));
+                if (j < c1.y) top.y = fmax(top.y, fabs(gp_grid_sample(grid + 1, k + nz) - v));
+                if (q < c1.z) top.z = fmax(top.z, fabs(gp_grid_sample(grid + 1, k + 1) - v));
+            }
+    /* index coordinates per unit t along d: the record's rows map world to index */
+    double3 du = (double3)(dot(convert_double3(grid->row0.xyz), d),
+                           dot(convert_double3(grid->row1.xyz), d),
+                           dot(convert_double3(grid->row2.xyz), d));
+    return dot(top, fabs(du));
 }
 
 inline void fs_store_fields(FsScratch S, int i, GpFieldsAt f)
