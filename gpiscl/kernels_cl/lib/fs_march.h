@@ -384,13 +384,14 @@ inline double fs_mean_cap(GpKernel p, __global const MeanNode* mean, int mc, FsS
  * sigma thinner than the step hid its crossings from the rule's nodes (docs/design/
  * grid-means.md, "Sigma fields"). Never below FS_H_MIN l_d, the rule's own floor;
  * INFINITY without a sigma field. */
-inline double fs_field_cap(GpKernel p, __global const MeanNode* mean, FsRay ray, double ta,
-                           double he, double m, double sd, double ell)
+inline double fs_field_cap(GpKernel p, __global const MeanNode* mean, FsScratch S,
+                           FsRay ray, double ta, double he, double m, double sd, double ell)
 {
     if (!p.sigma_field || !(he > 0.0)) return INFINITY;
     __global const MeanNode* grid = mean + p.sigma_grid;
     double3 a = ray.o + ta * ray.d;
-    double ms = fs_fields(p, mean, a).ms;
+    /* sigma's multiplier at x(ta): the prior sd over sigma, or evaluated (a posterior) */
+    double ms = S.post.n ? fs_fields(p, mean, a).ms : sd / sqrt((double)p.sigma2);
     double z = sd > 0.0 ? fmin(fabs(m) / sd, FS_MEAN_Z + FS_MEAN_KAPPA)
                         : FS_MEAN_Z + FS_MEAN_KAPPA;
     double seg = he, slope = INFINITY;
@@ -415,7 +416,7 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
     double h = fs_mean_cap(p, mean, mc, S, ray, dn, ta, hg, m, sd, lip, grid, g, certified,
                            &far FS_PROF_FWD);
     if (*certified || !p.sigma_field) return h;
-    double fcap = fs_field_cap(p, mean, ray, ta, fmin(h, ray.t1 - ta), m, sd, ell);
+    double fcap = fs_field_cap(p, mean, S, ray, ta, fmin(h, ray.t1 - ta), m, sd, ell);
     return fmax(far, fmin(h, fcap));
 }
 

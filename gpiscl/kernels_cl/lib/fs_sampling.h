@@ -386,21 +386,24 @@ inline double fs_field_slope(int kind, float4 p0, float4 p1, __global const Mean
     int3 wd = c1 - c0 + 1;
     if (wd.x * wd.y * wd.z > FS_SD_BOX_SAMPLES) return INFINITY;
     int ny = (int)grid->p1.y, nz = (int)grid->p1.z;
-    double3 top = (double3)(0.0);
-    for (int i = c0.x; i <= c1.x; ++i)
-        for (int j = c0.y; j <= c1.y; ++j)
-            for (int q = c0.z; q <= c1.z; ++q) {
-                int k = (i * ny + j) * nz + q;
-                double v = gp_grid_sample(grid + 1, k);
-                if (i < c1.x) top.x = fmax(top.x, fabs(gp_grid_sample(grid + 1, k + ny * nz) - v));
-                if (j < c1.y) top.y = fmax(top.y, fabs(gp_grid_sample(grid + 1, k + nz) - v));
-                if (q < c1.z) top.z = fmax(top.z, fabs(gp_grid_sample(grid + 1, k + 1) - v));
+    /* each sample read once, into the box's own array (x, y, z strides wd.y wd.z, wd.z, 1);
+     * each difference against the neighbour read before it */
+    float box[FS_SD_BOX_SAMPLES];
+    float3 top = (float3)(0.0f);
+    for (int i = 0, at = 0; i < wd.x; ++i)
+        for (int j = 0; j < wd.y; ++j)
+            for (int q = 0; q < wd.z; ++q, ++at) {
+                float v = gp_grid_sample(grid + 1, ((c0.x + i) * ny + c0.y + j) * nz + c0.z + q);
+                box[at] = v;
+                if (i) top.x = fmax(top.x, fabs(v - box[at - wd.y * wd.z]));
+                if (j) top.y = fmax(top.y, fabs(v - box[at - wd.z]));
+                if (q) top.z = fmax(top.z, fabs(v - box[at - 1]));
             }
     /* index coordinates per unit t along d: the record's rows map world to index */
     double3 du = (double3)(dot(convert_double3(grid->row0.xyz), d),
                            dot(convert_double3(grid->row1.xyz), d),
                            dot(convert_double3(grid->row2.xyz), d));
-    return dot(top, fabs(du));
+    return dot(convert_double3(top), fabs(du));
 }
 
 inline void fs_store_fields(FsScratch S, int i, GpFieldsAt f)
