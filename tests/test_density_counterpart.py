@@ -32,11 +32,14 @@ LINEAR_L = {"type": "linear", "value": 1.0, "gradient": [0.3, 0, 0], "origin": [
 GRID_SIGMA = 1.0 + 0.5 * np.random.default_rng(3).random((6, 6, 6))
 
 # (name, kernel keys besides SE's, ray y): grazing rays along +x through the sphere
-# mean's shell, transmittance 0.2-0.35 (so both the hits and the misses count)
+# mean's shell, transmittance 0.2-0.65 (so both the hits and the misses count)
 CASES = [("sphere", {}, 0.65),
          ("sphere_linear_sigma", {"sigma_field": LINEAR_SIGMA}, 0.65),
          ("sphere_grid_sigma", {"sigma_field": {"type": "grid", "file": "sigma.npz"}}, 0.62),
-         ("sphere_linear_l", {"length_scale_field": LINEAR_L}, 0.65)]
+         ("sphere_linear_l", {"length_scale_field": LINEAR_L}, 0.65),
+         # sigma 0.0005: 0.375 sigma stretches took ~10^4 to the sphere (every flight past
+         # FS_TRACK_CAP); outside they now grow with the mean (FS_CL_FAR)
+         ("sphere_small_sigma", {"sigma": 0.0005}, 0.5002)]
 
 
 def write_scene(folder, kernel_keys: dict, mean=SPHERE) -> str:
@@ -140,10 +143,13 @@ def test05_bad_input_is_one_line(device, tmp_path, capsys):
     assert main(["density", str(tmp_path / "none.json"), "-o", str(tmp_path / "d")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "SCENE" in err[0] and "none.json" in err[0]
-    scene = write_scene(tmp_path, {"sigma": 0.0005})
+    # a steep plane seen edge-on 4 sigma outside its zero level: stretches of 0.5 mu / lip
+    steep = {"type": "plane", "normal": [1, 0, 0], "point": [0, 0, 0], "scale": 1e4}
+    scene = write_scene(tmp_path, {}, mean=steep)
     with pytest.raises(SceneError, match="--object"):
         scene_density(scene, 1, paths=20, bounces=1, device=device)
-    data, _ = scene_density(scene, 0, paths=20, bounces=1, device=device)
+    edge_on = Ray(np.array([4 * SE["sigma"] / 1e4, -1.0, 0.0]), np.array([0.0, 1.0, 0.0]), 2.0)
+    data, _ = scene_density(scene, 0, edge_on, paths=20, bounces=1, device=device)
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "shapes[0]" in err[0] and "classical_medium 20 of 20" in err[0]
     assert "track_cap" in err[0]

@@ -21,6 +21,7 @@ from ..errors import CLI_SOURCE, SceneError
 from ..gp import classical as C
 from ..gp.kernels import Kernel, NonStationary
 from ..gp.means import Constant, Mean, Plane
+from ..layout.constants import FS_CL_FAR, FS_CL_STRETCH
 from ..layout.function_space_records import STATUS
 from ..layout.random_slots import FS_TRACK_CAP
 from ..render.device import Device, shared_device
@@ -468,7 +469,8 @@ def scene_density(scene: str, obj: int, ray: Ray | None = None, paths: int = 200
     failed = failures(data["runs"])
     if failed:
         hint = (f"; the medium counterpart's tracker stops after {FS_TRACK_CAP} stretches "
-                "(each at most 0.375 sigma / mean slope long) or tentative collisions"
+                f"(each as long as the mean moves by {FS_CL_STRETCH} sigma, or outside by "
+                f"{FS_CL_FAR} of itself) or tentative collisions"
                 ) if "track_cap" in failed else ""
         print(f"gpiscl: warning: {scene}: {key}: density: flights failed, as the renderer "
               f"would count them (RenderStats.gpis_failed): {failed}{hint}; summary.csv's "

@@ -105,6 +105,8 @@ FS_JITTER = _const("FS_JITTER", 1e-10, "relative nugget: K_ii (1 + FS_JITTER)", 
 
 FS_CL_STRETCH = _const("FS_CL_STRETCH", 0.375, "a majorant stretch: the mean moves by at most "
                        "this many sigma over it", "double")
+FS_CL_FAR = _const("FS_CL_FAR", 0.5, "a majorant stretch outside the zero level may also be as "
+                   "long as the mean falls by this fraction of itself", "double")
 
 # --- Philox streams ---------------------------------------------------------------------
 

@@ -157,7 +157,11 @@ inline FsResult fs_classical_tracked_flight(GpKernel p, __global const MeanNode*
         double room = fmin((ray.t1 - t) * dlen,
                            fmin(fs_cl_field_stretch(p.sigma_field, sgrid, fa.ms, fa.gs, dn),
                                 fs_cl_field_stretch(p.ls_field, lgrid, fa.ml, fa.gl, dn)));
-        double tight = FS_CL_STRETCH * k.sigma0 * fa.ms, lip = lip_all, L = room;
+        /* tight where the rate matters; far outside (mu >> sigma: h(z) ~ e^{-z^2 / 2}) as
+         * long as mu may halve, which keeps the majorant negligible and the stretches
+         * few (a small sigma(x) took thousands of tight ones) */
+        double tight = fmax(FS_CL_STRETCH * k.sigma0 * fa.ms, FS_CL_FAR * mu);
+        double lip = lip_all, L = room;
         if (lip > 0.0) L = fmin(L, tight / lip);
         if (grid_mean && lip > 0.0) {
             /* the bound over the stretch only, and a longer stretch where it is smaller */
