@@ -7,8 +7,8 @@ import pyopencl as cl
 from gpiscl.host.compile.gpis import sampler_window
 from gpiscl.host.gp import Constant
 from gpiscl.host.layout import function_space_records as FL
-from gpiscl.host.layout import gp_records
 from gpiscl.host.layout.records import GPIS_MEMORIES
+from gpiscl.host.render.flight_samples import pack_model
 from gpiscl.host.render.program_sources import fs_sampler_options
 
 from .wrappers import buffer, sampler_program
@@ -116,12 +116,12 @@ def sampler_buffers(device, kernel, mean, cap, chunk):
     """The kernel, mean program, per-work-item scratch and global-memory rings of a
     function-space wrapper launched `chunk` rays at a time: (kp, mb, mean count, scratch,
     rings)."""
-    mean_nodes = gp_records.pack_mean(mean)
-    kp, mb = buffer(device, gp_records.pack_kernel(kernel)), buffer(device, mean_nodes)
+    packed = pack_model(kernel, mean)     # the mean program, then the kernel's grid fields
+    kp, mb = buffer(device, packed.kernel), buffer(device, packed.nodes)
     stride = FL.scratch_doubles(FL.max_rows(WINDOW_MAX, CAP_MAX))
     scratch = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, 8 * stride * chunk)
     rings = cl.Buffer(device.ctx, cl.mem_flags.READ_WRITE, FL.FS_OBS.dtype.itemsize * cap * chunk)
-    return kp, mb, len(mean_nodes), scratch, rings
+    return kp, mb, packed.mean_count, scratch, rings
 
 
 def flights(device, prg, kernel, mean, n, memory="global", window=0, cap=64, refine=6,

@@ -374,34 +374,33 @@ inline double fs_mean_cap(GpKernel p, __global const MeanNode* mean, int mc, FsS
 }
 
 /* The longest try a sigma(x) field allows: a crossing of f = mu + sigma e is one of the
- * unit process e across -mu / sigma, a threshold the rule sees only at its nodes. The mean
- * cap keeps mu's share of its change over a try within FS_MEAN_KAPPA; this keeps sigma's
- * within about as much: with z = |mu| / sd at x(ta) (at most FS_MEAN_Z + FS_MEAN_KAPPA:
- * farther out the far balls, sized by the sd's bound, carry the try), sigma may change by
- * a fraction FS_MEAN_KAPPA / z of its value at x(ta), at most 1/2 (the sd stays above half
- * its start's) (fs_field_slope: the field's slope bound on the try, a grid's over at
- * most FS_SD_BOX_SAMPLES samples, the try halved until it fits). Without it a rise of
- * sigma thinner than the step hid its crossings from the rule's nodes (docs/design/
- * grid-means.md, "Sigma fields"). Never below FS_H_MIN l_d, the rule's own floor;
- * INFINITY without a sigma field. */
+ * unit process e across -mu / sigma, a threshold the rule sees only at its nodes. Over a
+ * try sigma may rise to twice and fall to half its value at x(ta): a rise moves the
+ * threshold toward 0 by at most half of |mu| / sigma, which is within FS_MEAN_KAPPA of
+ * where it was (|mu| / sd <= 2 kappa) or leaves it past FS_MEAN_Z (the far zone); a fall
+ * moves it away from 0, and the floor keeps the mean cap's FS_MEAN_KAPPA sd (taken at
+ * x(ta)) within 2 kappa of the sd at the try's end. fs_field_slope bounds the field's
+ * rates of fall and rise on the try (a grid's over at most FS_SD_BOX_SAMPLES samples, the
+ * try halved until it fits). Without it a rise of sigma thinner than the step hid its
+ * crossings from the rule's nodes (docs/design/grid-means.md, "Sigma fields"). Never
+ * below FS_H_MIN l_d, the rule's own floor; INFINITY without a sigma field. */
 inline double fs_field_cap(GpKernel p, __global const MeanNode* mean, FsScratch S,
-                           FsRay ray, double ta, double he, double m, double sd, double ell)
+                           FsRay ray, double ta, double he, double sd, double ell)
 {
     if (!p.sigma_field || !(he > 0.0)) return INFINITY;
     __global const MeanNode* grid = mean + p.sigma_grid;
     double3 a = ray.o + ta * ray.d;
     /* sigma's multiplier at x(ta): the prior sd over sigma, or evaluated (a posterior) */
     double ms = S.post.n ? fs_fields(p, mean, a).ms : sd / sqrt((double)p.sigma2);
-    double z = sd > 0.0 ? fmin(fabs(m) / sd, FS_MEAN_Z + FS_MEAN_KAPPA)
-                        : FS_MEAN_Z + FS_MEAN_KAPPA;
-    double seg = he, slope = INFINITY;
-    for (int k = 0; k < 16 && isinf(slope); ++k, seg *= 0.5)
-        slope = fs_field_slope(p.sigma_field, p.sigma_p0, p.sigma_p1, grid, a,
-                               ray.o + (ta + seg) * ray.d) / seg;
-    if (isinf(slope)) return FS_H_MIN * ell;
+    double seg = he;
+    double2 rate = (double2)(INFINITY);       /* (fall, rise) per unit t */
+    for (int k = 0; k < 16 && isinf(rate.x); ++k, seg *= 0.5)
+        rate = fs_field_slope(p.sigma_field, p.sigma_p0, p.sigma_p1, grid, a,
+                              ray.o + (ta + seg) * ray.d) / seg;
+    if (isinf(rate.x)) return FS_H_MIN * ell;
     seg *= 2.0;                                /* the loop halved once past the last */
-    double cap = slope > 0.0
-        ? fmin(FS_MEAN_KAPPA / z, 0.5) * fabs(ms) / slope : INFINITY;
+    double cap = fmin(rate.x > 0.0 ? 0.5 * fabs(ms) / rate.x : INFINITY,
+                      rate.y > 0.0 ? fabs(ms) / rate.y : INFINITY);
     if (cap > seg && seg < he) cap = seg;      /* the bound holds on [ta, ta + seg] only */
     return fmax(cap, FS_H_MIN * ell);
 }
@@ -416,7 +415,7 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
     double h = fs_mean_cap(p, mean, mc, S, ray, dn, ta, hg, m, sd, lip, grid, g, certified,
                            &far FS_PROF_FWD);
     if (*certified || !p.sigma_field) return h;
-    double fcap = fs_field_cap(p, mean, S, ray, ta, fmin(h, ray.t1 - ta), m, sd, ell);
+    double fcap = fs_field_cap(p, mean, S, ray, ta, fmin(h, ray.t1 - ta), sd, ell);
     return fmax(far, fmin(h, fcap));
 }
 

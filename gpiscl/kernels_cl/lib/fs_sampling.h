@@ -357,17 +357,21 @@ inline double2 fs_field_range(int kind, float4 p0, float4 p1,
     return (double2)(1.0);
 }
 
-/* A bound of |d m / dt| for one field multiplier m along x(t) = a + t d on t in [0, 1]
- * (d = b - a): a linear field's constant slope; a radial blend's largest tanh slope on
- * the segment (|q| at most its end's, 1 - tanh^2 at its smallest |argument|); a grid's
- * largest sample difference along each index axis over the cells the segment's index box
- * meets (a trilinear cell's partial derivative lies between its four edge differences),
- * at most FS_SD_BOX_SAMPLES samples, else INFINITY (the caller shortens the segment). */
-inline double fs_field_slope(int kind, float4 p0, float4 p1, __global const MeanNode* grid,
-                             double3 a, double3 b)
+/* Bounds of how fast one field multiplier m may fall and rise along x(t) = a + t d on
+ * t in [0, 1] (d = b - a): (.x, .y) = (max of -dm/dt, max of dm/dt), both >= 0. A linear
+ * field's slope has its sign; a radial blend's largest tanh slope on the segment (|q| at
+ * most its end's, 1 - tanh^2 at its smallest |argument|) either way; a grid's range of
+ * sample differences along each index axis over the cells the segment's index box meets
+ * (a trilinear cell's partial derivative lies between its four edge differences), at
+ * most FS_SD_BOX_SAMPLES samples, else INFINITY (the caller shortens the segment). */
+inline double2 fs_field_slope(int kind, float4 p0, float4 p1, __global const MeanNode* grid,
+                              double3 a, double3 b)
 {
     double3 d = b - a;
-    if (kind == GP_FIELD_LINEAR) return fabs(dot(convert_double3(p0.xyz), d));
+    if (kind == GP_FIELD_LINEAR) {
+        double s = dot(convert_double3(p0.xyz), d);
+        return (double2)(fmax(-s, 0.0), fmax(s, 0.0));
+    }
     if (kind == GP_FIELD_RADIAL) {
         double3 c = convert_double3(p0.xyz), qa = a - c;
         double R = p0.w, w = p1.z, h = 0.5 * fabs((double)p1.y - (double)p1.x);
@@ -378,32 +382,36 @@ inline double fs_field_slope(int kind, float4 p0, float4 p1, __global const Mean
         double ulo = (rmin2 - R * R) / (2.0 * R * w), uhi = (rmax2 - R * R) / (2.0 * R * w);
         double u = ulo <= 0.0 && uhi >= 0.0 ? 0.0 : fmin(fabs(ulo), fabs(uhi));
         double th = tanh(u);
-        return h * (1.0 - th * th) * sqrt(rmax2) / (R * w) * sqrt(dd);
+        return (double2)(h * (1.0 - th * th) * sqrt(rmax2) / (R * w) * sqrt(dd));
     }
-    if (kind != GP_FIELD_GRID) return 0.0;
+    if (kind != GP_FIELD_GRID) return (double2)(0.0);
     int3 c0, c1;
     fs_grid_box(grid, a, b, &c0, &c1);
     int3 wd = c1 - c0 + 1;
-    if (wd.x * wd.y * wd.z > FS_SD_BOX_SAMPLES) return INFINITY;
+    if (wd.x * wd.y * wd.z > FS_SD_BOX_SAMPLES) return (double2)(INFINITY);
     int ny = (int)grid->p1.y, nz = (int)grid->p1.z;
     /* each sample read once, into the box's own array (x, y, z strides wd.y wd.z, wd.z, 1);
      * each difference against the neighbour read before it */
     float box[FS_SD_BOX_SAMPLES];
-    float3 top = (float3)(0.0f);
+    float3 lo = (float3)(INFINITY), hi = (float3)(-INFINITY);
     for (int i = 0, at = 0; i < wd.x; ++i)
         for (int j = 0; j < wd.y; ++j)
             for (int q = 0; q < wd.z; ++q, ++at) {
                 float v = gp_grid_sample(grid + 1, ((c0.x + i) * ny + c0.y + j) * nz + c0.z + q);
                 box[at] = v;
-                if (i) top.x = fmax(top.x, fabs(v - box[at - wd.y * wd.z]));
-                if (j) top.y = fmax(top.y, fabs(v - box[at - wd.z]));
-                if (q) top.z = fmax(top.z, fabs(v - box[at - 1]));
+                if (i) { float e = v - box[at - wd.y * wd.z]; lo.x = fmin(lo.x, e); hi.x = fmax(hi.x, e); }
+                if (j) { float e = v - box[at - wd.z]; lo.y = fmin(lo.y, e); hi.y = fmax(hi.y, e); }
+                if (q) { float e = v - box[at - 1]; lo.z = fmin(lo.z, e); hi.z = fmax(hi.z, e); }
             }
-    /* index coordinates per unit t along d: the record's rows map world to index */
+    /* index coordinates per unit t along d (the record's rows map world to index); dm/dt
+     * = sum_i dm/du_i du_i/dt with dm/du_i in [lo_i, hi_i] */
     double3 du = (double3)(dot(convert_double3(grid->row0.xyz), d),
                            dot(convert_double3(grid->row1.xyz), d),
                            dot(convert_double3(grid->row2.xyz), d));
-    return dot(convert_double3(top), fabs(du));
+    double3 dl = convert_double3(lo) * du, dh = convert_double3(hi) * du;
+    double3 top = fmax(dl, dh), bottom = fmin(dl, dh);
+    return (double2)(fmax(-(bottom.x + bottom.y + bottom.z), 0.0),
+                     fmax(top.x + top.y + top.z, 0.0));
 }
 
 inline void fs_store_fields(FsScratch S, int i, GpFieldsAt f)
