@@ -65,6 +65,14 @@ inline float8 gp_grid_corners(GP_MEAN_SPACE const MeanNode* payload, int b, int 
                     gp_grid_sample(payload, b + sx + sy + 1));
 }
 
+/* Four samples of a cell face: b, b + o1, b + o2, b + o1 + o2 (gp_mean_monotone_reach's
+ * walk reads the face it crosses into, in gp_grid_corners' component order). */
+inline float4 gp_grid_quad(GP_MEAN_SPACE const MeanNode* payload, int b, int o1, int o2)
+{
+    return (float4)(gp_grid_sample(payload, b), gp_grid_sample(payload, b + o1),
+                    gp_grid_sample(payload, b + o2), gp_grid_sample(payload, b + o1 + o2));
+}
+
 /* The trilinear cell of index coordinates u in a grid of `dims` samples per axis (x index
  * first): u clamped to the sample box, its cell (floor, the last cell at the far faces),
  * the weights t inside it, the first sample's index and the x and y strides. Shared by
@@ -401,8 +409,11 @@ inline float gp_mean_monotone_reach(GP_MEAN_SPACE const MeanNode* n, float3 p, f
     int3 left = convert_int3(abs(last - c));
     int cells = left.x + left.y + left.z + 1, sign = 0;
     float t = 0.0f;                                   /* where the current cell starts */
+    /* the cell's corners; a step across a face keeps the four the cells share and reads
+     * the other four (gp_grid_quad) */
+    int base = (c.x * ny + c.y) * nz + c.z;
+    float8 s = gp_grid_corners(payload, base, sx, nz);
     for (int k = 0; k < cells; ++k) {
-        float8 s = gp_grid_corners(payload, (c.x * ny + c.y) * nz + c.z, sx, nz);
         /* the cell's edge differences along x, y and z */
         float4 ex = s.s4567 - s.s0123, ey = s.s2367 - s.s0145, ez = s.s1357 - s.s0246;
         float3 lo = (float3)(fmin(fmin(ex.x, ex.y), fmin(ex.z, ex.w)),
@@ -424,12 +435,21 @@ inline float gp_mean_monotone_reach(GP_MEAN_SPACE const MeanNode* n, float3 p, f
         if (tnext.x <= tnext.y && tnext.x <= tnext.z) {
             if (c.x == last.x) break;
             c.x += step.x; tnext.x += tstep.x;
+            base += step.x * sx;
+            if (step.x > 0) { s.s0123 = s.s4567; s.s4567 = gp_grid_quad(payload, base + sx, 1, nz); }
+            else { s.s4567 = s.s0123; s.s0123 = gp_grid_quad(payload, base, 1, nz); }
         } else if (tnext.y <= tnext.z) {
             if (c.y == last.y) break;
             c.y += step.y; tnext.y += tstep.y;
+            base += step.y * nz;
+            if (step.y > 0) { s.s0145 = s.s2367; s.s2367 = gp_grid_quad(payload, base + nz, 1, sx); }
+            else { s.s2367 = s.s0145; s.s0145 = gp_grid_quad(payload, base, 1, sx); }
         } else {
             if (c.z == last.z) break;
             c.z += step.z; tnext.z += tstep.z;
+            base += step.z;
+            if (step.z > 0) { s.s0246 = s.s1357; s.s1357 = gp_grid_quad(payload, base + 1, nz, sx); }
+            else { s.s1357 = s.s0246; s.s0246 = gp_grid_quad(payload, base, nz, sx); }
         }
         t = tout;
     }
