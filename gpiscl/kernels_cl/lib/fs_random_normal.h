@@ -51,9 +51,9 @@ inline float3 fs_random_normal_eval(int mode, __global const Material* mat, FsNo
  * and with normals spread by a few degrees most light samples carry a tiny weight. The
  * ray survives with q = min(1, |c| / (t |c_ref|)) and then carries c / q (unbiased);
  * c_ref is the same light sample at a white Lambertian vertex facing the light (the path's
- * throughput times Le / (pi p_L sel)), the scale of the pixels this light makes, so what
- * a lost ray adds to a pixel's variance, c (t |c_ref| - c) < (t |c_ref|)^2, is small
- * beside them. t <= 0 turns it off; docs/design/light-sampling.md measures t. */
+ * throughput times Le / (pi p_L sel)), the scale of the pixels this light makes: a ray
+ * that may be lost adds c (t |c_ref| - c) <= (t |c_ref|)^2 / 4 to its pixel's variance,
+ * small beside theirs. t <= 0 turns it off; docs/design/light-sampling.md measures t. */
 inline float fs_random_normal_shadow_survival(int mode, float3 c, float3 c_ref, float t)
 {
     if (mode == RANDOM_NORMAL_SAMPLED || !(t > 0.0f)) return 1.0f;
