@@ -1,18 +1,22 @@
-"""Light sampling (docs/design/light-sampling.md) against the last release, same run.
+"""Light sampling (docs/design/light-sampling.md) against earlier trees, same run.
 
-    python tools/bench_light_sampling.py [--baseline /work/wt/baseline] [--resolution 32]
-        [--spp 64] [--reference-spp 2048] [--cornell-spp 16] [scenes...]
+    python tools/bench_light_sampling.py [--baseline /work/wt/baseline ...] [--rounds 1]
+        [--resolution 32] [--spp 64] [--reference-spp 2048] [--cornell-spp 16] [scenes...]
 
 Each tree renders in its own process (PYTHONPATH = that tree). Per scene: a converged
 reference (this tree, --reference-spp, its own seed); per tree, at --spp: the per-sample
 variance svar (mean over pixels and channels of stderr^2 * spp), MSE*spp against the
-reference (less the reference's own variance), and paths/s. Ratios are base / new (> 1:
-the new tree is better). The MSE at equal time is MSE*spp times seconds per path, i.e.
-the error each tree reaches in the same time (the renders are too short on this shared
-machine for a fixed time limit to be fair to both). Fireflies: in the default Cornell
-box at its own resolution and --cornell-spp, the share of pixels whose luminance is more
-than 3x the median of their 5x5 neighbourhood. The image means against the reference
-(z, from both standard errors) check that the trees agree.
+reference (less the reference's own variance), and paths per second of the render's own
+process CPU time (PoCL's threads run in it: steadier than wall time on a shared machine).
+Ratios are base / new (> 1: the new tree is better); each --baseline (repeatable) is
+compared with this tree. The MSE at equal time is MSE*spp times CPU seconds per path,
+i.e. the error each tree reaches in the same time (the renders are too short on this
+shared machine for a fixed time limit to be fair to both). --rounds N renders every tree
+N times, the trees interleaved (their order rotates each round), round r with seed 1 + r,
+and prints the median over rounds of each per-round ratio, with its range. Fireflies: in
+the default Cornell box at its own resolution and --cornell-spp, the share of pixels whose
+luminance is more than 3x the median of their 5x5 neighbourhood. The image means against
+the reference (z, from both standard errors) check that the trees agree.
 Scenes: "cornell" (the built-in default scene), "sun_sky_floor" and "mirror_ball_map"
 (below; the latter not by default), or scene files.
 """
@@ -21,6 +25,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -59,9 +64,9 @@ def worker(args):
     from gpiscl import render_result
     res = None if args.full_resolution else (args.resolution, args.resolution)
     render_result(_scene(args.scene), spp=1, seed=7, resolution=(8, 8))   # compile
-    t = time.perf_counter()
+    t = time.process_time()
     r = render_result(_scene(args.scene), spp=args.spp, seed=args.seed, resolution=res)
-    seconds = time.perf_counter() - t
+    seconds = time.process_time() - t
     np.savez(args.out, mean=r.image.mean, stderr=r.image.stderr, seconds=seconds,
              paths=r.stats.paths)
 
@@ -87,10 +92,29 @@ def fireflies(mean) -> float:
     return float(np.mean(lum > 3.0 * np.maximum(med, 1e-6)))
 
 
+def metrics(r, ref, spp) -> dict:
+    svar = float((r["stderr"] ** 2).mean() * spp)
+    mse = float(((r["mean"] - ref["mean"]) ** 2 - ref["stderr"] ** 2).mean())
+    sec_per_path = float(r["seconds"]) / float(r["paths"])
+    diff = float(r["mean"].mean() - ref["mean"].mean())
+    se = float(np.sqrt(((r["stderr"].sum(-1) ** 2).sum()
+                        + (ref["stderr"].sum(-1) ** 2).sum())) / r["mean"].size)
+    return {"svar": svar, "mse_spp": mse * spp, "paths_s": 1 / sec_per_path,
+            "mse_time": mse * spp * sec_per_path, "z": diff / se}
+
+
+RATIOS = {"var_ratio": lambda b, n: b["svar"] / n["svar"],
+          "mse_spp_ratio": lambda b, n: b["mse_spp"] / n["mse_spp"],
+          "mse_time_ratio": lambda b, n: b["mse_time"] / n["mse_time"],
+          "speed_ratio": lambda b, n: n["paths_s"] / b["paths_s"]}
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("scenes", nargs="*", default=list(SCENES))
-    ap.add_argument("--baseline", default="/work/wt/baseline")
+    ap.add_argument("--baseline", action="append", default=None,
+                    help="an earlier tree (repeatable; default /work/wt/baseline)")
+    ap.add_argument("--rounds", type=int, default=1)
     ap.add_argument("--resolution", type=int, default=32)
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--reference-spp", type=int, default=2048)
@@ -102,31 +126,33 @@ def main():
     args = ap.parse_args()
     if args.worker:
         return worker(args)
-    trees = {"base": Path(args.baseline), "new": ROOT}
+    bases = [Path(b) for b in (args.baseline or ["/work/wt/baseline"])]
+    trees = {**{str(b): b for b in bases}, "new": ROOT}
+    names = list(trees)
     rows = []
     for scene in args.scenes:
         ref = _render(ROOT, scene, args.reference_spp, 99, args.resolution)
-        row = {"scene": scene}
-        for name, tree in trees.items():
-            r = _render(tree, scene, args.spp, 1, args.resolution)
-            svar = float((r["stderr"] ** 2).mean() * args.spp)
-            mse = float(((r["mean"] - ref["mean"]) ** 2 - ref["stderr"] ** 2).mean())
-            sec_per_path = float(r["seconds"]) / float(r["paths"])
-            diff = float(r["mean"].mean() - ref["mean"].mean())
-            se = float(np.sqrt(((r["stderr"].sum(-1) ** 2).sum()
-                                + (ref["stderr"].sum(-1) ** 2).sum())) / r["mean"].size)
-            row[name] = {"svar": svar, "mse_spp": mse * args.spp,
-                         "paths_s": 1 / sec_per_path,
-                         "mse_time": mse * args.spp * sec_per_path, "z": diff / se}
-        b, n = row["base"], row["new"]
-        row["var_ratio"] = b["svar"] / n["svar"]
-        row["mse_spp_ratio"] = b["mse_spp"] / n["mse_spp"]
-        row["mse_time_ratio"] = b["mse_time"] / n["mse_time"]
-        row["speed_ratio"] = n["paths_s"] / b["paths_s"]
-        rows.append(row)
-        print(f"{scene:30s} var {row['var_ratio']:6.2f}x  MSE@spp {row['mse_spp_ratio']:6.2f}x"
-              f"  MSE@time {row['mse_time_ratio']:7.2f}x  paths/s {row['speed_ratio']:5.2f}"
-              f"  z base {b['z']:+.2f} new {n['z']:+.2f}", flush=True)
+        runs = {name: [] for name in names}
+        for k in range(args.rounds):
+            for name in names[k % len(names):] + names[:k % len(names)]:
+                r = _render(trees[name], scene, args.spp, 1 + k, args.resolution)
+                runs[name].append(metrics(r, ref, args.spp))
+        med = statistics.median
+        for base in names[:-1]:
+            row = {"scene": scene, "base": base, "rounds": args.rounds,
+                   "base_runs": runs[base], "new_runs": runs["new"]}
+            for key, ratio in RATIOS.items():
+                per_round = [ratio(b, n) for b, n in zip(runs[base], runs["new"])]
+                row[key] = med(per_round)
+                row[key + "_range"] = (min(per_round), max(per_round))
+            rows.append(row)
+            zb = med(x["z"] for x in runs[base])
+            zn = med(x["z"] for x in runs["new"])
+            print(f"{scene:30s} vs {base}: var {row['var_ratio']:6.2f}x  MSE@spp "
+                  f"{row['mse_spp_ratio']:6.2f}x  MSE@time {row['mse_time_ratio']:7.2f}x  "
+                  f"paths/s {row['speed_ratio']:5.3f} ({row['speed_ratio_range'][0]:.3f}-"
+                  f"{row['speed_ratio_range'][1]:.3f})  z base {zb:+.2f} new {zn:+.2f}",
+                  flush=True)
     if "cornell" in args.scenes:
         for name, tree in trees.items():
             r = _render(tree, "cornell", args.cornell_spp, 1, 0, full=True)

@@ -1,5 +1,8 @@
-"""Where each random number of the function-space sampler comes from: named slot ranges,
-checked disjoint when this module is imported.
+"""Where each random number comes from: named slot ranges, checked disjoint when this
+module is imported, emitted as #defines (c_defines, through records.c_header).
+
+The path tracer's stages draw with rng.h's rng4: counter (pixel, sample, bounce, dimension),
+four uniforms per call; each stage owns a dimension (STAGE_DIMS).
 
 fs_sampling.h draws from Philox blocks: counter (pixel, sample, bounce, segment, block),
 one block = two uniforms. Within a segment (a ray's step) every draw owns fixed blocks,
@@ -86,7 +89,21 @@ UNIFORM_BLOCKS = SlotPlan("uniform", 1, (
 # fs_uniform2's counter holds a block in 12 bits
 BLOCK_LIMIT = 1 << 12
 
-_CLASHES = overlaps(NORMAL_SLOTS, UNIFORM_BLOCKS)
+# rng4's dimensions (rng.h; another Philox key than fs_sampling.h's, so its own space).
+# camera: the pixel offset; light: NEE's light choice and sample; bsdf: the continuation;
+# roulette: the path's Russian roulette; medium: reserved for GPIS free flight (unused:
+# function-space flights draw from the blocks above); shadow_roulette: the survival of a
+# light sample's shadow ray at function-space mirror and conductor vertices (scatter.cl).
+STAGE_DIMS = SlotPlan("stage", 1, (
+    ("camera", "DIM_CAMERA", 0, 1),
+    ("light", "DIM_LIGHT", 1, 1),
+    ("bsdf", "DIM_BSDF", 2, 1),
+    ("roulette", "DIM_ROULETTE", 3, 1),
+    ("medium", "DIM_MEDIUM", 4, 1),
+    ("shadow_roulette", "DIM_SHADOW_ROULETTE", 5, 1),
+))
+
+_CLASHES = overlaps(NORMAL_SLOTS, UNIFORM_BLOCKS) + overlaps(STAGE_DIMS)
 if _CLASHES:
     raise ValueError(f"random slot ranges share Philox blocks: {_CLASHES}")
 _BEYOND = [r.name for plan in (NORMAL_SLOTS, UNIFORM_BLOCKS) for r in plan.ranges
@@ -98,6 +115,7 @@ if _BEYOND:
 def c_defines() -> str:
     lines = ["/* Generated from gpiscl/host/layout/random_slots.py: do not edit. */"]
     lines += NORMAL_SLOTS.c_defines() + UNIFORM_BLOCKS.c_defines()
+    lines += [f"#define {r.c_name} {r.first}" for r in STAGE_DIMS.ranges]
     lines.append(f"#define FS_TN_TAIL_TRIES {FS_TN_TAIL_TRIES}")
     lines.append(f"#define FS_TRACK_CAP {FS_TRACK_CAP}")
     return "\n".join(lines) + "\n"

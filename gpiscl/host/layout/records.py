@@ -133,6 +133,8 @@ RENDER_PARAMS = Struct("RenderParams", (
     ("int", "fs_nee"),         # 1: NEE at function-space hits may pick the normal
                                # (fs_normal_pdf.h); 0: only the sampled one, the mirror
                                # delta (the benchmarks' baseline, tools/bench_mirror_nee.py)
+    ("float", "shadow_roulette"),  # > 0: the relative threshold of the roulette on shadow
+                               # rays of light samples that pick the normal (fs_random_normal.h)
 ))
 
 # --- queues ---------------------------------------------------------------------------

@@ -46,6 +46,11 @@ TRUSTED_SECONDS = 0.1
 # (docs/design/batches.md, 'When cost-per-pixel sizing is on')
 COSTLY_RATE = 5000.0
 
+# The relative threshold of the roulette on shadow rays whose light sample picked the
+# normal at a function-space mirror or conductor (fs_random_normal.h): measured in
+# docs/design/light-sampling.md, "fs_mirror_ball_sun's paths/s".
+SHADOW_ROULETTE = 0.1
+
 
 # PATH_STATE's first-hit fields (aov.py): one element each when no AOV is asked for, as
 # every kernel's access is guarded by params->aov
@@ -177,6 +182,8 @@ class WavefrontIntegrator:
         p["aov"] = 1 if aov else 0
         # not a scene key: the baseline of tools/bench_mirror_nee.py
         p["fs_nee"] = 1 if settings.get("fs_nee", True) else 0
+        # not a scene key: 0 turns the shadow rays' roulette off (tools/bench_light_sampling.py)
+        p["shadow_roulette"] = settings.get("shadow_roulette", SHADOW_ROULETTE)
         # null surfaces do not count as bounces, so allow extra iterations for them
         self.max_iterations = 4 * settings["max_depth"] + 64
         self.stats = RenderStats(pixels=self.num_pixels)

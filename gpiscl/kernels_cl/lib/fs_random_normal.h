@@ -46,6 +46,20 @@ inline float3 fs_random_normal_eval(int mode, __global const Material* mat, FsNo
     return material_eval(mat->kind, mat, albedo, n, wo, wl, pdf_f);
 }
 
+/* Russian roulette on a light sample's shadow ray where the light sample picks the normal
+ * (modes HALF_VECTOR and PAIRS): that ray is a function-space flight through the GPIS,
+ * and with normals spread by a few degrees most light samples carry a tiny weight. The
+ * ray survives with q = min(1, |c| / (t |c_ref|)) and then carries c / q (unbiased);
+ * c_ref is the same light sample at a white Lambertian vertex facing the light (the path's
+ * throughput times Le / (pi p_L sel)), the scale of the pixels this light makes: a ray
+ * that may be lost adds c (t |c_ref| - c) <= (t |c_ref|)^2 / 4 to its pixel's variance,
+ * small beside theirs. t <= 0 turns it off; docs/design/light-sampling.md measures t. */
+inline float fs_random_normal_shadow_survival(int mode, float3 c, float3 c_ref, float t)
+{
+    if (mode == RANDOM_NORMAL_SAMPLED || !(t > 0.0f)) return 1.0f;
+    return fmin(1.0f, max3(c) / (t * max3(c_ref)));
+}
+
 /* RANDOM_NORMAL_PAIRS with a light of density pl (> 0, per light and already divided by
  * the light count): strategy A (the sampled normal) or B (a normal about the half vector),
  * each with probability 1/2; all densities relative to the light's, i.e.

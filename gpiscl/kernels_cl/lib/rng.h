@@ -3,12 +3,8 @@
  * batch size or device. One call yields four uniforms in [0, 1). */
 #include <pyopencl-random123/philox.cl>
 
-/* Dimension slots: each stage draws from its own slot within a bounce. */
-#define DIM_CAMERA 0
-#define DIM_LIGHT 1
-#define DIM_BSDF 2
-#define DIM_ROULETTE 3
-#define DIM_MEDIUM 4   /* first of the slots reserved for GPIS free flight */
+/* Dimension slots: each stage draws from its own slot within a bounce (DIM_*, generated
+ * from gpiscl/host/layout/random_slots.py STAGE_DIMS). */
 
 inline float4 rng4(uint seed, int pixel, int sample, int bounce, uint dim)
 {

@@ -111,6 +111,13 @@ __kernel void scatter(SCATTER_PARAMS)
             f = fs_random_normal_pairs(mat, law, albedo, n, wo, wl, pdf_light * sel, ul.w,
                                        ub.zw, &pdf_f, &grad, &w);
         float3 c = beta * f * Le * (w * inv_pdf / sel);
+        /* a light sample that picks the normal pays a function-space shadow flight:
+         * roulette where it carries little (fs_random_normal.h) */
+        float q = fs_random_normal_shadow_survival(rn, c, beta * Le * (INV_PI_F * inv_pdf / sel),
+                                                   params->shadow_roulette);
+        if (q < 1.0f)
+            c = (rng4(params->seed, pixel, sample, bounce, DIM_SHADOW_ROULETTE).x < q)
+                ? c / q : (float3)(0.0f);
         if (max3(c) > 0.0f) {
             int k = atomic_inc(&counters[COUNT_SHADOW]);
             shadow_o[k] = (float4)(xo, 0.0f);
