@@ -17,10 +17,11 @@ from gpiscl.testing.reference import function_space as FS
 from gpiscl.host.layout import function_space_records as FL
 from gpiscl.testing.stats import z_threshold
 from gpiscl.testing.flights import flights, run_crossings
-from gpiscl.testing.oracles import COV_1D, M32, M52, dense_se_paths, expected_crossings
+from gpiscl.testing.oracles import COV_1D, M32, M52, dense_se_paths
 from gpiscl.testing.stats import ks_two_sample
 
 from batched_march import march_many
+from crossing_oracle import expected_crossings
 
 SE = SquaredExponential(sigma=1.0, length_scale=1.0)
 RQ = RationalQuadratic(sigma=1.0, length_scale=1.0, alpha=1.0)
