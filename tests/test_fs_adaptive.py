@@ -17,8 +17,11 @@ from gpiscl.testing.reference import function_space as FS
 from gpiscl.host.layout import function_space_records as FL
 from gpiscl.testing.stats import z_threshold
 from gpiscl.testing.flights import flights, run_crossings
-from gpiscl.testing.oracles import COV_1D, M32, M52, dense_se_paths, expected_crossings
+from gpiscl.testing.oracles import COV_1D, M32, M52, dense_se_paths
 from gpiscl.testing.stats import ks_two_sample
+
+from batched_march import march_many
+from crossing_oracle import expected_crossings
 
 SE = SquaredExponential(sigma=1.0, length_scale=1.0)
 RQ = RationalQuadratic(sigma=1.0, length_scale=1.0, alpha=1.0)
@@ -187,16 +190,16 @@ def test07_missed_crossings_of_the_same_realizations_stay_below_the_tolerance(de
     l / 100) that it reads where it samples: the down-crossings of the dense path that it
     skips, per length scale, stay below the tolerance (one-sided Poisson bound, Bonferroni
     over the cases); the misses are counted, not inferred from a rate. Short form: up to
-    150 realizations (the march's Python loop is the cost), long form up to 300."""
+    150 realizations, long form up to 300 (the twin marched over all of them at once:
+    tests/batched_march.py, checked against the twin by test07c)."""
     ts, C = dense_se
     keep = 300 if long_run else 150
     rng = np.random.default_rng(int(1000 * tol) + int(mu))
     Z = C @ rng.standard_normal((len(ts), 5 * keep // 3)) + mu
     Z = Z[:, Z[0] >= 0.0][:, :keep]
-    missed = steps = 0
-    for F in Z.T:
-        idx, m, _ = FS.march_realization(SE, Constant(mu), (0, 0, 0), (1, 0, 0), ts, F, tol)
-        missed, steps = missed + m, steps + len(idx) - 1
+    marches = march_many(SE, Constant(mu), (0, 0, 0), (1, 0, 0), ts, Z.T, tol)
+    missed = sum(m for _, m, _ in marches)
+    steps = sum(len(idx) - 1 for idx, _, _ in marches)
     length = Z.shape[1] * ts[-1]
     allowed = tol * length
     print(f"tol {tol} mu {mu}: {missed} missed over {length:.0f} l ({missed / length:.2e} "
@@ -216,20 +219,32 @@ def test07b_the_default_tolerance_misses_under_0p2_percent_of_crossings(long_run
     by 1.3 +- 0.4% there): its node at 2/3 of the step cannot see a rate that grows
     steeply toward the step's end, where the dips it missed sat. The long form (24x the
     short form's realizations, ~2000 crossings at 2.5 sigma) fails on that rule; the
-    short form (~60 crossings at 2.5 sigma: 19 s of the numpy twin's Python loop at twice
-    this size on a 2-core CI machine) guards against gross regressions only."""
+    short form (~60 crossings at 2.5 sigma) guards against gross regressions only. The
+    twin marches all realizations at once (tests/batched_march.py, test07c)."""
     n = 24 * n_short if long_run else n_short
     ts, Z = dense_se_paths(n, mu, np.random.default_rng(17 + int(10 * mu)))
     dense = int(((Z[:, :-1] >= 0.0) & (Z[:, 1:] < 0.0)).sum())
-    missed = steps = evals = 0
-    for F in Z:
-        idx, m, e = FS.march_realization(SE, Constant(mu), (0, 0, 0), (1, 0, 0), ts, F,
-                                         FL.DEFAULT_MISS_TOLERANCE)
-        missed, steps, evals = missed + m, steps + len(idx) - 1, evals + e
+    marches = march_many(SE, Constant(mu), (0, 0, 0), (1, 0, 0), ts, Z,
+                         FL.DEFAULT_MISS_TOLERANCE)
+    missed = sum(m for _, m, _ in marches)
+    steps = sum(len(idx) - 1 for idx, _, _ in marches)
+    evals = sum(e for _, _, e in marches)
     allowed = 2e-3 * dense
     print(f"mu {mu}: {missed} missed of {dense} dense down-crossings, "
           f"{steps / (n * ts[-1]):.2f} steps per l, {evals / steps:.2f} evaluations a step")
     assert missed < allowed + z_threshold(2) * math.sqrt(allowed)
+
+
+@pytest.mark.parametrize("mu, tol", [(0.0, 1e-1), (2.5, FL.DEFAULT_MISS_TOLERANCE)])
+def test07c_the_stacked_march_is_the_twin(mu, tol):
+    """tests/batched_march.py (test07 and test07b's march over many realizations at
+    once) takes the twin's steps on each realization: the same sampled indices, misses
+    and rate evaluations as function_space.march_realization, one at a time."""
+    ts, Z = dense_se_paths(24, mu, np.random.default_rng(3 + int(10 * mu)))
+    stacked = march_many(SE, Constant(mu), (0, 0, 0), (1, 0, 0), ts, Z, tol)
+    for F, (idx, m, e) in zip(Z, stacked):
+        twin = FS.march_realization(SE, Constant(mu), (0, 0, 0), (1, 0, 0), ts, F, tol)
+        assert np.array_equal(idx, twin[0]) and (m, e) == twin[1:], (mu, tol)
 
 
 def assert_every_ray_hits_at(out, face: float, within: float):

@@ -17,7 +17,8 @@ from gpiscl.testing.reference import function_space as FS
 from gpiscl.host.gp.kernels import covariance_matrix
 from markov_wrappers import bridge, flights, paths, rule_ratios, transition
 from gpiscl.testing.stats import assert_agree, ks_two_sample, z_threshold
-from gpiscl.testing.oracles import M32, M52, expected_crossings
+from gpiscl.testing.oracles import M32, M52
+from crossing_oracle import expected_crossings
 
 getcontext().prec = 40
 

@@ -224,15 +224,17 @@ def test_shadow_rays_condition_on_the_implied_gradient(device, memory):
 def test_normal_pdf_integrates_to_one(device, case):
     """Quadrature over the hemisphere of each of 8 laws the device produced: 1 to 1e-4
     (midpoint rule on a 2000 x 400 equal-area grid; without the s^2 / |n.d|^3 Jacobian
-    the integral is E|n.d|^3 / s^2, nowhere near 1)."""
+    the integral is E|n.d|^3 / s^2, nowhere near 1: 0.45 to 0.97 away, the same to 1e-4
+    on a 200 x 40 grid, which this check uses)."""
     _, laws = normal_laws(device, case, 64)
     assert len(laws[3]) >= 8
     pts, w = hemisphere(2000, 400)
+    coarse, w_coarse = hemisphere(200, 40)
     for k in range(8):
         law = tuple(x[k] for x in laws)
         total = normal_pdf(pts, law).sum() * w
         assert abs(total - 1.0) < 1e-4, (case, k, total)
-        broken = normal_pdf(pts, law, jacobian=False).sum() * w
+        broken = normal_pdf(coarse, law, jacobian=False).sum() * w_coarse
         assert abs(broken - 1.0) > 1e-2, (case, k, broken)
 
 
@@ -270,14 +272,16 @@ def cell_chi_square(normals, laws, pdf, d=D, cells=(6, 8), sub=8, chunk=250):
 def test_sampled_normals_match_the_pdf(device, case):
     """2000 device normals, each from its own law, binned against that law's pdf
     (chi-square); the same statistic rejects the pdf without the s^2 / |n.d|^3 Jacobian
-    (renormalised per law so only its shape differs), so the test can fail."""
+    (renormalised per law so only its shape differs), so the test can fail. The
+    renormalisation's 60 x 30 midpoint grid gives the statistic the 120 x 60 grid gave to
+    0.1 (1099, 1428, 1678, 1882 against 3 x thresholds of 171-188) at 0.4x the time."""
     normals, laws = normal_laws(device, case, 2000, seed=12)
     assert len(normals) > 1500
     chi2, df, total = cell_chi_square(normals, laws, normal_pdf)
     assert abs(total - 1.0) < 2e-3, total
     t = chi2_threshold(df)
     assert chi2 < t, f"{case}: chi-square {chi2:.1f}, df {df} (threshold {t:.1f})"
-    pts, w = hemisphere(120, 60)
+    pts, w = hemisphere(60, 30)
 
     def shape_only(n, law):   # no Jacobian, each law normalised on the hemisphere
         s = law[3]

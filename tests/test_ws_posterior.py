@@ -349,8 +349,11 @@ def test07_render_agrees_with_function_space(device, tmp_path, long_run):
     function space (exact conditioning) render the same expected image, per pixel and in
     4x4 blocks; the weight-space prior alone differs measurably (the test has power).
     Measured max |z|: 3.1 per pixel, 2.2 per block; the prior 6.1 and 5.4. The short form
-    renders 12x12 pixels instead of 16x16 at the same spp (a pixel's power is unchanged)."""
-    sigma, spp, res = 0.05, 32, (16 if long_run else 12)
+    renders 8x8 pixels instead of 16x16 at the same spp (a pixel's power is unchanged; a
+    lower spp would leave each pixel's error estimate too few samples): measured
+    (2026-12-07) posterior 2.8 per pixel (threshold 4.56), 1.8 per block (3.93); the
+    prior, i.e. observations ignored, 6.7 and 13.8 (at 12x12: 21.2 and 18.4)."""
+    sigma, spp, res = 0.05, 32, (16 if long_run else 8)
     pts = noisy_sphere_points(tmp_path / "pts.xyz", 100, 0.05 * sigma)
     obs = {"file": pts, "noise": 0.05 * sigma}
     fs = render_checked(sphere_scene(1.2, sigma, spp, obs, seed=3, res=res), device).image
