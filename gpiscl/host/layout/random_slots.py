@@ -91,15 +91,14 @@ BLOCK_LIMIT = 1 << 12
 
 # rng4's dimensions (rng.h; another Philox key than fs_sampling.h's, so its own space).
 # camera: the pixel offset; light: NEE's light choice and sample; bsdf: the continuation;
-# roulette: the path's Russian roulette; medium: reserved for GPIS free flight (unused:
-# function-space flights draw from the blocks above); shadow_roulette: the survival of a
-# light sample's shadow ray at function-space mirror and conductor vertices (scatter.cl).
+# roulette: the path's Russian roulette; shadow_roulette: the survival of a light sample's
+# shadow ray at function-space mirror and conductor vertices (scatter.cl). Dimension 4 was
+# reserved for GPIS free flights, which draw from the blocks above instead.
 STAGE_DIMS = SlotPlan("stage", 1, (
     ("camera", "DIM_CAMERA", 0, 1),
     ("light", "DIM_LIGHT", 1, 1),
     ("bsdf", "DIM_BSDF", 2, 1),
     ("roulette", "DIM_ROULETTE", 3, 1),
-    ("medium", "DIM_MEDIUM", 4, 1),
     ("shadow_roulette", "DIM_SHADOW_ROULETTE", 5, 1),
 ))
 
