@@ -1,50 +1,14 @@
-"""The numpy twin of fs_march.h's step rule (function_space.march_realization) over many
-dense realizations at once, for tests/test_fs_adaptive.py test07/test07b: the same
-control flow per realization, but each rule evaluation's conditional moments are
-solved in one stacked numpy call for every realization waiting on one (grouped by how
-many rows it conditions on, so each matrix is the one the twin factors). The twin
-spends ~0.3 ms of numpy call overhead per evaluation on 4-10 row matrices; stacked,
-750 realizations take ~1 s instead of ~15 s. test07c checks that both give the same
-steps, misses and evaluations, so a change of the rule in the twin shows here."""
+"""The numpy twin of fs_march.h's step rule over many dense realizations at once, for
+tests/test_fs_adaptive.py test07/test07b: each realization runs the twin's own march
+(function_space.march_steps), and each rule evaluation's conditional moments are solved
+in one stacked numpy call for every realization waiting on one (grouped by how many rows
+it conditions on, so each matrix is the one the twin factors). The twin spends ~0.3 ms of
+numpy call overhead per evaluation on 4-10 row matrices; stacked, 750 realizations take
+~1 s instead of ~15 s. test07c checks that the stacked moments give march_realization's
+steps, misses and evaluations."""
 import numpy as np
 
 from gpiscl.testing.reference import function_space as FS
-
-
-def march_steps(kernel, o, d, ts, F, tol):
-    """march_realization's loop as a generator: yields (rows' points, rows' values,
-    node) where the twin calls its moments and receives (m, m1, s, r, g); returns
-    (sampled indices, missed down-crossings, evaluations)."""
-    o, d = np.asarray(o, float), np.asarray(d, float)
-    dt = ts[1] - ts[0]
-    ell = FS.step_size(kernel, d, FS.ELL_CORR)
-    down = (F[:-1] >= 0.0) & (F[1:] < 0.0)
-    idx, i, h, grow, missed, first, evals = [0], 0, 0.5 * ell, 1.0, 0, 0, 0
-    while i < len(ts) - 1:
-        if len(idx) - first > 2 * FS.RULE_SAMPLES:
-            first = len(idx) - FS.RULE_SAMPLES
-        rows = idx[first:]
-        xr, yr = o + ts[rows, None] * d, F[rows]
-        outside = F[i] >= 0.0
-        h = min(grow * h, FS.H_MAX * ell)
-        while True:
-            k = max(1, min(int(h / dt), len(ts) - 1 - i))
-            hs = k * dt
-            ratio = 0.0
-            for u, w in FS.RULE:
-                moments = yield xr, yr, o + (ts[i] + u * hs) * d
-                ratio += w * FS.return_rate(*moments, outside) * ell / tol
-                evals += 1
-                if ratio > 1.0:
-                    break
-            if ratio <= 1.0 or h <= FS.H_MIN * ell or k == 1:
-                grow = 2.0 if ratio < 0.05 else (1.5 if ratio < 0.3 else 1.1)
-                break
-            h = 0.5 * hs
-        missed += int(down[i:i + k].sum()) - int(F[i] >= 0.0 > F[i + k])
-        i += k
-        idx.append(i)
-    return np.array(idx), missed, evals
 
 
 def stacked_moments(kernel, mean, X, Y, x, d):
@@ -87,7 +51,7 @@ def march_many(kernel, mean, o, d, ts, Z, tol):
             results[b] = done.value
 
     for b, F in enumerate(Z):
-        advance(b, march_steps(kernel, o, d, ts, F, tol), None)
+        advance(b, FS.march_steps(kernel, o, d, ts, F, tol), None)
     while waiting:
         groups = {}
         for b, (_, (xr, _, _)) in waiting.items():

@@ -180,14 +180,17 @@ def _moments(kernel, mean, x_rows, y_rows, x, d):
             L[n + 1, n + 1])
 
 
-def march_realization(kernel, mean, o, d, ts, F, tol):
+def march_steps(kernel, o, d, ts, F, tol):
     """The step rule of fs_march.h applied to one realization F sampled densely at the
-    equally spaced ts along the unit ray o + t d (F[0] >= 0): the march reads F where it
-    samples (steps rounded down to the grid, at least one cell), takes the rule's moments
-    given its last RULE_SAMPLES samples (the device's memory rows are absent here: the
-    ray starts fresh at F[0]) and goes on through every crossing. Returns the sampled grid indices
-    and the missed down-crossings: those of the dense path inside a step whose ends do
-    not show them (the event the tolerance bounds), and the rate evaluations it made."""
+    equally spaced ts along the unit ray o + t d (F[0] >= 0), as a generator: the march
+    reads F where it samples (steps rounded down to the grid, at least one cell), yields
+    (rows' points, rows' values, node) where the rule needs its moments given its last
+    RULE_SAMPLES samples (the device's memory rows are absent here: the ray starts fresh
+    at F[0]) and is sent (m, m1, s, r, g) back; it goes on through every crossing.
+    Returns the sampled grid indices and the missed down-crossings: those of the dense
+    path inside a step whose ends do not show them (the event the tolerance bounds), and
+    the rate evaluations it made. march_realization answers one realization's questions;
+    tests/batched_march.py answers many realizations' at once."""
     o, d = np.asarray(o, float), np.asarray(d, float)
     dt = ts[1] - ts[0]
     ell = step_size(kernel, d, ELL_CORR)
@@ -197,7 +200,7 @@ def march_realization(kernel, mean, o, d, ts, F, tol):
         if len(idx) - first > 2 * RULE_SAMPLES:     # fs_rule_build: the last 4 again
             first = len(idx) - RULE_SAMPLES
         rows = idx[first:]
-        xr, yr = [o + ts[j] * d for j in rows], F[rows]
+        xr, yr = o + ts[rows, None] * d, F[rows]
         outside = F[i] >= 0.0
         h = min(grow * h, H_MAX * ell)
         while True:
@@ -205,9 +208,8 @@ def march_realization(kernel, mean, o, d, ts, F, tol):
             hs = k * dt
             ratio = 0.0
             for u, w in RULE:          # a try stops at the first node that rejects it
-                node = o + (ts[i] + u * hs) * d
-                ratio += w * return_rate(*_moments(kernel, mean, xr, yr, node, d), outside) \
-                    * ell / tol
+                moments = yield xr, yr, o + (ts[i] + u * hs) * d
+                ratio += w * return_rate(*moments, outside) * ell / tol
                 evals += 1
                 if ratio > 1.0:
                     break
@@ -219,6 +221,19 @@ def march_realization(kernel, mean, o, d, ts, F, tol):
         i += k
         idx.append(i)
     return np.array(idx), missed, evals
+
+
+def march_realization(kernel, mean, o, d, ts, F, tol):
+    """march_steps for one realization, each rule evaluation's moments from _moments:
+    (sampled grid indices, missed down-crossings, rate evaluations)."""
+    d = np.asarray(d, float)
+    steps = march_steps(kernel, o, d, ts, F, tol)
+    try:
+        xr, yr, node = next(steps)
+        while True:
+            xr, yr, node = steps.send(_moments(kernel, mean, xr, yr, node, d))
+    except StopIteration as done:
+        return done.value
 
 
 def root_point(ta, tb, fa, fb, width, k, kmax):
