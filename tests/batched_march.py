@@ -15,21 +15,9 @@ def stacked_moments(kernel, mean, X, Y, x, d):
     """(m, m1, s, r, g) per realization b of f and its slope along d at x[b] given the
     values Y[b] at the points X[b] (b, n, 3): the twin's moments for a stack of n-row
     conditionings (covariance_matrix's formulas over a leading axis)."""
-    B, n = Y.shape
+    n = Y.shape[1]
     pts = np.concatenate([X, x[:, None], x[:, None]], axis=1)
-    deriv = np.arange(n + 2) == n + 1
-    u = np.where(deriv[:, None], d, 0.0)
-    j = kernel.jet(pts[:, None, :, :] - pts[:, :, None, :])
-    ug1 = np.einsum("ik,bijk->bij", u, j.g)
-    ug2 = np.einsum("jk,bijk->bij", u, j.g)
-    dv = -np.einsum("ik,bijk->bij", u, j.G)
-    vd = np.einsum("jk,bijk->bij", u, j.G)
-    dd = -(j.alpha * ug1 * ug2 + np.einsum("ik,bijk,jk->bij", u, j.D, u))
-    D1, D2 = deriv[:, None], deriv[None, :]
-    K = np.where(D1, np.where(D2, dd, dv), np.where(D2, vd, j.k))
-    K[:, np.arange(n + 2), np.arange(n + 2)] *= 1.0 + FS.JITTER
-    v, grad = mean.value_and_gradient(pts)
-    mu = np.where(deriv, np.sum(u * grad, axis=-1), v)
+    K, mu = FS.stacked_observation_matrix(kernel, mean, pts, np.arange(n + 2) == n + 1, d)
     L = np.linalg.cholesky(K)
     e = np.linalg.solve(L[:, :n, :n], (Y - mu[:, :n])[..., None])[..., 0]
     return (mu[:, n] + np.einsum("bi,bi->b", L[:, n, :n], e),

@@ -111,21 +111,9 @@ def numpy_systems(n, batch, dt, rng):
     X = np.zeros((batch, n + 2, 3))
     X[:, :, 0] = 0.001 * s[:, None]
     X[:, 2:, 2] = (np.arange(n)[None, :] + u[:, None]) * dt
-    d = np.array([0.0, 0.0, 1.0])
     deriv = np.zeros(n + 2, bool)
     deriv[1] = True
-    U = np.where(deriv[:, None], d, 0.0)
-    j = KERNEL.jet(X[:, None, :, :] - X[:, :, None, :])
-    ug1 = np.einsum("ik,bijk->bij", U, j.g)
-    ug2 = np.einsum("jk,bijk->bij", U, j.g)
-    dv = -np.einsum("ik,bijk->bij", U, j.G)
-    vd = np.einsum("jk,bijk->bij", U, j.G)
-    dd = -(j.alpha * ug1 * ug2 + np.einsum("ik,bijk,jk->bij", U, j.D, U))
-    D1, D2 = deriv[None, :, None], deriv[None, None, :]
-    K = np.where(D1, np.where(D2, dd, dv), np.where(D2, vd, j.k))
-    K[:, np.arange(n + 2), np.arange(n + 2)] *= 1.0 + FS.JITTER
-    v, g = MEAN.value_and_gradient(X)
-    mu = np.where(deriv[None, :], g @ d, v)
+    K, mu = FS.stacked_observation_matrix(KERNEL, MEAN, X, deriv, (0.0, 0.0, 1.0))
     return K, mu, rng.standard_normal((batch, n))
 
 

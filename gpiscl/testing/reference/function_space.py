@@ -53,6 +53,29 @@ def observation_matrix(kernel, mean, x, u, deriv):
     return K, mu
 
 
+def stacked_observation_matrix(kernel, mean, X, deriv, d):
+    """observation_matrix over a leading batch axis, with the device's jitter: K (b, n, n)
+    and mu (b, n) of values (deriv False) and slopes along d (deriv True) at the points X
+    (b, n, 3), from one kernel jet of every pair (tests/batched_march.py,
+    tools/bench_function_space.py)."""
+    d = np.asarray(d, float)
+    deriv = np.asarray(deriv, bool)
+    U = np.where(deriv[:, None], d, 0.0)
+    j = kernel.jet(X[:, None, :, :] - X[:, :, None, :])
+    ug1 = np.einsum("ik,bijk->bij", U, j.g)
+    ug2 = np.einsum("jk,bijk->bij", U, j.g)
+    dv = -np.einsum("ik,bijk->bij", U, j.G)
+    vd = np.einsum("jk,bijk->bij", U, j.G)
+    dd = -(j.alpha * ug1 * ug2 + np.einsum("ik,bijk,jk->bij", U, j.D, U))
+    D1, D2 = deriv[:, None], deriv[None, :]
+    K = np.where(D1, np.where(D2, dd, dv), np.where(D2, vd, j.k))
+    n = len(deriv)
+    K[:, np.arange(n), np.arange(n)] *= 1.0 + JITTER
+    v, grad = mean.value_and_gradient(X)
+    mu = np.where(deriv, np.sum(U * grad, axis=-1), v)
+    return K, mu
+
+
 # --- truncated normal -------------------------------------------------------------------
 
 def mills_ratio(a):
