@@ -46,7 +46,9 @@ def _library_output_muted():
     straight to the file descriptors ("EXR_ERR_BAD_CHUNK_LEADER ..." on 2, "Warning:
     Exception raised reading pixel data ..." on 1), two lines besides the one-line error
     the caller raises: both point at /dev/null while the library reads (scene loading runs
-    before any progress output)."""
+    before any progress output). Python's buffers are flushed before they point back:
+    the binding prints through sys.stdout, whose buffer held the warning until the
+    process exited (the line reached a CLI's stdout unless PYTHONUNBUFFERED was set)."""
     sys.stdout.flush()
     sys.stderr.flush()
     saved = {fd: os.dup(fd) for fd in (1, 2)}
@@ -56,6 +58,8 @@ def _library_output_muted():
                 os.dup2(null.fileno(), fd)
         yield
     finally:
+        sys.stdout.flush()
+        sys.stderr.flush()
         for fd, copy in saved.items():
             os.dup2(copy, fd)
             os.close(copy)
