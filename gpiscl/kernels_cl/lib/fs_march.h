@@ -392,13 +392,14 @@ inline double fs_field_cap(GpKernel p, __global const MeanNode* mean, FsScratch 
     double3 a = ray.o + ta * ray.d;
     /* sigma's multiplier at x(ta): the prior sd over sigma, or evaluated (a posterior) */
     double ms = S.post.n ? fs_fields(p, mean, a).ms : sd / sqrt((double)p.sigma2);
-    double seg = he;
+    double seg = 2.0 * he;
     double2 rate = (double2)(INFINITY);       /* (fall, rise) per unit t */
-    for (int k = 0; k < 16 && isinf(rate.x); ++k, seg *= 0.5)
+    for (int k = 0; k < 16 && isinf(rate.x); ++k) {
+        seg *= 0.5;
         rate = fs_field_slope(p.sigma_field, p.sigma_p0, p.sigma_p1, grid, a,
                               ray.o + (ta + seg) * ray.d) / seg;
+    }
     if (isinf(rate.x)) return FS_H_MIN * ell;
-    seg *= 2.0;                                /* the loop halved once past the last */
     double cap = fmin(rate.x > 0.0 ? 0.5 * fabs(ms) / rate.x : INFINITY,
                       rate.y > 0.0 ? fabs(ms) / rate.y : INFINITY);
     if (cap > seg && seg < he) cap = seg;      /* the bound holds on [ta, ta + seg] only */

@@ -325,20 +325,40 @@ inline int fs_grid_box_samples(__global const MeanNode* n, double3 a, double3 b)
     return w.x * w.y * w.z;
 }
 
-inline double2 fs_grid_field_range(__global const MeanNode* n, double3 a, double3 b)
+/* One pass over the samples of fs_grid_box's cells for the segment [a, b] (at most
+ * FS_SD_BOX_SAMPLES; callers check fs_grid_box_samples, a larger box gives NaN): their
+ * smallest and largest, and per index axis the range [dlo, dhi] of the differences of
+ * neighbouring samples (each read once, into the box's own array). */
+inline double2 fs_grid_box_scan(__global const MeanNode* n, double3 a, double3 b,
+                                float3* dlo, float3* dhi)
 {
     int3 c0, c1;
     fs_grid_box(n, a, b, &c0, &c1);
+    int3 wd = c1 - c0 + 1;
+    *dlo = (float3)(INFINITY);
+    *dhi = (float3)(-INFINITY);
+    if (wd.x * wd.y * wd.z > FS_SD_BOX_SAMPLES) return (double2)(NAN);
     int ny = (int)n->p1.y, nz = (int)n->p1.z;
-    double lo = INFINITY, hi = -INFINITY;
-    for (int i = c0.x; i <= c1.x; ++i)
-        for (int j = c0.y; j <= c1.y; ++j)
-            for (int q = c0.z; q <= c1.z; ++q) {
-                double v = gp_grid_sample(n + 1, (i * ny + j) * nz + q);
+    float box[FS_SD_BOX_SAMPLES];     /* strides wd.y wd.z, wd.z, 1 */
+    float lo = INFINITY, hi = -INFINITY;
+    for (int i = 0, at = 0; i < wd.x; ++i)
+        for (int j = 0; j < wd.y; ++j)
+            for (int q = 0; q < wd.z; ++q, ++at) {
+                float v = gp_grid_sample(n + 1, ((c0.x + i) * ny + c0.y + j) * nz + c0.z + q);
+                box[at] = v;
                 lo = fmin(lo, v);
                 hi = fmax(hi, v);
+                if (i) { float e = v - box[at - wd.y * wd.z]; dlo->x = fmin(dlo->x, e); dhi->x = fmax(dhi->x, e); }
+                if (j) { float e = v - box[at - wd.z]; dlo->y = fmin(dlo->y, e); dhi->y = fmax(dhi->y, e); }
+                if (q) { float e = v - box[at - 1]; dlo->z = fmin(dlo->z, e); dhi->z = fmax(dhi->z, e); }
             }
     return (double2)(lo, hi);
+}
+
+inline double2 fs_grid_field_range(__global const MeanNode* n, double3 a, double3 b)
+{
+    float3 dlo, dhi;
+    return fs_grid_box_scan(n, a, b, &dlo, &dhi);
 }
 
 /* The range of one field multiplier over the segment [a, b]: 1 without a field, a linear
@@ -385,24 +405,8 @@ inline double2 fs_field_slope(int kind, float4 p0, float4 p1, __global const Mea
         return (double2)(h * (1.0 - th * th) * sqrt(rmax2) / (R * w) * sqrt(dd));
     }
     if (kind != GP_FIELD_GRID) return (double2)(0.0);
-    int3 c0, c1;
-    fs_grid_box(grid, a, b, &c0, &c1);
-    int3 wd = c1 - c0 + 1;
-    if (wd.x * wd.y * wd.z > FS_SD_BOX_SAMPLES) return (double2)(INFINITY);
-    int ny = (int)grid->p1.y, nz = (int)grid->p1.z;
-    /* each sample read once, into the box's own array (x, y, z strides wd.y wd.z, wd.z, 1);
-     * each difference against the neighbour read before it */
-    float box[FS_SD_BOX_SAMPLES];
-    float3 lo = (float3)(INFINITY), hi = (float3)(-INFINITY);
-    for (int i = 0, at = 0; i < wd.x; ++i)
-        for (int j = 0; j < wd.y; ++j)
-            for (int q = 0; q < wd.z; ++q, ++at) {
-                float v = gp_grid_sample(grid + 1, ((c0.x + i) * ny + c0.y + j) * nz + c0.z + q);
-                box[at] = v;
-                if (i) { float e = v - box[at - wd.y * wd.z]; lo.x = fmin(lo.x, e); hi.x = fmax(hi.x, e); }
-                if (j) { float e = v - box[at - wd.z]; lo.y = fmin(lo.y, e); hi.y = fmax(hi.y, e); }
-                if (q) { float e = v - box[at - 1]; lo.z = fmin(lo.z, e); hi.z = fmax(hi.z, e); }
-            }
+    float3 lo, hi;
+    if (isnan(fs_grid_box_scan(grid, a, b, &lo, &hi).x)) return (double2)(INFINITY);
     /* index coordinates per unit t along d (the record's rows map world to index); dm/dt
      * = sum_i dm/du_i du_i/dt with dm/du_i in [lo_i, hi_i] */
     double3 du = (double3)(dot(convert_double3(grid->row0.xyz), d),
