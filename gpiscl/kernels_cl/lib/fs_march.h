@@ -269,6 +269,8 @@ inline double fs_sd_over(GpKernel p, __global const MeanNode* mean, FsRay ray, d
  * needs a residual of that size: rate ~ e^{-Z^2/2} / l, far below any tolerance). m and sd
  * are the prior's at x(ta) (sigma(x) fields and a posterior included; fs_start_mean); a
  * posterior's mean correction varies on the kernel's scale, which the l_d cap covers.
+ * Where the mean is one trilinear grid, lip times the length is also bounded cell by cell
+ * along the ray (gp_mean_variation_reach), which reaches further on oblique rays.
  * A mean certified monotone with |slope| >= FS_MONO_R g (g: the prior slope's sd along
  * dn, > 0 only for stationary priors without a posterior; gp_mean_monotone_reach) cannot
  * dip and come back, and the crossings it could hide are negligible: the cap extends to
@@ -315,6 +317,21 @@ inline double fs_mean_cap(GpKernel p, __global const MeanNode* mean, int mc, FsS
         if (cap >= he) {
             *certified = balls && fabs(m) - FS_MEAN_Z * sdh >= he * lip;
             return hg;
+        }
+        /* one trilinear grid: the bound of its variation along the ray itself, longer
+         * than lip times the length where the ray runs along the surface; not where the
+         * monotone stretch is taken (g > 0), which certifies most of those tries at less
+         * cost (docs/design/grid-means.md, "The variation walk") */
+        if (!(g > 0.0) && gp_mean_is_trilinear_grid(mean, mc)) {
+            FS_PROF_ADD(VAR_WALKS, 1);
+            double vr = (double)gp_mean_variation_reach(
+                mean, convert_float3(ray.o + ta * ray.d),
+                convert_float3(ray.o + (ta + he) * ray.d), (float)reach) * he;
+            if (vr >= he) {
+                *certified = balls && fabs(m) - FS_MEAN_Z * sdh >= FS_MEAN_KAPPA * sd;
+                return hg;
+            }
+            cap = fmax(cap, vr);
         }
     }
     double far = 0.0;

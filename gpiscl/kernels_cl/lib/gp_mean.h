@@ -366,92 +366,154 @@ inline int gp_mean_is_trilinear_grid(GP_MEAN_SPACE const MeanNode* nodes, int co
         && count == 1 + nodes[0].flags && nodes[0].scale > 0.0f;
 }
 
-/* How far along the segment [p, q] (a fraction in [0, 1]) a one-trilinear-grid-leaf mean
- * program (gp_mean_is_trilinear_grid) is certified monotone with a slope along `dir` (per
- * unit of dir) of one sign and magnitude >= thr. The cells the segment crosses are walked
- * in order (Amanatides and Woo): in a cell each gradient component is a bilinear blend of
- * the cell's four edge differences along its axis, so the slope lies in
- * sum_i dir_i [min, max] of them (index space); the walk stops at the first cell whose
- * range breaks the bound, at the sample box's faces (the outside continuation is not
- * walked), and where the mean, m_p at p, heads for its zero set, once it is certified
- * past it by `band` (its bound accumulated cell by cell: the step then ends on the far
- * side anyway, with a short bracket for the root search).
- * A cell the segment only grazes within rounding may be skipped: its slope acts over
- * ~1e-6 voxels, too short to move the mean by anything that matters. */
-inline float gp_mean_monotone_reach(GP_MEAN_SPACE const MeanNode* n, float3 p, float3 q,
-                                    float3 dir, float thr, float m_p, float band)
+/* The trilinear cells a segment crosses, in order (Amanatides and Woo), of a
+ * one-trilinear-grid-leaf mean program (gp_mean_is_trilinear_grid), in index space:
+ * fractions t of the segment where the current cell is entered and left (tout), tend where
+ * the segment leaves the sample box (the outside continuation is not walked), and the
+ * cell's eight samples (gp_grid_corners' order). A step across a face keeps the four
+ * samples the cells share and reads the other four (gp_grid_quad). A cell the segment only
+ * grazes within rounding may be skipped: it spans ~1e-6 voxels of the segment. */
+typedef struct {
+    GP_MEAN_SPACE const MeanNode* payload;
+    float3 tnext, tstep;
+    int3 c, last, step;
+    int base, sx, nz;
+    float t, tout, tend;
+    float8 s;
+} GpCellWalk;
+
+/* The walk's first cell, the one holding p; 0 where p lies outside the sample box. */
+inline int gp_cell_walk_begin(GP_MEAN_SPACE const MeanNode* n, float3 p, float3 q,
+                              GpCellWalk* w)
 {
     float3 r0 = n->row0.xyz, r1 = n->row1.xyz, r2 = n->row2.xyz;
     float3 a = (float3)(dot(r0, p) + n->row0.w, dot(r1, p) + n->row1.w, dot(r2, p) + n->row2.w);
     float3 b = (float3)(dot(r0, q) + n->row0.w, dot(r1, q) + n->row1.w, dot(r2, q) + n->row2.w);
+    float3 top = n->p1.xyz - 1.0f, d = b - a;
+    if (any(a < (float3)(0.0f)) || any(a > top)) return 0;
+    float3 face = select((float3)(0.0f), top, d > (float3)(0.0f));
+    float3 texit = select((face - a) / d, (float3)(INFINITY), d == (float3)(0.0f));
+    w->tend = fmin(1.0f, fmin(texit.x, fmin(texit.y, texit.z)));
+    w->payload = n + 1;
+    int ny = (int)n->p1.y;
+    w->nz = (int)n->p1.z;
+    w->sx = ny * w->nz;
+    w->c = convert_int3(fmin(floor(a), top - 1.0f));
+    w->last = convert_int3(fmin(floor(fmin(fmax(a + w->tend * d, (float3)(0.0f)), top)),
+                                top - 1.0f));
+    w->step = select((int3)(-1), (int3)(1), d > (float3)(0.0f));
+    float3 next = select((float3)(0.0f), (float3)(1.0f), d > (float3)(0.0f));
+    w->tnext = select((convert_float3(w->c) + next - a) / d, (float3)(INFINITY),
+                      d == (float3)(0.0f));
+    w->tstep = select(1.0f / fabs(d), (float3)(INFINITY), d == (float3)(0.0f));
+    w->t = 0.0f;
+    w->tout = fmin(fmin(w->tnext.x, fmin(w->tnext.y, w->tnext.z)), w->tend);
+    w->base = (w->c.x * ny + w->c.y) * w->nz + w->c.z;
+    w->s = gp_grid_corners(w->payload, w->base, w->sx, w->nz);
+    return 1;
+}
+
+/* On to the next cell, across the nearest face; 0 at the segment's or the box's end. */
+inline int gp_cell_walk_next(GpCellWalk* w)
+{
+    if (w->tout >= w->tend) return 0;
+    GP_MEAN_SPACE const MeanNode* payload = w->payload;
+    int sx = w->sx, nz = w->nz;
+    if (w->tnext.x <= w->tnext.y && w->tnext.x <= w->tnext.z) {
+        if (w->c.x == w->last.x) return 0;
+        w->c.x += w->step.x; w->tnext.x += w->tstep.x;
+        w->base += w->step.x * sx;
+        if (w->step.x > 0) { w->s.s0123 = w->s.s4567; w->s.s4567 = gp_grid_quad(payload, w->base + sx, 1, nz); }
+        else { w->s.s4567 = w->s.s0123; w->s.s0123 = gp_grid_quad(payload, w->base, 1, nz); }
+    } else if (w->tnext.y <= w->tnext.z) {
+        if (w->c.y == w->last.y) return 0;
+        w->c.y += w->step.y; w->tnext.y += w->tstep.y;
+        w->base += w->step.y * nz;
+        if (w->step.y > 0) { w->s.s0145 = w->s.s2367; w->s.s2367 = gp_grid_quad(payload, w->base + nz, 1, sx); }
+        else { w->s.s2367 = w->s.s0145; w->s.s0145 = gp_grid_quad(payload, w->base, 1, sx); }
+    } else {
+        if (w->c.z == w->last.z) return 0;
+        w->c.z += w->step.z; w->tnext.z += w->tstep.z;
+        w->base += w->step.z;
+        if (w->step.z > 0) { w->s.s0246 = w->s.s1357; w->s.s1357 = gp_grid_quad(payload, w->base + 1, nz, sx); }
+        else { w->s.s1357 = w->s.s0246; w->s.s0246 = gp_grid_quad(payload, w->base, nz, sx); }
+    }
+    w->t = w->tout;
+    w->tout = fmin(fmin(w->tnext.x, fmin(w->tnext.y, w->tnext.z)), w->tend);
+    return 1;
+}
+
+/* The ranges of a cell's four edge differences along x, y and z (samples s in
+ * gp_grid_corners' order): each partial derivative of the trilinear interpolant, in index
+ * units, is a bilinear blend of its axis's four. */
+inline void gp_cell_edge_ranges(float8 s, float3* lo, float3* hi)
+{
+    float4 ex = s.s4567 - s.s0123, ey = s.s2367 - s.s0145, ez = s.s1357 - s.s0246;
+    *lo = (float3)(fmin(fmin(ex.x, ex.y), fmin(ex.z, ex.w)),
+                   fmin(fmin(ey.x, ey.y), fmin(ey.z, ey.w)),
+                   fmin(fmin(ez.x, ez.y), fmin(ez.z, ez.w)));
+    *hi = (float3)(fmax(fmax(ex.x, ex.y), fmax(ex.z, ex.w)),
+                   fmax(fmax(ey.x, ey.y), fmax(ey.z, ey.w)),
+                   fmax(fmax(ez.x, ez.y), fmax(ez.z, ez.w)));
+}
+
+/* How far along the segment [p, q] (a fraction in [0, 1]) a one-trilinear-grid-leaf mean
+ * program is certified monotone with a slope along `dir` (per unit of dir) of one sign and
+ * magnitude >= thr: cell by cell (GpCellWalk), the slope lies in sum_i dir_i [min, max]
+ * of the cell's edge differences (index space). The walk stops at the first cell whose
+ * range breaks the bound, at the sample box's faces, and where the mean, m_p at p, heads
+ * for its zero set, once it is certified past it by `band` (its bound accumulated cell by
+ * cell: the step then ends on the far side anyway, with a short bracket for the root
+ * search). */
+inline float gp_mean_monotone_reach(GP_MEAN_SPACE const MeanNode* n, float3 p, float3 q,
+                                    float3 dir, float thr, float m_p, float band)
+{
+    GpCellWalk w;
+    if (!gp_cell_walk_begin(n, p, q, &w)) return 0.0f;
+    float3 r0 = n->row0.xyz, r1 = n->row1.xyz, r2 = n->row2.xyz;
     /* index-space slope per unit of the segment's fraction, in the samples' units */
     float3 u = (float3)(dot(r0, dir), dot(r1, dir), dot(r2, dir)) * length(q - p);
     float inv = 1.0f / n->scale;
     thr *= length(q - p) * inv;
     float v = m_p * inv;
     band *= inv;
-    float3 top = n->p1.xyz - 1.0f, d = b - a;
-    if (any(a < (float3)(0.0f)) || any(a > top)) return 0.0f;
-    /* where the segment leaves the sample box */
-    float3 face = select((float3)(0.0f), top, d > (float3)(0.0f));
-    float3 texit = select((face - a) / d, (float3)(INFINITY), d == (float3)(0.0f));
-    float tend = fmin(1.0f, fmin(texit.x, fmin(texit.y, texit.z)));
-    GP_MEAN_SPACE const MeanNode* payload = n + 1;
-    int ny = (int)n->p1.y, nz = (int)n->p1.z, sx = ny * nz;
-    int3 c = convert_int3(fmin(floor(a), top - 1.0f));
-    int3 last = convert_int3(fmin(floor(fmin(fmax(a + tend * d, (float3)(0.0f)), top)),
-                                  top - 1.0f));
-    int3 step = select((int3)(-1), (int3)(1), d > (float3)(0.0f));
-    float3 next = select((float3)(0.0f), (float3)(1.0f), d > (float3)(0.0f));
-    float3 tnext = select((convert_float3(c) + next - a) / d, (float3)(INFINITY),
-                          d == (float3)(0.0f));
-    float3 tstep = select(1.0f / fabs(d), (float3)(INFINITY), d == (float3)(0.0f));
-    int3 left = convert_int3(abs(last - c));
-    int cells = left.x + left.y + left.z + 1, sign = 0;
-    float t = 0.0f;                                   /* where the current cell starts */
-    /* the cell's corners; a step across a face keeps the four the cells share and reads
-     * the other four (gp_grid_quad) */
-    int base = (c.x * ny + c.y) * nz + c.z;
-    float8 s = gp_grid_corners(payload, base, sx, nz);
-    for (int k = 0; k < cells; ++k) {
-        /* the cell's edge differences along x, y and z */
-        float4 ex = s.s4567 - s.s0123, ey = s.s2367 - s.s0145, ez = s.s1357 - s.s0246;
-        float3 lo = (float3)(fmin(fmin(ex.x, ex.y), fmin(ex.z, ex.w)),
-                             fmin(fmin(ey.x, ey.y), fmin(ey.z, ey.w)),
-                             fmin(fmin(ez.x, ez.y), fmin(ez.z, ez.w)));
-        float3 hi = (float3)(fmax(fmax(ex.x, ex.y), fmax(ex.z, ex.w)),
-                             fmax(fmax(ey.x, ey.y), fmax(ey.z, ey.w)),
-                             fmax(fmax(ez.x, ez.y), fmax(ez.z, ez.w)));
+    int sign = 0;
+    do {
+        float3 lo, hi;
+        gp_cell_edge_ranges(w.s, &lo, &hi);
         float3 s0 = u * lo, s1 = u * hi;
         float smin = dot(fmin(s0, s1), (float3)(1.0f)), smax = dot(fmax(s0, s1), (float3)(1.0f));
         if (sign == 0) sign = smin >= thr ? 1 : (smax <= -thr ? -1 : 0);
-        if (!(sign > 0 ? smin >= thr : (sign < 0 && smax <= -thr))) return t;
-        float tout = fmin(fmin(tnext.x, fmin(tnext.y, tnext.z)), tend);
+        if (!(sign > 0 ? smin >= thr : (sign < 0 && smax <= -thr))) return w.t;
         /* the bound of the mean at the cell's exit: the least change, in the slope's sign */
-        v += (sign > 0 ? smin : smax) * (tout - t);
-        if (sign * m_p < 0.0f && (sign > 0 ? v >= band : v <= -band)) return tout;
-        if (tout >= tend) break;
-        /* the next cell: across the nearest face */
-        if (tnext.x <= tnext.y && tnext.x <= tnext.z) {
-            if (c.x == last.x) break;
-            c.x += step.x; tnext.x += tstep.x;
-            base += step.x * sx;
-            if (step.x > 0) { s.s0123 = s.s4567; s.s4567 = gp_grid_quad(payload, base + sx, 1, nz); }
-            else { s.s4567 = s.s0123; s.s0123 = gp_grid_quad(payload, base, 1, nz); }
-        } else if (tnext.y <= tnext.z) {
-            if (c.y == last.y) break;
-            c.y += step.y; tnext.y += tstep.y;
-            base += step.y * nz;
-            if (step.y > 0) { s.s0145 = s.s2367; s.s2367 = gp_grid_quad(payload, base + nz, 1, sx); }
-            else { s.s2367 = s.s0145; s.s0145 = gp_grid_quad(payload, base, 1, sx); }
-        } else {
-            if (c.z == last.z) break;
-            c.z += step.z; tnext.z += tstep.z;
-            base += step.z;
-            if (step.z > 0) { s.s0246 = s.s1357; s.s1357 = gp_grid_quad(payload, base + 1, nz, sx); }
-            else { s.s1357 = s.s0246; s.s0246 = gp_grid_quad(payload, base, nz, sx); }
-        }
-        t = tout;
-    }
-    return tend;
+        v += (sign > 0 ? smin : smax) * (w.tout - w.t);
+        if (sign * m_p < 0.0f && (sign > 0 ? v >= band : v <= -band)) return w.tout;
+    } while (gp_cell_walk_next(&w));
+    return w.tend;
+}
+
+/* How far along the segment [p, q] (a fraction in [0, 1]) a one-trilinear-grid-leaf mean
+ * program is certified to change by less than `budget` (world units): its total variation
+ * there, bounded cell by cell (GpCellWalk) by the largest |edge difference| along each axis
+ * times the segment's run along it. The same bound as fs_mean_cap's Lipschitz one, taken
+ * along the ray instead of over a box: longer for rays that run along the surface. Past the
+ * sample box's faces nothing is certified (tend). */
+inline float gp_mean_variation_reach(GP_MEAN_SPACE const MeanNode* n, float3 p, float3 q,
+                                     float budget)
+{
+    GpCellWalk w;
+    if (!gp_cell_walk_begin(n, p, q, &w)) return 0.0f;
+    float3 r0 = n->row0.xyz, r1 = n->row1.xyz, r2 = n->row2.xyz;
+    /* index-space run per unit of the segment's fraction */
+    float3 run = fabs((float3)(dot(r0, q - p), dot(r1, q - p), dot(r2, q - p)));
+    float left = budget / n->scale;
+    do {
+        float3 lo, hi;
+        gp_cell_edge_ranges(w.s, &lo, &hi);
+        float rate = dot(run, fmax(fabs(lo), fabs(hi)));
+        float use = rate * (w.tout - w.t);
+        if (use >= left) return w.t + left / rate;
+        left -= use;
+    } while (gp_cell_walk_next(&w));
+    return w.tend;
 }

@@ -1,8 +1,14 @@
-"""gp_mean_monotone_reach, the monotone stretch that lets fs_mean_step lift the mean cap:
+"""gp_mean.h's walks over a trilinear grid's cells along a segment (GpCellWalk).
+
+gp_mean_monotone_reach, the monotone stretch that lets fs_mean_step lift the mean cap:
 over the stretch it certifies, the mean's difference quotients along random segments
 (trilinear grids, transformed) keep one sign with at least the required magnitude; the
 stop past the zero set lands there; only one-trilinear-leaf programs qualify; and the
-knob's shipped programs are certified on head-on stretches near their surface."""
+knob's shipped programs are certified on head-on stretches near their surface.
+
+gp_mean_variation_reach, the mean cap's bound along the ray: the mean stays within its
+budget of its start value over the reach (dense samples), the reach is never shorter than
+the Lipschitz bound's, and it is longer for segments that run along the surface."""
 import numpy as np
 import pyopencl as cl
 import pytest
@@ -23,6 +29,14 @@ __kernel void reach(__global const MeanNode* nodes, int count, __global const fl
     float3 p = vload3(2 * i, pq), q = vload3(2 * i + 1, pq);
     out[i] = gp_mean_is_trilinear_grid(nodes, count)
         ? gp_mean_monotone_reach(nodes, p, q, normalize(q - p), thr, m_p[i], band) : -1.0f;
+}
+
+__kernel void variation(__global const MeanNode* nodes, __global const float* pq,
+                        __global const float* budget, __global float* out)
+{
+    int i = get_global_id(0);
+    out[i] = gp_mean_variation_reach(nodes, vload3(2 * i, pq), vload3(2 * i + 1, pq),
+                                     budget[i]);
 }
 """
 
@@ -166,3 +180,79 @@ def test_the_knob_is_certified_on_head_on_stretches(device, prg):
               f"monotone there, FS_MONO_R g = {thr:.4f}")
         assert len(x) > 100 and certified.mean() > 0.7
         assert certified.mean() >= 0.9 * truth.mean()
+
+
+def device_variation(device, prg, mean, p, q, budget):
+    """gp_mean_variation_reach of each segment [p_i, q_i] with budget_i; the reach and the
+    float32 end points, in float64."""
+    nodes = pack_mean(mean)
+    pq = np.ascontiguousarray(np.stack([p, q], 1), np.float32)
+    mf = cl.mem_flags
+
+    def buf(a):
+        return cl.Buffer(device.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
+
+    out = np.empty(len(p), np.float32)
+    ob = cl.Buffer(device.ctx, mf.WRITE_ONLY, out.nbytes)
+    prg["variation"](device.queue, (len(p),), None, buf(nodes), buf(pq),
+                     buf(np.ascontiguousarray(budget, np.float32)), ob)
+    cl.enqueue_copy(device.queue, out, ob)
+    pq = pq.astype(np.float64)
+    return out.astype(np.float64), pq[:, 0], pq[:, 1]
+
+
+def sphere_segments(rng, n, along):
+    """Segments near the smooth grid's sphere (centre 0.2, radius 0.8): random directions,
+    or (along) tangent to the sphere at a point near it."""
+    centre = np.full(3, 0.2)
+    x = rng.normal(size=(n, 3))
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    p = centre + x * rng.uniform(0.7, 0.95, (n, 1))
+    d = rng.normal(size=(n, 3))
+    if along:
+        d -= np.sum(d * x, 1, keepdims=True) * x
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return p, p + d * rng.uniform(0.1, 0.5, (n, 1))
+
+
+@pytest.mark.parametrize("name", ["grid", "affine"])
+def test_the_mean_stays_within_its_budget_over_the_reach(device, prg, name):
+    """Dense samples (257 a segment) of the mean over the certified stretch differ from
+    its start value by at most the budget (float32 rounding: 1e-5); a budget twice as
+    large reaches further somewhere, so the walk does not stop for nothing."""
+    g = smooth_grid()
+    mean = g if name == "grid" else Transform(g, AFFINE)
+    rng = np.random.default_rng(3)
+    p, q = sphere_segments(rng, 2000, along=False)
+    budget = rng.uniform(0.005, 0.2, len(p))
+    reach, p, q = device_variation(device, prg, mean, p, q, budget)
+    t = np.linspace(0.0, 1.0, 257)
+    x = p[:, None] + (t[None, :] * reach[:, None])[..., None] * (q - p)[:, None]
+    v = mean.value(x.reshape(-1, 3)).reshape(len(p), -1)
+    moved = np.max(np.abs(v - v[:, :1]), axis=1)
+    print(f"{name}: mean reach {reach.mean():.3f}, used {np.mean(moved / budget):.1%} of "
+          "the budget")
+    assert np.all(moved <= budget + 1e-5)
+    assert np.all(reach >= 0.0) and np.all(reach <= 1.0)
+    wider, _, _ = device_variation(device, prg, mean, p, q, 2.0 * budget)
+    assert np.all(wider >= reach) and np.mean(wider > reach) > 0.5
+
+
+def test_the_reach_beats_the_lipschitz_bound_along_the_surface(device, prg):
+    """Inside the sample box the walk's bound is at most the Lipschitz bound times the
+    length (Cauchy-Schwarz over the axes), so its reach is at least budget / lipschitz;
+    along the surface (tangent segments) it is several times longer on average."""
+    g = smooth_grid()
+    rng = np.random.default_rng(4)
+    gain = {}
+    for along in (False, True):
+        p, q = sphere_segments(rng, 2000, along)
+        budget = np.full(len(p), 0.03)
+        reach, p, q = device_variation(device, prg, g, p, q, budget)
+        length = np.linalg.norm(q - p, axis=1)
+        lip_reach = np.minimum(budget / g.lipschitz / length, 1.0)
+        assert np.all(reach >= lip_reach * (1.0 - 1e-4) - 1e-6)
+        gain[along] = np.mean(reach / lip_reach)
+    print(f"reach / Lipschitz reach: random directions {gain[False]:.2f}, along the "
+          f"surface {gain[True]:.2f}")
+    assert gain[True] > 2.0 and gain[True] > gain[False]
