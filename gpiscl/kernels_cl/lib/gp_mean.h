@@ -54,21 +54,41 @@ inline float gp_grid_sample(GP_MEAN_SPACE const MeanNode* payload, int j)
     return ((GP_MEAN_SPACE const float*)(payload + r))[j - r * GP_MEAN_GRID_PAYLOAD_FLOATS];
 }
 
+/* Samples j and j + 1, and j .. j + 3: one record lookup for the run (a record holds
+ * GP_MEAN_GRID_PAYLOAD_FLOATS samples; a run that crosses into the next record reads the
+ * rest there). The same numbers as gp_grid_sample's, for fewer index divisions. */
+inline float2 gp_grid_sample2(GP_MEAN_SPACE const MeanNode* payload, int j)
+{
+    int r = j / GP_MEAN_GRID_PAYLOAD_FLOATS, k = j - r * GP_MEAN_GRID_PAYLOAD_FLOATS;
+    GP_MEAN_SPACE const float* f = (GP_MEAN_SPACE const float*)(payload + r);
+    if (k + 1 < GP_MEAN_GRID_PAYLOAD_FLOATS) return vload2(0, f + k);
+    return (float2)(f[k], ((GP_MEAN_SPACE const float*)(payload + r + 1))[0]);
+}
+
+inline float4 gp_grid_sample4(GP_MEAN_SPACE const MeanNode* payload, int j)
+{
+    int r = j / GP_MEAN_GRID_PAYLOAD_FLOATS, k = j - r * GP_MEAN_GRID_PAYLOAD_FLOATS;
+    GP_MEAN_SPACE const float* f = (GP_MEAN_SPACE const float*)(payload + r);
+    if (k + 3 < GP_MEAN_GRID_PAYLOAD_FLOATS) return vload4(0, f + k);
+    GP_MEAN_SPACE const float* g = (GP_MEAN_SPACE const float*)(payload + r + 1)
+                                   - GP_MEAN_GRID_PAYLOAD_FLOATS;
+    return (float4)(f[k], k + 1 < GP_MEAN_GRID_PAYLOAD_FLOATS ? f[k + 1] : g[k + 1],
+                    k + 2 < GP_MEAN_GRID_PAYLOAD_FLOATS ? f[k + 2] : g[k + 2], g[k + 3]);
+}
+
 /* The eight samples of the cell whose lowest corner is sample b (sx, sy: the x and y
  * strides), component 4 dx + 2 dy + dz: .s0 = c000, .s1 = c001, ..., .s7 = c111. */
 inline float8 gp_grid_corners(GP_MEAN_SPACE const MeanNode* payload, int b, int sx, int sy)
 {
-    return (float8)(gp_grid_sample(payload, b), gp_grid_sample(payload, b + 1),
-                    gp_grid_sample(payload, b + sy), gp_grid_sample(payload, b + sy + 1),
-                    gp_grid_sample(payload, b + sx), gp_grid_sample(payload, b + sx + 1),
-                    gp_grid_sample(payload, b + sx + sy),
-                    gp_grid_sample(payload, b + sx + sy + 1));
+    return (float8)(gp_grid_sample2(payload, b), gp_grid_sample2(payload, b + sy),
+                    gp_grid_sample2(payload, b + sx), gp_grid_sample2(payload, b + sx + sy));
 }
 
 /* Four samples of a cell face: b, b + o1, b + o2, b + o1 + o2 (gp_mean_monotone_reach's
  * walk reads the face it crosses into, in gp_grid_corners' component order). */
 inline float4 gp_grid_quad(GP_MEAN_SPACE const MeanNode* payload, int b, int o1, int o2)
 {
+    if (o1 == 1) return (float4)(gp_grid_sample2(payload, b), gp_grid_sample2(payload, b + o2));
     return (float4)(gp_grid_sample(payload, b), gp_grid_sample(payload, b + o1),
                     gp_grid_sample(payload, b + o2), gp_grid_sample(payload, b + o1 + o2));
 }
@@ -158,12 +178,11 @@ inline float gp_grid_cubic(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* gr
         float va = 0.0f;
         for (int b = 0; b < 4; ++b) {
             float vb = 0.0f, db = 0.0f;
-            int row = base + a * sx + b * sy;
-            for (int e = 0; e < 4; ++e) {
-                float q = gp_grid_sample(payload, row + e);
-                vb += wz[e] * q;
-                db += dz[e] * q;
-            }
+            float4 q = gp_grid_sample4(payload, base + a * sx + b * sy);
+            vb += wz[0] * q.x; db += dz[0] * q.x;
+            vb += wz[1] * q.y; db += dz[1] * q.y;
+            vb += wz[2] * q.z; db += dz[2] * q.z;
+            vb += wz[3] * q.w; db += dz[3] * q.w;
             va += wy[b] * vb;
             ga += (float3)(0.0f, dy[b] * vb, wy[b] * db);
         }
