@@ -342,9 +342,13 @@ inline double2 fs_grid_box_scan(__global const MeanNode* n, double3 a, double3 b
     float box[FS_SD_BOX_SAMPLES];     /* strides wd.y wd.z, wd.z, 1 */
     float lo = INFINITY, hi = -INFINITY;
     for (int i = 0, at = 0; i < wd.x; ++i)
-        for (int j = 0; j < wd.y; ++j)
+        for (int j = 0; j < wd.y; ++j) {
+            /* a run along z: its payload record looked up once (gp_grid_sample's map) */
+            int run = ((c0.x + i) * ny + c0.y + j) * nz + c0.z;
+            int r = run / GP_MEAN_GRID_PAYLOAD_FLOATS, k = run - r * GP_MEAN_GRID_PAYLOAD_FLOATS;
             for (int q = 0; q < wd.z; ++q, ++at) {
-                float v = gp_grid_sample(n + 1, ((c0.x + i) * ny + c0.y + j) * nz + c0.z + q);
+                if (k == GP_MEAN_GRID_PAYLOAD_FLOATS) { ++r; k = 0; }
+                float v = ((__global const float*)(n + 1 + r))[k++];
                 box[at] = v;
                 lo = fmin(lo, v);
                 hi = fmax(hi, v);
@@ -352,6 +356,7 @@ inline double2 fs_grid_box_scan(__global const MeanNode* n, double3 a, double3 b
                 if (j) { float e = v - box[at - wd.z]; dlo->y = fmin(dlo->y, e); dhi->y = fmax(dhi->y, e); }
                 if (q) { float e = v - box[at - 1]; dlo->z = fmin(dlo->z, e); dhi->z = fmax(dhi->z, e); }
             }
+        }
     return (double2)(lo, hi);
 }
 
