@@ -66,7 +66,36 @@ inline int fs_moments(GpKernel p, __global const MeanNode* mean, int mc, FsScrat
     S.rows[n] = fs_obs(x, dn, FS_OBS_VALUE, t);
     S.rows[n + 1] = fs_obs(x, dn, FS_OBS_DERIV, 0.0);
     int st;
-    if (S.post.n || gp_kernel_nonstationary(p)) {
+    if (!S.post.n && p.sigma_field && !p.ls_field) {
+        /* a sigma field alone: as the stationary branch below, one base-kernel jet per row
+         * for both entries (gp_cov_sigma_jet, the expressions gp_cov_at uses), FS_LANES
+         * rows' jets at a time (fs_jets) */
+        GpFieldsAt fx = fs_fields(p, mean, x);
+        fs_store_fields(S, n, fx);
+        fs_store_fields(S, n + 1, fx);
+        float3 gm;
+        S.mu[n] = (double)gp_mean_eval(mean, mc, convert_float3(x), &gm);
+        S.mu[n + 1] = dot(convert_double3(gm), dn);
+        __global double* L0 = S.L + fs_tri(n);
+        __global double* L1 = S.L + fs_tri(n + 1);
+        for (int j0 = 0; j0 < n; j0 += FS_LANES) {
+            GpJet J[FS_LANES];
+            int lanes = min(FS_LANES, n - j0);
+            if (lanes == FS_LANES) fs_jets(p, S, j0, x, J);
+            else for (int l = 0; l < lanes; ++l) J[l] = gp_kernel_jet(p, x - fs_pos(S.rows + j0 + l));
+            for (int l = 0; l < lanes; ++l) {
+                __global const FsObs* rj = S.rows + j0 + l;
+                GpFieldsAt fj = fs_row_fields(S, j0 + l);
+                L0[j0 + l] = gp_cov_sigma_jet(J[l], fs_dir(rj), rj->kind, fj, dn, 0, fx);
+                L1[j0 + l] = gp_cov_sigma_jet(J[l], fs_dir(rj), rj->kind, fj, dn, 1, fx);
+            }
+        }
+        GpJet J0 = gp_kernel_jet(p, (double3)(0.0));
+        L0[n] = gp_cov_sigma_jet(J0, dn, 0, fx, dn, 0, fx);
+        L1[n] = gp_cov_sigma_jet(J0, dn, 0, fx, dn, 1, fx);
+        L1[n + 1] = gp_cov_sigma_jet(J0, dn, 1, fx, dn, 1, fx);
+        st = fs_cholesky(S.L, n, n + 2, 0);
+    } else if (S.post.n || gp_kernel_nonstationary(p)) {
         /* fs_factor's fs_row_prep for both rows, sharing what the point shares: one
          * mean-program run (value and gradient) and one field evaluation, the same numbers
          * as two fs_row_prep calls (csg_baked's cubic mean and sigma grid: 2 -> 1 each) */

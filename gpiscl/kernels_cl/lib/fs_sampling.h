@@ -552,7 +552,18 @@ inline int fs_factor_known(GpKernel p, __global const MeanNode* mean, FsScratch 
         __global double* Li = S.L + fs_tri(i);
         if (ns) {
             GpFieldsAt fi = fs_row_fields(S, i);
-            for (int j = 0; j <= i; ++j) {
+            int j0 = 0;
+            /* a sigma field alone: the base kernel's jets in vector lanes, as below */
+            for (; !p.ls_field && j0 + FS_LANES <= i + 1; j0 += FS_LANES) {
+                GpJet J[FS_LANES];
+                fs_jets(p, S, j0, xi, J);
+                for (int l = 0; l < FS_LANES; ++l) {
+                    __global const FsObs* rj = S.rows + j0 + l;
+                    Li[j0 + l] = gp_cov_sigma_jet(J[l], fs_dir(rj), rj->kind,
+                                                  fs_row_fields(S, j0 + l), ui, ri->kind, fi);
+                }
+            }
+            for (int j = j0; j <= i; ++j) {
                 __global const FsObs* rj = S.rows + j;
                 Li[j] = gp_cov_at(p, fs_pos(rj), fs_dir(rj), rj->kind, fs_row_fields(S, j),
                                   xi, ui, ri->kind, fi);

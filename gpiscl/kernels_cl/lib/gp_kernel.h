@@ -184,28 +184,38 @@ inline GP_REAL gp_ps_terms(GpKernel p, GP_REAL3 a, GP_REAL3 u, GpFieldsAt fa,
     return k0;
 }
 
-/* One joint-covariance entry of a non-stationary kernel with the fields at a and b
- * given: the base (stationary or Paciorek-Schervish) terms, then the product rule for
- * m_s(a) m_s(b). */
-inline GP_REAL gp_cov_ns_at(GpKernel p, GP_REAL3 a, GP_REAL3 u, int da, GpFieldsAt fa,
-                            GP_REAL3 b, GP_REAL3 v, int db, GpFieldsAt fb)
+/* The product rule for m_s(a) m_s(b) around the base kernel's k0 and its derivative
+ * covariances cov0(d_u f(a), f(b)) = dv, cov0(f(a), d_v f(b)) = vd and dd. */
+inline GP_REAL gp_sigma_product(GP_REAL k0, GP_REAL dv, GP_REAL vd, GP_REAL dd, GP_REAL3 u,
+                                int da, GpFieldsAt fa, GP_REAL3 v, int db, GpFieldsAt fb)
 {
-    GP_REAL k0, dv, vd, dd;
-    if (p.ls_field) {
-        k0 = gp_ps_terms(p, a, u, fa, b, v, fb, &dv, &vd, &dd);
-    } else {
-        GpJet j = gp_kernel_jet(p, b - a);
-        k0 = j.k;
-        dv = -dot(u, j.G);
-        vd = dot(v, j.G);
-        dd = -(j.alpha * dot(u, j.g) * dot(v, j.g) + dot(u * j.D, v));
-    }
     GP_REAL ma = fa.ms, mb = fb.ms;
     GP_REAL ua = da ? dot(u, fa.gs) : (GP_REAL)0, vb = db ? dot(v, fb.gs) : (GP_REAL)0;
     if (!da && !db) return ma * mb * k0;
     if (!db) return mb * (ua * k0 + ma * dv);
     if (!da) return ma * (vb * k0 + mb * vd);
     return ua * vb * k0 + ua * mb * vd + ma * vb * dv + ma * mb * dd;
+}
+
+/* One entry of a kernel with a sigma field only, from the base (stationary) kernel's jet
+ * at b - a (fs_jets takes several in vector lanes). */
+inline GP_REAL gp_cov_sigma_jet(GpJet j, GP_REAL3 u, int da, GpFieldsAt fa, GP_REAL3 v,
+                                int db, GpFieldsAt fb)
+{
+    return gp_sigma_product(j.k, -dot(u, j.G), dot(v, j.G),
+                            -(j.alpha * dot(u, j.g) * dot(v, j.g) + dot(u * j.D, v)),
+                            u, da, fa, v, db, fb);
+}
+
+/* One joint-covariance entry of a non-stationary kernel with the fields at a and b
+ * given: the base (stationary or Paciorek-Schervish) terms, then the product rule for
+ * m_s(a) m_s(b). */
+inline GP_REAL gp_cov_ns_at(GpKernel p, GP_REAL3 a, GP_REAL3 u, int da, GpFieldsAt fa,
+                            GP_REAL3 b, GP_REAL3 v, int db, GpFieldsAt fb)
+{
+    if (!p.ls_field) return gp_cov_sigma_jet(gp_kernel_jet(p, b - a), u, da, fa, v, db, fb);
+    GP_REAL dv, vd, dd, k0 = gp_ps_terms(p, a, u, fa, b, v, fb, &dv, &vd, &dd);
+    return gp_sigma_product(k0, dv, vd, dd, u, da, fa, v, db, fb);
 }
 
 inline GP_REAL gp_cov_ns(GpKernel p, GP_REAL3 a, GP_REAL3 u, int da,
