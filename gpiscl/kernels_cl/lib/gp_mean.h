@@ -302,9 +302,15 @@ inline float gp_grid_slope_on(GP_MEAN_SPACE const MeanNode* n, float3 lo, float3
     GP_MEAN_SPACE const MeanNode* payload = n + 1;
     float m = 0.0f;
     for (int i = b0.x; i <= b1.x; ++i)
-        for (int j = b0.y; j <= b1.y; ++j)
-            for (int k = b0.z; k <= b1.z; ++k)
-                m = fmax(m, gp_grid_sample(payload, first + (i * nb.y + j) * nb.z + k));
+        for (int j = b0.y; j <= b1.y; ++j) {
+            /* a run along z: its payload record looked up once (gp_grid_sample's map) */
+            int run = first + (i * nb.y + j) * nb.z + b0.z;
+            int r = run / GP_MEAN_GRID_PAYLOAD_FLOATS, q = run - r * GP_MEAN_GRID_PAYLOAD_FLOATS;
+            for (int k = b0.z; k <= b1.z; ++k) {
+                if (q == GP_MEAN_GRID_PAYLOAD_FLOATS) { ++r; q = 0; }
+                m = fmax(m, ((GP_MEAN_SPACE const float*)(payload + r))[q++]);
+            }
+        }
     if (any(lo < (float3)(0.0f)) || any(hi > top)) m = sqrt(m * m + n->p0.x * n->p0.x);
     return fmin(m, 1.0f);
 }
