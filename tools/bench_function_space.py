@@ -155,7 +155,8 @@ def main():
           f"{'chol-only/s':>16}{'ratio':>8}{'device samples/s':>19}")
     numpy_rate = {}
     for n in (8, 16, 32, 128):
-        batch = args.batch if n <= 32 else args.batch // 16
+        # whole work-groups of 16 (the launch's local size), at least one
+        batch = max(16, (args.batch if n <= 32 else args.batch // 16) // 16 * 16)
         scratch = cl.Buffer(dev.ctx, mf.READ_WRITE, 8 * stride * batch)
         out = cl.Buffer(dev.ctx, mf.WRITE_ONLY, 8 * batch)
 
