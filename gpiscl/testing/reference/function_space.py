@@ -324,8 +324,10 @@ def dense_first_hits(kernel, mean, o, d, t0, t1, n_points, n_samples, rng, chunk
     out, out_s = [], []
     dt = ts[1] - ts[0]
     while sum(len(h) for h in out) < n_samples:
-        F = mu + L @ rng.standard_normal((n_points, chunk), dtype=np.float32)
-        F = F[:, F[0] >= 0.0]
+        Z = rng.standard_normal((n_points, chunk), dtype=np.float32)
+        # f(t0) = mu + L[0, 0] z_0 (L is lower triangular): the start condition decides
+        # before the product, which then takes the accepted columns only (half at mu = 0)
+        F = mu + L @ Z[:, mu[0] + L[0, 0] * Z[0] >= 0.0]
         neg = F < 0.0
         first = np.where(neg.any(axis=0), neg.argmax(axis=0), -1)
         cols = np.arange(F.shape[1])
