@@ -163,15 +163,18 @@ def test03_clip_never_cuts_an_occupied_point(device, clip_prg, mname, kname, ste
     res = device_clip(device, clip_prg, mean, level, o, d, step=step)
     hit = np.isfinite(res[:, 0])
     assert hit.sum() > n // 2
-    # every hit ray's chord at once (a call per ray of the mean, sigma and erfc was half
-    # the test's time)
     rows = np.flatnonzero(hit)
     p0, p1, t0, t1 = res[rows].T
     t = np.linspace(p0, p1, 1500, axis=1)
-    x = (o[rows, None] + t[..., None] * d[rows, None]).reshape(-1, 3)
-    mu = mean.value_and_gradient(x)[0].reshape(t.shape)
-    sig = sigma_at(kernel, x).reshape(t.shape)
-    occ = 0.5 * np.vectorize(math.erfc)(mu / (np.sqrt(2.0) * sig))
+    occ = np.empty_like(t)
+    # the mean, sigma and erfc on 8 chords (12,000 points) a call: one call per chord
+    # paid its overhead 80 times a case, one call for all of them missed the caches
+    # (3.2 and 4.2 s against 2.3 s for the 12 step-0 cases)
+    for s in range(0, len(rows), 8):
+        x = (o[rows[s:s + 8], None] + t[s:s + 8, :, None] * d[rows[s:s + 8], None]).reshape(-1, 3)
+        mu = mean.value_and_gradient(x)[0]
+        sig = sigma_at(kernel, x)
+        occ[s:s + 8] = (0.5 * np.vectorize(math.erfc)(mu / (np.sqrt(2.0) * sig))).reshape(-1, 1500)
     occupied = occ >= eps
     slack = 1e-5 * (1.0 + np.abs(t))
     clipped_away = ~np.isfinite(t0)
