@@ -163,25 +163,30 @@ def test03_clip_never_cuts_an_occupied_point(device, clip_prg, mname, kname, ste
     res = device_clip(device, clip_prg, mean, level, o, d, step=step)
     hit = np.isfinite(res[:, 0])
     assert hit.sum() > n // 2
-    kept = removed = 0.0
-    for r in np.flatnonzero(hit):
-        p0, p1, t0, t1 = res[r]
-        t = np.linspace(p0, p1, 1500)
-        x = o[r] + t[:, None] * d[r]
+    rows = np.flatnonzero(hit)
+    p0, p1, t0, t1 = res[rows].T
+    t = np.linspace(p0, p1, 1500, axis=1)
+    occ = np.empty_like(t)
+    # the mean, sigma and erfc on 8 chords (12,000 points) a call: one call per chord
+    # paid its overhead 80 times a case, one call for all of them missed the caches
+    # (3.2 and 4.2 s against 2.3 s for the 12 step-0 cases)
+    for s in range(0, len(rows), 8):
+        x = (o[rows[s:s + 8], None] + t[s:s + 8, :, None] * d[rows[s:s + 8], None]).reshape(-1, 3)
         mu = mean.value_and_gradient(x)[0]
         sig = sigma_at(kernel, x)
-        occ = 0.5 * np.vectorize(math.erfc)(mu / (np.sqrt(2.0) * sig))
-        occupied = occ >= eps
-        slack = 1e-5 * (1.0 + np.abs(t))
-        if not np.isfinite(t0):
-            assert not occupied.any(), (r, t[occupied][:3])
-            removed += p1 - p0
-            continue
-        assert p0 <= t0 + 1e-6 and t1 <= p1 + 1e-5 * (1 + abs(p1))
-        bad = occupied & ((t < t0 - slack) | (t > t1 + slack))
-        assert not bad.any(), (r, t0, t1, t[bad][:3], occ[bad][:3])
-        kept += t1 - t0
-        removed += (p1 - p0) - (t1 - t0)
+        occ[s:s + 8] = (0.5 * np.vectorize(math.erfc)(mu / (np.sqrt(2.0) * sig))).reshape(-1, 1500)
+    occupied = occ >= eps
+    slack = 1e-5 * (1.0 + np.abs(t))
+    clipped_away = ~np.isfinite(t0)
+    assert not occupied[clipped_away].any(), rows[clipped_away & occupied.any(1)]
+    ok = ~clipped_away
+    assert np.all(p0[ok] <= t0[ok] + 1e-6), rows[ok][p0[ok] > t0[ok] + 1e-6]
+    assert np.all(t1[ok] <= p1[ok] + 1e-5 * (1 + np.abs(p1[ok])))
+    bad = occupied & ((t < t0[:, None] - slack) | (t > t1[:, None] + slack)) & ok[:, None]
+    assert not bad.any(), [(r, t0[i], t1[i], t[i][bad[i]][:3], occ[i][bad[i]][:3])
+                           for i, r in enumerate(rows) if bad[i].any()][:3]
+    kept = float(np.sum((t1 - t0)[ok]))
+    removed = float(np.sum((p1 - p0)[clipped_away]) + np.sum(((p1 - p0) - (t1 - t0))[ok]))
     assert removed > 0.2 * (kept + removed), (kept, removed)
 
 

@@ -108,7 +108,7 @@ def _numpy_escape_fraction(kernel, key, m, cam, sub, proxy_radius, mean):
         s = np.linspace(0, 1, steps)[None, :]
         t = t0[chunk, None] + s * (t1 - t0)[chunk, None]
         x = o + t[..., None] * d[chunk, None, :]
-        f, _ = ws.evaluate(theta, tau, w, kernel.variance, x, mean)
+        f = ws.evaluate_value(theta, tau, w, kernel.variance, x, mean)
         _, t_hi = ws.dense_scan_first_root(f, np.arange(steps))
         hit[chunk] = np.isfinite(t_hi)
     return 1.0 - hit.reshape(h, wd, sub * sub).mean(axis=2)

@@ -180,7 +180,7 @@ def test_searches_leaving_a_root_decide_and_match_a_dense_scan(device, prg, long
     ts = np.linspace(0.0, length, int(length / (kernel.length_scale / 200)) + 1)
     for r in np.flatnonzero(st[:, 1]):
         xs = x[r].astype(float) + ts[:, None] * dirs[r].astype(float)
-        f, _ = ws.evaluate(theta[r], tau[r], w[r], kernel.variance, xs, mean)
+        f = ws.evaluate_value(theta[r], tau[r], w[r], kernel.variance, xs, mean)
         noise, _ = eval_tolerance(theta[r], tau[r], w[r], kernel.variance, xs)
         t_lo, t_hi = (v[0] for v in ws.dense_scan_first_root(f[None], ts))
         t_robust = ws.dense_scan_first_root(f[None], ts, leave_above=noise[None])[1][0]
@@ -189,7 +189,7 @@ def test_searches_leaving_a_root_decide_and_match_a_dense_scan(device, prg, long
         if np.isfinite(t_dev):
             near = t_dev - tol * np.linspace(1, 0, 9)
             xn = x[r].astype(float) + near[:, None] * dirs[r].astype(float)
-            fn, _ = ws.evaluate(theta[r], tau[r], w[r], kernel.variance, xn, mean)
+            fn = ws.evaluate_value(theta[r], tau[r], w[r], kernel.variance, xn, mean)
             nn, _ = eval_tolerance(theta[r], tau[r], w[r], kernel.variance, xn)
             assert fn[-1] <= nn[-1] and np.max(fn + nn) >= 0, (r, fn)
         if t_robust == t_hi and np.isfinite(t_dev):   # a clear crossing: the same one

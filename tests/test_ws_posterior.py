@@ -261,7 +261,7 @@ def test04_bounds_contain_every_point_evaluation(device, prg, kind):
     for r in range(n):
         t = vals[r, :, 0].astype(float)
         x = o[r].astype(float) + t[:, None] * d[r].astype(float)
-        exact = (ws.evaluate(theta[r], tau[r], w[r], kernel.variance, x, mean)[0]
+        exact = (ws.evaluate_value(theta[r], tau[r], w[r], kernel.variance, x, mean)
                  + post.cross(x) @ v[r])
         (lk, la, lm, lb, hk, ha, hm, hb, _), (a_, b_) = tents[r].astype(float), ab[r]
         lo = np.interp(t, [a_, lk, b_], [la, lm, lb])
@@ -300,7 +300,7 @@ def test05_first_roots_match_a_dense_scan(device, prg, long_run, kind):
     hits = 0
     for r in range(n):
         x = o[r].astype(float) + ts[:, None] * d[r].astype(float)
-        f = (ws.evaluate(theta[r], tau[r], w[r], kernel.variance, x, mean)[0]
+        f = (ws.evaluate_value(theta[r], tau[r], w[r], kernel.variance, x, mean)
              + post.cross(x) @ v[r])
         t_lo, t_hi = (q[0] for q in ws.dense_scan_first_root(f[None], ts))
         if np.isfinite(t_hi):
@@ -309,7 +309,7 @@ def test05_first_roots_match_a_dense_scan(device, prg, long_run, kind):
         if t_dev[r] < 1e29:
             near = t_dev[r] - tol * np.linspace(1, 0, 9)
             xn = o[r].astype(float) + near[:, None] * d[r].astype(float)
-            fn = (ws.evaluate(theta[r], tau[r], w[r], kernel.variance, xn, mean)[0]
+            fn = (ws.evaluate_value(theta[r], tau[r], w[r], kernel.variance, xn, mean)
                   + post.cross(xn) @ v[r])
             noise, _ = eval_tolerance(theta[r], tau[r], w[r], kernel.variance, xn)
             noise = noise + 1e-5 * (1 + np.abs(post.cross(xn)) @ np.abs(v[r]))

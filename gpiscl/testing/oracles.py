@@ -20,14 +20,16 @@ COV_1D = {"se": (lambda t: np.exp(-0.5 * t * t), lambda t: -t * np.exp(-0.5 * t 
                   lambda t: -t * (1.0 + _R3 * t) * np.exp(-_R3 * t))}
 
 
-def expected_crossings(kind, mu, L, nt=6000, nz=600):
-    """E[down-crossings of 0 in (0, L]] of f ~ GP(mu, k) on a unit-speed ray given the
-    start condition f(0) >= 0: the integral over t of Rice's rate conditioned on it,
+def expected_crossings(kind, mu, L, nt=6000, nz=600, start=0.0):
+    """E[down-crossings of 0 in (start, L]] of f ~ GP(mu, k) on a unit-speed ray given the
+    start condition f(0) >= 0 (nt midpoints of that stretch: start = L / 2 with nt / 2
+    takes the second half of (0, L]'s nodes): the integral over t of Rice's rate
+    conditioned on it,
       nu(t) = p_f(t)(0) E[(-f'(t))+ 1{f(0) >= 0} | f(t) = 0] / P(f(0) >= 0),
     where given f(t) = 0, f(0) ~ N(mu (1 - k), 1 - k^2) and f'(t) | f(0) is Gaussian with
     cov(f(0), f'(t)) = k'(t) (cov(f(t), f'(t)) = 0). Tends to Rice's rate as k -> 0."""
     k, dk = COV_1D[kind]
-    t = (np.arange(nt) + 0.5) * (L / nt)
+    t = start + (np.arange(nt) + 0.5) * ((L - start) / nt)
     kt, dkt = k(t)[:, None], dk(t)[:, None]
     ma, va = mu * (1.0 - kt), 1.0 - kt * kt
     sa = np.sqrt(va)
@@ -43,7 +45,7 @@ def expected_crossings(kind, mu, L, nt=6000, nz=600):
     inner = np.trapezoid(g, dx=dz, axis=1)
     p0 = 0.5 * special.erfc(-mu / math.sqrt(2))             # P(f(0) >= 0)
     nu = math.exp(-0.5 * mu * mu) / math.sqrt(2 * math.pi) * inner / p0
-    return float(nu.sum() * (L / nt))
+    return float(nu.sum() * ((L - start) / nt))
 
 
 def dense_se_paths(n, mu, rng, spacing=0.01, L=20.0):

@@ -248,7 +248,7 @@ def host_values(theta, tau, w, kernel, mean, o, d, t):
     """f in float64 along rays: (R, T) values at parameters t (R, T) or (T,)."""
     t = np.broadcast_to(t, (len(o), np.shape(t)[-1]))
     x = o[:, None, :].astype(float) + t[..., None] * d[:, None, :].astype(float)
-    return np.stack([ws.evaluate(theta[r], tau[r], w[r], kernel.variance, x[r], mean)[0]
+    return np.stack([ws.evaluate_value(theta[r], tau[r], w[r], kernel.variance, x[r], mean)
                      for r in range(len(o))])
 
 

@@ -150,20 +150,20 @@ def beckmann_single_scatter_bins(theta_i: float, alpha: float, edges, n_theta: i
     the incident energy the single-scattering Beckmann BRDF with height-correlated Smith
     G2 = 1 / (1 + Lambda_i + Lambda_o) (rough_conductor's) sends into each bin of
     theta_o between `edges` (radians), over every phi: the midpoint rule on a grid."""
-    wi = np.array([math.sin(theta_i), 0.0, math.cos(theta_i)])
-    lam_i = smith_lambda(wi[2], alpha)
+    si, ci = math.sin(theta_i), math.cos(theta_i)
+    lam_i = smith_lambda(ci, alpha)
     out = []
     for lo, hi in zip(edges[:-1], edges[1:]):
         th = lo + (np.arange(n_theta) + 0.5) * (hi - lo) / n_theta
         ph = (np.arange(n_phi) + 0.5) * 2.0 * math.pi / n_phi
-        T, P = np.meshgrid(th, ph, indexing="ij")
-        wo = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], -1)
-        h = wo + wi
-        h /= np.linalg.norm(h, axis=-1)[..., None]
-        c = h[..., 2]
+        T, P = th[:, None], ph[None, :]
+        # the half vector's cos theta_h = (cos theta_o + cos theta_i) / |wo + wi|, with
+        # |wo + wi|^2 = 2 (1 + wo . wi): scalars per node, no 3-vectors
+        c = (np.cos(T) + ci) / np.sqrt(2.0 * (1.0 + np.sin(T) * np.cos(P) * si + np.cos(T) * ci))
         d = np.exp(-(1.0 - c * c) / (c * c * alpha * alpha)) / (math.pi * alpha ** 2 * c ** 4)
-        g2 = 1.0 / (1.0 + lam_i + smith_lambda(wo[..., 2], alpha))
-        f_cos = d * g2 / (4.0 * wi[2])                   # f_r cos theta_o
+        # Lambda_o depends on theta_o alone: one erf per row, not per (theta, phi) node
+        g2 = 1.0 / (1.0 + lam_i + smith_lambda(np.cos(th), alpha)[:, None])
+        f_cos = d * g2 / (4.0 * ci)                      # f_r cos theta_o
         out.append(float(np.sum(f_cos * np.sin(T)) * (hi - lo) / n_theta * 2 * math.pi / n_phi))
     return np.array(out)
 
