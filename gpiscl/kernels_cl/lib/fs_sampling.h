@@ -343,12 +343,11 @@ inline double2 fs_grid_box_scan(__global const MeanNode* n, double3 a, double3 b
     float lo = INFINITY, hi = -INFINITY;
     for (int i = 0, at = 0; i < wd.x; ++i)
         for (int j = 0; j < wd.y; ++j) {
-            /* a run along z: its payload record looked up once (gp_grid_sample's map) */
-            int run = ((c0.x + i) * ny + c0.y + j) * nz + c0.z;
-            int r = run / GP_MEAN_GRID_PAYLOAD_FLOATS, k = run - r * GP_MEAN_GRID_PAYLOAD_FLOATS;
+            int k;                                   /* a run along z (gp_grid_run) */
+            __global const float* f =
+                gp_grid_place(n + 1, ((c0.x + i) * ny + c0.y + j) * nz + c0.z, &k);
             for (int q = 0; q < wd.z; ++q, ++at) {
-                if (k == GP_MEAN_GRID_PAYLOAD_FLOATS) { ++r; k = 0; }
-                float v = ((__global const float*)(n + 1 + r))[k++];
+                float v = gp_grid_run(&f, &k);
                 box[at] = v;
                 lo = fmin(lo, v);
                 hi = fmax(hi, v);

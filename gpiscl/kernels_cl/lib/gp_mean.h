@@ -48,30 +48,56 @@ inline float gp_sd_box(float3 p, float3 extent, float3* g)
     return out_len + fmin(qmax, 0.0f);
 }
 
-inline float gp_grid_sample(GP_MEAN_SPACE const MeanNode* payload, int j)
+/* Where float j of a grid payload lies: its record's floats (GP_MEAN_GRID_PAYLOAD_FLOATS
+ * of them, the record's int tail past them) and its index *k there. */
+inline GP_MEAN_SPACE const float* gp_grid_place(GP_MEAN_SPACE const MeanNode* payload, int j,
+                                                int* k)
 {
     int r = j / GP_MEAN_GRID_PAYLOAD_FLOATS;
-    return ((GP_MEAN_SPACE const float*)(payload + r))[j - r * GP_MEAN_GRID_PAYLOAD_FLOATS];
+    *k = j - r * GP_MEAN_GRID_PAYLOAD_FLOATS;
+    return (GP_MEAN_SPACE const float*)(payload + r);
 }
 
-/* Samples j and j + 1, and j .. j + 3: one record lookup for the run (a record holds
- * GP_MEAN_GRID_PAYLOAD_FLOATS samples; a run that crosses into the next record reads the
- * rest there). The same numbers as gp_grid_sample's, for fewer index divisions. */
+/* The floats of the payload record after the one whose floats are f */
+inline GP_MEAN_SPACE const float* gp_grid_next_record(GP_MEAN_SPACE const float* f)
+{
+    return (GP_MEAN_SPACE const float*)((GP_MEAN_SPACE const MeanNode*)f + 1);
+}
+
+inline float gp_grid_sample(GP_MEAN_SPACE const MeanNode* payload, int j)
+{
+    int k;
+    return gp_grid_place(payload, j, &k)[k];
+}
+
+/* The float at (*f, *k) (gp_grid_place), then on to the next one: a run of consecutive
+ * floats read with one index division. */
+inline float gp_grid_run(GP_MEAN_SPACE const float** f, int* k)
+{
+    if (*k == GP_MEAN_GRID_PAYLOAD_FLOATS) {
+        *f = gp_grid_next_record(*f);
+        *k = 0;
+    }
+    return (*f)[(*k)++];
+}
+
+/* Samples j and j + 1, and j .. j + 3: one record lookup for the run (a vload where it
+ * stays in the record; one that crosses into the next reads the rest there). The same
+ * numbers as gp_grid_sample's, for fewer index divisions. */
 inline float2 gp_grid_sample2(GP_MEAN_SPACE const MeanNode* payload, int j)
 {
-    int r = j / GP_MEAN_GRID_PAYLOAD_FLOATS, k = j - r * GP_MEAN_GRID_PAYLOAD_FLOATS;
-    GP_MEAN_SPACE const float* f = (GP_MEAN_SPACE const float*)(payload + r);
+    int k;
+    GP_MEAN_SPACE const float* f = gp_grid_place(payload, j, &k);
     if (k + 1 < GP_MEAN_GRID_PAYLOAD_FLOATS) return vload2(0, f + k);
-    return (float2)(f[k], ((GP_MEAN_SPACE const float*)(payload + r + 1))[0]);
+    return (float2)(f[k], gp_grid_next_record(f)[0]);
 }
 
 inline float4 gp_grid_sample4(GP_MEAN_SPACE const MeanNode* payload, int j)
 {
-    int r = j / GP_MEAN_GRID_PAYLOAD_FLOATS, k = j - r * GP_MEAN_GRID_PAYLOAD_FLOATS;
-    GP_MEAN_SPACE const float* f = (GP_MEAN_SPACE const float*)(payload + r);
+    int k;
+    GP_MEAN_SPACE const float* f = gp_grid_place(payload, j, &k);
     if (k + 3 < GP_MEAN_GRID_PAYLOAD_FLOATS) return vload4(0, f + k);
-    GP_MEAN_SPACE const float* g = (GP_MEAN_SPACE const float*)(payload + r + 1)
-                                   - GP_MEAN_GRID_PAYLOAD_FLOATS;
+    GP_MEAN_SPACE const float* g = gp_grid_next_record(f) - GP_MEAN_GRID_PAYLOAD_FLOATS;
     return (float4)(f[k], k + 1 < GP_MEAN_GRID_PAYLOAD_FLOATS ? f[k + 1] : g[k + 1],
                     k + 2 < GP_MEAN_GRID_PAYLOAD_FLOATS ? f[k + 2] : g[k + 2], g[k + 3]);
 }
@@ -303,13 +329,10 @@ inline float gp_grid_slope_on(GP_MEAN_SPACE const MeanNode* n, float3 lo, float3
     float m = 0.0f;
     for (int i = b0.x; i <= b1.x; ++i)
         for (int j = b0.y; j <= b1.y; ++j) {
-            /* a run along z: its payload record looked up once (gp_grid_sample's map) */
-            int run = first + (i * nb.y + j) * nb.z + b0.z;
-            int r = run / GP_MEAN_GRID_PAYLOAD_FLOATS, q = run - r * GP_MEAN_GRID_PAYLOAD_FLOATS;
-            for (int k = b0.z; k <= b1.z; ++k) {
-                if (q == GP_MEAN_GRID_PAYLOAD_FLOATS) { ++r; q = 0; }
-                m = fmax(m, ((GP_MEAN_SPACE const float*)(payload + r))[q++]);
-            }
+            int q;                                   /* a run along z (gp_grid_run) */
+            GP_MEAN_SPACE const float* f =
+                gp_grid_place(payload, first + (i * nb.y + j) * nb.z + b0.z, &q);
+            for (int k = b0.z; k <= b1.z; ++k) m = fmax(m, gp_grid_run(&f, &q));
         }
     if (any(lo < (float3)(0.0f)) || any(hi > top)) m = sqrt(m * m + n->p0.x * n->p0.x);
     return fmin(m, 1.0f);

@@ -10,18 +10,13 @@
  *             interleaved RGB samples follow; trilinear, clamped to the sample box
  * Index 0 means "no field": the field table's record 0 is no field (compile/gpis.py). */
 
-/* float q of a grid payload: GP_MEAN_GRID_PAYLOAD_FLOATS per record (row0..p1), past
- * which each record's int tail lies, as in gp_grid_sample */
-inline float gpis_payload_float(__global const MeanNode* payload, int q)
-{
-    int r = q / GP_MEAN_GRID_PAYLOAD_FLOATS;
-    return ((__global const float*)(payload + r))[q - r * GP_MEAN_GRID_PAYLOAD_FLOATS];
-}
-
+/* RGB sample j of a grid field's payload (interleaved floats, gp_grid_run's layout) */
 inline float3 gpis_field_sample(__global const MeanNode* payload, int j)
 {
-    return (float3)(gpis_payload_float(payload, 3 * j), gpis_payload_float(payload, 3 * j + 1),
-                    gpis_payload_float(payload, 3 * j + 2));
+    int k;
+    __global const float* f = gp_grid_place(payload, 3 * j, &k);
+    float r = gp_grid_run(&f, &k), g = gp_grid_run(&f, &k);
+    return (float3)(r, g, gp_grid_run(&f, &k));
 }
 
 inline float3 gpis_field_grid(__global const MeanNode* n, float3 u)
