@@ -29,6 +29,7 @@ class CompiledScene:
     materials: np.ndarray
     lights: np.ndarray
     light_choice: np.ndarray    # LIGHT_CHOICE: which light NEE picks (light_selection.py)
+    caustic_spheres: np.ndarray  # CAUSTIC_SPHERES: int32 primitive ids (caustic_spheres())
     bvh_nodes: np.ndarray
     env_texels: np.ndarray      # (H*W, 4) float32, a dummy texel when no map
     env_marginal: np.ndarray
@@ -46,6 +47,7 @@ class CompiledScene:
         pairs = ((stages.CAMERA, self.camera), (stages.NODES, self.bvh_nodes),
                  (stages.PRIMS, self.primitives), (stages.MATERIALS, self.materials),
                  (stages.LIGHTS, self.lights), (stages.LIGHT_CHOICE, self.light_choice),
+                 (stages.CAUSTIC_SPHERES, self.caustic_spheres),
                  (stages.GPIS, self.gpis.objects),
                  (stages.KERNELS, self.gpis.kernels), (stages.MEAN_NODES, self.gpis.mean_nodes),
                  (stages.ORDER_TABLE, self.gpis.order_table),
@@ -215,6 +217,17 @@ def bound_scene_proxies(data: dict, prims: np.ndarray | None = None) -> list:
     return [dict(s, proxy=box) if s["proxy"]["type"] == "scene" else s for s in shapes]
 
 
+def caustic_spheres(prims: np.ndarray, materials: np.ndarray, lights: np.ndarray) -> np.ndarray:
+    """The primitives the manifold NEE reflects area lights off (lib/caustics.h): classical
+    mirror spheres that are no light, where the scene has an area light (else none)."""
+    area = [LIGHTS.id(k) for k in LIGHTS.with_trait("area")]
+    if not np.isin(lights["kind"], area).any():
+        return np.zeros(0, np.int32)
+    mirror = materials["kind"][prims["material"]] == MATERIALS.id("mirror")
+    listed = (prims["kind"] == PRIM["sphere"]) & mirror & (prims["light"] < 0)
+    return np.nonzero(listed)[0].astype(np.int32)
+
+
 def compile_scene(data: dict, source: str = "<scene>", bakes=None) -> CompiledScene:
     """source: the scene's file, for errors found only while compiling (e.g. a mesh bake);
     bakes: the render device's bakes (render/device_bakes.py), numpy's when None."""
@@ -255,7 +268,8 @@ def compile_scene(data: dict, source: str = "<scene>", bakes=None) -> CompiledSc
     lo, hi = scene_box(data, prims)
     choice = light_choice([f for _, f in b.light_fields], [k for k, _ in b.light_fields],
                           0.5 * float(np.linalg.norm(hi - lo)))
-    return CompiledScene(compile_camera(data["camera"]), prims,
-                         np.array(b.materials, dtype=layouts.MATERIAL.dtype), lights, choice,
+    materials = np.array(b.materials, dtype=layouts.MATERIAL.dtype)
+    return CompiledScene(compile_camera(data["camera"]), prims, materials, lights, choice,
+                         caustic_spheres(prims, materials, lights),
                          nodes, envmap.texels, envmap.marginal, envmap.conditional, envmap.size,
                          gpis)

@@ -9,7 +9,8 @@ gives its texels to the power estimate as "environment_rgb"). Traits:
   environment  fills the scene's one environment slot (at most one per scene); a vertex
                may leave these to BSDF sampling (fs_random_normal.h);
   at_infinity  escaped rays look it up: has <name>_radiance;
-  area         carried by a primitive that rays hit: has <name>_area_radiance;
+  area         carried by a primitive that rays hit: has <name>_area_radiance and
+               <name>_sample_point;
   positioned   the packer's p0 is a point of the scene (its bounding box takes it).
 A kind's host is a LightHost: its packer, and its power estimate, by which next-event
 estimation picks among the scene's lights (compile/light_selection.py).
@@ -242,6 +243,7 @@ LIGHTS = KindTable("light", "LIGHT", [
 _SAMPLE = "__global const Light* l, EnvMap m, float3 x, float2 u, float3* wi, float* dist, float* pdf"
 _RADIANCE = "__global const Light* l, EnvMap m, float3 d, float* pdf"
 _AREA = "__global const Light* l, float3 from, float3 x, float3 n, float3 d, float* pdf"
+_POINT = "__global const Light* l, float2 u, float3* y, float3* n, float* pdf_area"
 _NO_LIGHT = "(*pdf = 0.0f, (float3)(0.0f))"
 
 
@@ -252,7 +254,8 @@ def c_declarations() -> list:
 
 def device_source() -> str:
     """Every kind's light file and the light_sample / light_radiance /
-    light_area_radiance dispatch (lights.h, the shared part, comes before)."""
+    light_area_radiance / light_sample_point dispatch (lights.h, the shared part, comes
+    before)."""
     return "\n".join([
         LIGHTS.device_source(), '#line 1 "generated light dispatch"',
         LIGHTS.c_dispatch("sample", "inline float3", _SAMPLE, "l, m, x, u, wi, dist, pdf",
@@ -260,4 +263,6 @@ def device_source() -> str:
         LIGHTS.c_dispatch("radiance", "inline float3", _RADIANCE, "l, m, d, pdf", _NO_LIGHT,
                           LIGHTS.with_trait("at_infinity")),
         LIGHTS.c_dispatch("area_radiance", "inline float3", _AREA, "l, from, x, n, d, pdf",
-                          _NO_LIGHT, LIGHTS.with_trait("area"))])
+                          _NO_LIGHT, LIGHTS.with_trait("area")),
+        LIGHTS.c_dispatch("sample_point", "void", _POINT, "l, u, y, n, pdf_area",
+                          kinds=LIGHTS.with_trait("area"))])

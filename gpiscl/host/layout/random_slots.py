@@ -92,7 +92,9 @@ BLOCK_LIMIT = 1 << 12
 # rng4's dimensions (rng.h; another Philox key than fs_sampling.h's, so its own space).
 # camera: the pixel offset; light: NEE's light choice and sample; bsdf: the continuation;
 # roulette: the path's Russian roulette; shadow_roulette: the survival of a light sample's
-# shadow ray at function-space mirror and conductor vertices (scatter.cl). Dimension 4 was
+# shadow ray at function-space mirror and conductor vertices (scatter.cl); caustic: the light,
+# sphere and light point of the manifold NEE (lib/caustics.h); caustic_roulette: the survival
+# of its sample. Dimension 4 was
 # reserved for GPIS free flights, which draw from the blocks above instead.
 STAGE_DIMS = SlotPlan("stage", 1, (
     ("camera", "DIM_CAMERA", 0, 1),
@@ -100,6 +102,8 @@ STAGE_DIMS = SlotPlan("stage", 1, (
     ("bsdf", "DIM_BSDF", 2, 1),
     ("roulette", "DIM_ROULETTE", 3, 1),
     ("shadow_roulette", "DIM_SHADOW_ROULETTE", 5, 1),
+    ("caustic", "DIM_CAUSTIC", 6, 1),
+    ("caustic_roulette", "DIM_CAUSTIC_ROULETTE", 7, 1),
 ))
 
 _CLASHES = overlaps(NORMAL_SLOTS, UNIFORM_BLOCKS) + overlaps(STAGE_DIMS)

@@ -135,6 +135,9 @@ RENDER_PARAMS = Struct("RenderParams", (
                                # delta (the benchmarks' baseline, tools/bench_mirror_nee.py)
     ("float", "shadow_roulette"),  # > 0: the relative threshold of the roulette on shadow
                                # rays of light samples that pick the normal (fs_random_normal.h)
+                               # and of manifold NEE samples (lib/caustics.h)
+    ("int", "num_caustic_spheres"),  # classical mirror spheres that the manifold NEE
+                               # reflects area lights off (lib/caustics.h); 0: none
 ))
 
 # --- queues ---------------------------------------------------------------------------
@@ -150,6 +153,7 @@ PATH_STATE = Queue("path", (
     # a function-space rough conductor vertex (fs_normal_pdf.h, fs_conductor_light_pdf):
     ("float4", "prev_n"),     # its sampled normal n0, w = p_Omega(n0) (0: any other vertex)
     ("float4", "prev_v"),     # v = -(incoming direction), w = the Beckmann alpha
+    ("int", "caustic"),       # CAUSTIC_* (CAUSTIC_STATES below; set by scatter.cl)
     ("int", "depth"),         # scattering events so far
     ("int", "medium"),        # GPIS object the ray travels in, or -1
     # the first scattering event, for AOVs (aov.py; written only when params.aov is set)
@@ -179,7 +183,7 @@ INDEX_QUEUE = Queue("index", (
 SHADOW_QUEUE = Queue("shadow", (
     ("float4", "o"),
     ("float4", "d"),          # w = distance to the light sample
-    ("float4", "contribution"),
+    ("float4", "contribution"),   # w: SHADOW_* (SHADOW_SEGMENTS below)
     ("int", "path"),
     # w = 1: xyz is the gradient the light sample's normal implies at a function-space
     # vertex (fs_normal_pdf.h), which the shadow ray conditions on instead of the sampled
@@ -190,6 +194,15 @@ SHADOW_QUEUE = Queue("shadow", (
 # --- enumerations shared with the device (emitted as #defines) ----------------------
 
 PRIM_KINDS = {"sphere": 0, "rectangle": 1, "disk": 2, "triangle": 3}
+# A shadow record's contribution.w (SHADOW_QUEUE): a segment of its own, or the two
+# segments of one light path that a manifold NEE sample needs (x -> mirror -> light,
+# lib/caustics.h), written as consecutive records: the head adds the contribution where
+# neither record was blocked.
+SHADOW_SEGMENTS = {"single": 0, "head": 1, "tail": -1}
+# A path's `caustic` (PATH_STATE): none; the last vertex reflected area lights off the
+# mirror spheres by manifold NEE; the path was then reflected by one of those spheres, so
+# an area light it hits next was counted by that NEE already (emission.cl gives it 0).
+CAUSTIC_STATES = {"none": 0, "vertex": 1, "reflected": 2}
 # Device-side counters, int32. The host reads them after every bounce; the first four are
 # the bounce's queue sizes, the rest counts of failures and work.
 COUNTERS = {"rays_out": 0, "hits": 1, "escaped": 2, "shadow": 3, "nan_paths": 4,
@@ -217,6 +230,7 @@ GPIS_HIT_BASE = -2
 def _defines() -> str:
     lines = []
     for prefix, table in (("PRIM", PRIM_KINDS), ("COUNT", COUNTERS),
+                          ("SHADOW", SHADOW_SEGMENTS), ("CAUSTIC", CAUSTIC_STATES),
                           ("GPIS_PROXY", GPIS_PROXIES), ("GPIS_SAMPLER", GPIS_SAMPLERS)):
         lines += [f"#define {prefix}_{k.upper()} {v}" for k, v in table.items()]
     lines += [f"#define FS_PROF_{k[3:].upper()} {i}" for i, k in enumerate(FS_PROFILE_COUNTERS)]

@@ -104,6 +104,8 @@ PRIMS = Param("prims", "__global const Primitive*")
 MATERIALS = Param("materials", "__global const Material*")
 LIGHTS = Param("lights", "__global const Light*")
 LIGHT_CHOICE = Param("light_choice", "__global const LightChoice*")   # compile/light_selection.py
+# the primitives the manifold NEE reflects area lights off (compile/scene.py, lib/caustics.h)
+CAUSTIC_SPHERES = Param("caustic_spheres", "__global const int*")
 ENV_MAP = (Param("env_texels", "__global const float4*"),
            Param("env_marginal", "__global const float*"),
            Param("env_conditional", "__global const float*"))
@@ -162,7 +164,7 @@ EMISSION = Stage("emission", (
 SCATTER = Stage("scatter", (
     PARAMS, queue("path", PATH_STATE), queue("in", RAY_QUEUE), queue("out", RAY_QUEUE),
     queue("hits", INDEX_QUEUE), queue("shadow", SHADOW_QUEUE), COUNTERS, PRIMS, MATERIALS,
-    LIGHTS, *ENV_MAP, GPIS, FIELD_NODES, LIGHT_CHOICE))
+    LIGHTS, *ENV_MAP, GPIS, FIELD_NODES, LIGHT_CHOICE, CAUSTIC_SPHERES))
 GPIS_SHADOW_WEIGHT_SPACE = Stage("gpis_shadow_weight_space", (
     PARAMS, queue("path", PATH_STATE), queue("shadow", SHADOW_QUEUE), GPIS, KERNELS,
     MEAN_NODES, *GPIS_TABLES, ORDER_TABLE, COUNTERS, WS_POST_CACHE))

@@ -119,5 +119,6 @@ class FunctionSpaceStages:
         self._launch(stages.GPIS_FUNCTION_SPACE, n, named)
 
     def gpis_shadow_function_space(self, n, **named):
-        """Shadow rays (at most n: one per hit) blocked by function-space crossings."""
+        """Shadow records (at most n: up to three per hit) blocked by function-space
+        crossings."""
         self._launch(stages.GPIS_SHADOW_FUNCTION_SPACE, n, named)

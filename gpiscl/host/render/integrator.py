@@ -139,8 +139,14 @@ class WavefrontIntegrator:
         self.batch = int(batch_size or settings.get("batch_size") or default_batch(device))
         self.batch = max(1, min(self.batch, self.num_pixels * int(settings.get("spp", 1))))
         # before any allocation: the film must fit, and the batch shrinks to fit beside it
+        # a hit's shadow records: its light sample's, and a manifold NEE sample's two
+        # segments where the scene has mirror spheres and area lights (lib/caustics.h);
+        # not a scene key: caustic_nee off is the baseline of tests/test_caustics.py
+        caustics = (len(scene.caustic_spheres) if settings.get("nee", True)
+                    and settings.get("caustic_nee", True) else 0)
+        self.shadow_per_hit = 3 if caustics else 1
         self.batch = memory.plan(device, self.num_pixels, self.batch, max_memory, source,
-                                 aov=aov)
+                                 aov=aov, shadow_per_path=self.shadow_per_hit)
         self.program = stage_program(device)
         # the scene's buffers, by the kernels' parameter names
         self.scene_buffers = {name: to_device(device, array)
@@ -184,6 +190,7 @@ class WavefrontIntegrator:
         p["fs_nee"] = 1 if settings.get("fs_nee", True) else 0
         # not a scene key: 0 turns the shadow rays' roulette off (tools/bench_light_sampling.py)
         p["shadow_roulette"] = settings.get("shadow_roulette", SHADOW_ROULETTE)
+        p["num_caustic_spheres"] = caustics
         # null surfaces do not count as bounces, so allow extra iterations for them
         self.max_iterations = 4 * settings["max_depth"] + 64
         self.stats = RenderStats(pixels=self.num_pixels)
@@ -201,7 +208,7 @@ class WavefrontIntegrator:
         self.rays = [DeviceQueue(ctx, layouts.RAY_QUEUE, cap) for _ in range(2)]
         self.hits = DeviceQueue(ctx, layouts.INDEX_QUEUE, cap)
         self.escaped = DeviceQueue(ctx, layouts.INDEX_QUEUE, cap)
-        self.shadow = DeviceQueue(ctx, layouts.SHADOW_QUEUE, cap)
+        self.shadow = DeviceQueue(ctx, layouts.SHADOW_QUEUE, cap * self.shadow_per_hit)
 
     def release_work(self) -> None:
         """Free the queues and the function-space stages' per-batch buffers: render()
@@ -325,11 +332,12 @@ class WavefrontIntegrator:
             self.escaped_rays(cur, n)
             self.emission(cur, n)
             self.scatter(cur, nxt, n)
+            shadows = n * self.shadow_per_hit
             if self.weight_space:
-                self.gpis_shadow_weight_space(n)
+                self.gpis_shadow_weight_space(shadows)
             if self.function_space:
-                self.gpis_shadow_function_space(n)
-            self.shadow_rays(n)
+                self.gpis_shadow_function_space(shadows)
+            self.shadow_rays(shadows)
             cl.enqueue_copy(queue, self.counters_host, self.counters)
             self._sum_bounce_counters()
             self.stats.rays += n

@@ -33,13 +33,17 @@ QUEUES = (layouts.PATH_STATE, layouts.RAY_QUEUE, layouts.RAY_QUEUE, layouts.INDE
           layouts.INDEX_QUEUE, layouts.SHADOW_QUEUE)
 
 
-def bytes_per_path() -> int:
-    """Device bytes of one path in flight."""
-    return sum(layout.numpy_dtype(f).itemsize for layout in QUEUES for _, f in layout.fields)
+def bytes_per_path(shadow_per_path: int = 1) -> int:
+    """Device bytes of one path in flight, with shadow_per_path shadow records."""
+    extra = (shadow_per_path - 1) * sum(layouts.SHADOW_QUEUE.numpy_dtype(f).itemsize
+                                        for _, f in layouts.SHADOW_QUEUE.fields)
+    return extra + sum(layout.numpy_dtype(f).itemsize for layout in QUEUES
+                       for _, f in layout.fields)
 
 
 def plan(device, num_pixels: int, batch: int, max_memory: int | None = None,
-         source: str = "<scene>", key: str = "camera.resolution", aov: bool = False) -> int:
+         source: str = "<scene>", key: str = "camera.resolution", aov: bool = False,
+         shadow_per_path: int = 1) -> int:
     """The batch cap that fits (<= batch); SceneError when the film itself does not fit.
 
     max_memory: the bytes the render may use, instead of the estimate of what is free.
@@ -73,11 +77,11 @@ def plan(device, num_pixels: int, batch: int, max_memory: int | None = None,
                          f"for the film; the device allocates at most {size_text(per_buffer)} at "
                          "once (render fewer pixels)")
     film, budget = checks[0]    # the queues live where the film's first part does
-    per_path = bytes_per_path()
+    per_path = bytes_per_path(shadow_per_path)
     room = max(budget.bytes - film, 0) * QUEUE_SHARE
     fits = int(room // per_path)
     widest = max(layout.numpy_dtype(f).itemsize for layout in QUEUES for _, f in layout.fields)
-    fits = min(fits, per_buffer // widest)   # each queue field is one buffer
+    fits = min(fits, per_buffer // (widest * shadow_per_path))   # a field is one buffer
     if fits < 1:
         raise SceneError(source, key, f"no memory left for even one path after the film "
                          f"({size_text(film)} of {size_text(budget.bytes)})")

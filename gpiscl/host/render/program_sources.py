@@ -23,7 +23,7 @@ PYOPENCL_CL_DIR = Path(cl.__file__).resolve().parent / "cl"
 # The library every program starts with. A kind table stands for its kinds' device files
 # and generated dispatch (host/kinds/), joined at build time: a test's own kind shows.
 SHARED_HEADERS = ("compat.h", "rng.h", "geometry.h", "bvh.h", "lights.h", lights,
-                  materials, "gp_kernel.h", "gp_mean.h")
+                  materials, "caustics.h", "gp_kernel.h", "gp_mean.h")
 # The path tracer's stages, and the weight-space GPIS library they need.
 STAGE_FILES = ("generate_camera_rays.cl", "intersect.cl", "gpis_weight_space.cl",
                "queue_hits.cl", "escaped_rays.cl", "emission.cl", "scatter.cl",

@@ -8,6 +8,8 @@
  *   <kind>_radiance(l, m, d, &pdf)   kinds at_infinity: radiance along an escaped ray d
  *   <kind>_area_radiance(l, from, x, n, d, &pdf)   area kinds: radiance leaving surface
  *       point x (normal n) towards -d, seen from `from`
+ *   <kind>_sample_point(l, u, &y, &n, &pdf_area)   area kinds: a point y of the light with
+ *       its unit normal n, by a density per unit area (the manifold NEE, caustics.h)
  *
  * Each kind's file says what its Light record's fields mean. Cones are described by
  * 1 - cos(half-angle) throughout: a float32 cos of a 0.1 degree sun keeps one digit of

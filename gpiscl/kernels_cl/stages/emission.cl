@@ -1,6 +1,7 @@
 /* From: hit queue.  To: radiance emitted by area lights that rays hit, weighted by MIS
  * against light sampling from the previous vertex (path_prev_pos.w: the BSDF sample's
- * density, 0 for a delta; a function-space mirror has one, fs_random_normal.h), and by GPIS
+ * density, 0 for a delta; a function-space mirror has one, fs_random_normal.h), or 0 where
+ * the manifold NEE counted the path (CAUSTIC_REFLECTED, lib/caustics.h), and by GPIS
  * emission fields where rays meet a realization (never light-sampled, so with weight 1). */
 __kernel void emission(EMISSION_PARAMS)
 {
@@ -22,6 +23,9 @@ __kernel void emission(EMISSION_PARAMS)
     __global const Primitive* prim = &prims[in_hit_prim[r]];
     if (prim->light < 0) return;
     int p = in_path[r];
+    /* a path reflected to here by a mirror sphere from a vertex whose manifold NEE
+     * sampled exactly these paths (lib/caustics.h): counted there */
+    if (path_caustic[p] == CAUSTIC_REFLECTED) return;
     float3 o = in_o[r].xyz, d = in_d[r].xyz;
     float3 x = o + in_hit_t[r] * d;
     float4 prev = path_prev_pos[p];

@@ -21,6 +21,7 @@ __kernel void generate_camera_rays(GENERATE_CAMERA_RAYS_PARAMS)
     path_radiance[i] = (float4)(0.0f);
     path_prev_pos[i] = (float4)(camera->position.xyz, 0.0f);  /* pdf 0: seen directly */
     path_depth[i] = 0;
+    path_caustic[i] = CAUSTIC_NONE;
     path_medium[i] = -1;
     if (params->aov) {   /* without AOVs these fields hold one element (integrator.py) */
         path_aov_position[i] = (float4)(0.0f);   /* no hit yet: adds nothing to the film */

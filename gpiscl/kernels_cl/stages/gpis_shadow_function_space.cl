@@ -30,7 +30,9 @@ __kernel void gpis_shadow_function_space(GPIS_SHADOW_FUNCTION_SPACE_PARAMS)
     for (int i = item; i < end; i += get_global_size(0)) {
         if (max3(shadow_contribution[i].xyz) <= 0.0f) continue;   /* blocked already */
         float4 o = shadow_o[i], d = shadow_d[i];
-        int p = shadow_path[i], vk = vertex_object[p];
+        int p = shadow_path[i];
+        /* a pair's tail leaves a mirror sphere, where the path's record is none */
+        int vk = (shadow_contribution[i].w == SHADOW_TAIL) ? -1 : vertex_object[p];
         FsVertex none = {0}, prev = vertex[p];
         float4 g = shadow_grad[i];
         if (g.w > 0.0f) {   /* a light sample that chose its own normal (fs_normal_pdf.h) */

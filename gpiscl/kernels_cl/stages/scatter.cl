@@ -1,6 +1,8 @@
 /* From: hit queue.  To: for each surface hit, a shadow ray towards a sampled light
- * (next-event estimation, MIS-weighted) and a continuation ray in ray queue `out`.
- * Null (pass-through) surfaces forward the ray unchanged and switch the medium. */
+ * (next-event estimation, MIS-weighted), a manifold NEE sample's two shadow segments
+ * where the scene lists mirror spheres (lib/caustics.h), and a continuation ray in ray
+ * queue `out`. Null (pass-through) surfaces forward the ray unchanged and switch the
+ * medium. */
 __kernel void scatter(SCATTER_PARAMS)
 {
     int i = get_global_id(0);
@@ -127,6 +129,46 @@ __kernel void scatter(SCATTER_PARAMS)
             shadow_grad[k] = grad;
         }
     }
+    /* --- manifold NEE: area lights seen in the listed mirror spheres (caustics.h). The
+     * state says the continuation's paths x -> such a sphere -> area light were counted
+     * here; it is set before any sample, for every vertex that takes one, so that the
+     * partition does not depend on random outcomes. */
+    int caustic = CAUSTIC_NONE;
+    if (params->num_caustic_spheres == 0) {
+        /* no listed spheres: no manifold NEE, and no path counted by one */
+    } else if (params->nee && rn == RANDOM_NORMAL_SAMPLED && !MATERIAL_IS_DELTA(mat->kind)
+               && depth + 1 < params->max_depth) {
+        caustic = CAUSTIC_VERTEX;
+        float3 cp, cn, cy, ref;
+        float3 c = beta * caustic_sample(prims, materials, lights,
+                                         light_choice_at(light_choice, params->num_lights,
+                                                         env_nee),
+                                         params->num_lights, caustic_spheres,
+                                         params->num_caustic_spheres, mat, albedo, xo, n, wo,
+                                         rng4(params->seed, pixel, sample, bounce, DIM_CAUSTIC),
+                                         &cp, &cn, &cy, &ref);
+        float q = caustic_survival(c, beta * ref, params->shadow_roulette);
+        if (q < 1.0f)
+            c = (rng4(params->seed, pixel, sample, bounce, DIM_CAUSTIC_ROULETTE).x < q)
+                ? c / q : (float3)(0.0f);
+        if (max3(c) > 0.0f) {
+            int k = atomic_add(&counters[COUNT_SHADOW], 2);
+            float3 po = cp + ray_epsilon(cp) * cn;   /* the sphere's outside */
+            float3 d0 = cp - xo, d1 = cy - po;
+            float t0 = length(d0), t1 = length(d1);
+            shadow_o[k] = (float4)(xo, 0.0f);
+            shadow_d[k] = (float4)(d0 / t0, t0);
+            shadow_contribution[k] = (float4)(c, SHADOW_HEAD);
+            shadow_o[k + 1] = (float4)(po, 0.0f);
+            shadow_d[k + 1] = (float4)(d1 / t1, t1);
+            shadow_contribution[k + 1] = (float4)(c, SHADOW_TAIL);
+            shadow_path[k] = shadow_path[k + 1] = p;
+            shadow_grad[k] = shadow_grad[k + 1] = (float4)(0.0f);
+        }
+    } else if (hp >= 0 && path_caustic[p] == CAUSTIC_VERTEX
+               && caustic_listed(caustic_spheres, params->num_caustic_spheres, hp)) {
+        caustic = CAUSTIC_REFLECTED;
+    }
     /* --- BSDF sampling --- */
     beta *= fs_random_normal_sample(rn, mat, law, albedo, n, wo, ub.xy, &wi, &pdf_bsdf, &p_n0);
     if (!(max3(beta) > 0.0f)) return;   /* e.g. reflected below the surface */
@@ -143,6 +185,7 @@ __kernel void scatter(SCATTER_PARAMS)
     path_depth[p] = depth;
     path_prev_pos[p] = (float4)(x, pdf_bsdf);
     path_prev_env_nee[p] = env_nee;
+    path_caustic[p] = caustic;
     path_prev_n[p] = (float4)(n, p_n0);
     path_prev_v[p] = (float4)(-wo, mat->roughness);
     int k = atomic_inc(&counters[COUNT_RAYS_OUT]);

@@ -27,3 +27,11 @@ inline float3 rectangle_area_radiance(__global const Light* l, float3 from, floa
     *pdf = dot(v, v) / (l->area * fabs(cos_l));
     return l->radiance.xyz;
 }
+
+inline void rectangle_sample_point(__global const Light* l, float2 u, float3* y, float3* n,
+                                   float* pdf_area)
+{
+    *y = l->p0.xyz + u.x * l->p1.xyz + u.y * l->p2.xyz;
+    *n = normalize(cross(l->p1.xyz, l->p2.xyz));
+    *pdf_area = 1.0f / l->area;
+}

@@ -37,3 +37,15 @@ inline float3 sphere_area_radiance(__global const Light* l, float3 from, float3 
     if (d2 > r * r) *pdf = cone_pdf(sphere_cone_omc(r, d2));
     return (cos_l > 0.0f) ? l->radiance.xyz : (float3)(0.0f);
 }
+
+/* uniform over the whole sphere: a manifold NEE point (lib/caustics.h) may see any of it */
+inline void sphere_sample_point(__global const Light* l, float2 u, float3* y, float3* n,
+                                float* pdf_area)
+{
+    float z = 1.0f - 2.0f * u.x, s = sqrt(fmax(0.0f, 1.0f - z * z));
+    float phi = 2.0f * PI_F * u.y;
+    float r = l->p0.w;
+    *n = (float3)(s * cos(phi), s * sin(phi), z);
+    *y = l->p0.xyz + r * *n;
+    *pdf_area = 1.0f / (4.0f * PI_F * r * r);
+}
