@@ -145,11 +145,13 @@ GOLD = {"type": "mirror", "material": "Au"}
     (GOLD, function_space_sampler("renewal_plus")),
 ], ids=["classical", "weight-space-blocker", "function-space-blocker"])
 def test_caustics_agree_with_bsdf_sampling(device, long_run, sphere_bsdf, blocker):
-    """Independent seeds; the old estimator at 4x the samples (its variance is what limits
-    the test). Measured on the classical scene (256 / 1024 spp): the Jacobian 1.1x off
-    fails the whole image (z 6.1), the light's paths after the sphere left in emission.cl
-    (counted twice) fail it with z 40, and the roulette's survivors not divided by q with
-    z -24; with the blocker, the second segment's GPIS stage skipped gives |z| 5-9."""
+    """Independent seeds; the old estimator at 8x the samples (its variance is what limits
+    the test). Measured at 256 spp: the Jacobian 1.1x off fails the whole image (z 8.2
+    classical, 3.4 with a blocker); BSDF's copies of the paths left in emission.cl (counted
+    twice) fail blocks in all three (|z| 5.5-6.3); survivors of the second roulette stage
+    not divided by q fail all three (block |z| 5.8-9.4, image z -5.9), of the first two of
+    three (4.9, 7.8); a tail blocked by the GPIS but not by shadow_rays.cl fails both
+    blocker scenes (image z 3.7, 5.5)."""
     spp = 1024 if long_run else 256
     new = render(device, caustic_scene(spp, 11, sphere_bsdf, blocker), True)
     old = render(device, caustic_scene(8 * spp, 12, sphere_bsdf, blocker), False)

@@ -139,22 +139,23 @@ __kernel void scatter(SCATTER_PARAMS)
     } else if (params->nee && rn == RANDOM_NORMAL_SAMPLED && !MATERIAL_IS_DELTA(mat->kind)
                && depth + 1 < params->max_depth) {
         caustic = CAUSTIC_VERTEX;
-        float3 cp, cn, cy, ref;
-        float3 c = beta * caustic_sample(prims, materials, lights,
-                                         light_choice_at(light_choice, params->num_lights,
-                                                         env_nee),
-                                         params->num_lights, caustic_spheres,
-                                         params->num_caustic_spheres, mat, albedo, xo, n, wo,
-                                         rng4(params->seed, pixel, sample, bounce, DIM_CAUSTIC),
-                                         &cp, &cn, &cy, &ref);
-        float q = caustic_survival(c, beta * ref, params->shadow_roulette);
-        if (q < 1.0f)
-            c = (rng4(params->seed, pixel, sample, bounce, DIM_CAUSTIC_ROULETTE).x < q)
-                ? c / q : (float3)(0.0f);
+        CausticChoice ch;
+        float3 cp, cn, c = (float3)(0.0f);
+        float4 ur = rng4(params->seed, pixel, sample, bounce, DIM_CAUSTIC_ROULETTE);
+        if (caustic_choose(prims, lights,
+                           light_choice_at(light_choice, params->num_lights, env_nee),
+                           params->num_lights, caustic_spheres, params->num_caustic_spheres,
+                           rng4(params->seed, pixel, sample, bounce, DIM_CAUSTIC), &ch)) {
+            float q = caustic_survival_before(ch, materials, xo, albedo, params->shadow_roulette);
+            if (ur.x < q)
+                c = beta * caustic_connect(ch, materials, mat, albedo, xo, n, wo, &cp, &cn) / q;
+            q = caustic_survival_after(c, beta, ch, xo, params->shadow_roulette);
+            c = (ur.y < q) ? c / q : (float3)(0.0f);
+        }
         if (max3(c) > 0.0f) {
             int k = atomic_add(&counters[COUNT_SHADOW], 2);
             float3 po = cp + ray_epsilon(cp) * cn;   /* the sphere's outside */
-            float3 d0 = cp - xo, d1 = cy - po;
+            float3 d0 = cp - xo, d1 = ch.y - po;
             float t0 = length(d0), t1 = length(d1);
             shadow_o[k] = (float4)(xo, 0.0f);
             shadow_d[k] = (float4)(d0 / t0, t0);
