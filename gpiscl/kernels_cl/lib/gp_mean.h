@@ -298,8 +298,38 @@ inline float gp_mean_eval(GP_MEAN_SPACE const MeanNode* nodes, int count, float3
     return stack[0].w;
 }
 
+/* gp_grid_trilinear's value alone (the same operations on the same samples) */
+inline float gp_grid_trilinear_value(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* out)
+{
+    GpGridCell q = gp_grid_cell(n->p1.xyz, u);
+    float3 t = q.t;
+    float8 c = gp_grid_corners(n + 1, q.base, q.sx, q.sy);
+    float x0 = mix(mix(c.s0, c.s1, t.z), mix(c.s2, c.s3, t.z), t.y);
+    float x1 = mix(mix(c.s4, c.s5, t.z), mix(c.s6, c.s7, t.z), t.y);
+    *out = u - q.c;
+    return mix(x0, x1, t.x);
+}
+
+/* A program of one trilinear grid leaf (the baked means): gp_mean_eval's value without
+ * the gradient and the interpreter, the same operations (gp_mean_leaf, gp_mean_grid) */
+inline float gp_mean_trilinear_leaf_value(GP_MEAN_SPACE const MeanNode* n, float3 x)
+{
+    float3 r0 = n->row0.xyz, r1 = n->row1.xyz, r2 = n->row2.xyz, out;
+    float3 y = (float3)(dot(r0, x) + n->row0.w, dot(r1, x) + n->row1.w,
+                        dot(r2, x) + n->row2.w);
+    float v = gp_grid_trilinear_value(n, y, &out);
+    float d = n->p0.x * length(out);
+    if (d > 0.0f) v = v < 0.0f ? v + d : sqrt(v * v + d * d);
+    return n->scale * v;
+}
+
+/* The mean's value alone: the occupancy marches, the far balls and every value row
+ * evaluate it far more often than the gradient; a baked grid's takes the short way. */
 inline float gp_mean_value(GP_MEAN_SPACE const MeanNode* nodes, int count, float3 x)
 {
+    if (count > 0 && nodes[0].kind == GP_MEAN_GRID && nodes[0].p0.y < 0.5f
+        && count == 1 + nodes[0].flags)
+        return gp_mean_trilinear_leaf_value(nodes, x);
     float3 g;
     return gp_mean_eval(nodes, count, x, &g);
 }
