@@ -517,7 +517,7 @@ inline int gp_cell_walk_next(GpCellWalk* w)
         else { w->s.s1357 = w->s.s0246; w->s.s0246 = gp_grid_quad(payload, w->base, nz, sx); }
     }
     w->t = w->tout;
-    w->tout = fmin(fmin(w->tnext.x, fmin(w->tnext.y, w->tnext.z)), w->tend);
+    w->tout = min(min(w->tnext.x, min(w->tnext.y, w->tnext.z)), w->tend);
     return 1;
 }
 
@@ -527,12 +527,12 @@ inline int gp_cell_walk_next(GpCellWalk* w)
 inline void gp_cell_edge_ranges(float8 s, float3* lo, float3* hi)
 {
     float4 ex = s.s4567 - s.s0123, ey = s.s2367 - s.s0145, ez = s.s1357 - s.s0246;
-    *lo = (float3)(fmin(fmin(ex.x, ex.y), fmin(ex.z, ex.w)),
-                   fmin(fmin(ey.x, ey.y), fmin(ey.z, ey.w)),
-                   fmin(fmin(ez.x, ez.y), fmin(ez.z, ez.w)));
-    *hi = (float3)(fmax(fmax(ex.x, ex.y), fmax(ex.z, ex.w)),
-                   fmax(fmax(ey.x, ey.y), fmax(ey.z, ey.w)),
-                   fmax(fmax(ez.x, ez.y), fmax(ez.z, ez.w)));
+    *lo = (float3)(min(min(ex.x, ex.y), min(ex.z, ex.w)),
+                   min(min(ey.x, ey.y), min(ey.z, ey.w)),
+                   min(min(ez.x, ez.y), min(ez.z, ez.w)));
+    *hi = (float3)(max(max(ex.x, ex.y), max(ex.z, ex.w)),
+                   max(max(ey.x, ey.y), max(ey.z, ey.w)),
+                   max(max(ez.x, ez.y), max(ez.z, ez.w)));
 }
 
 /* How far along the segment [p, q] (a fraction in [0, 1]) a one-trilinear-grid-leaf mean
@@ -560,7 +560,7 @@ inline float gp_mean_monotone_reach(GP_MEAN_SPACE const MeanNode* n, float3 p, f
         float3 lo, hi;
         gp_cell_edge_ranges(w.s, &lo, &hi);
         float3 s0 = u * lo, s1 = u * hi;
-        float smin = dot(fmin(s0, s1), (float3)(1.0f)), smax = dot(fmax(s0, s1), (float3)(1.0f));
+        float smin = dot(min(s0, s1), (float3)(1.0f)), smax = dot(max(s0, s1), (float3)(1.0f));
         if (sign == 0) sign = smin >= thr ? 1 : (smax <= -thr ? -1 : 0);
         if (!(sign > 0 ? smin >= thr : (sign < 0 && smax <= -thr))) return w.t;
         /* the bound of the mean at the cell's exit: the least change, in the slope's sign */
@@ -588,7 +588,7 @@ inline float gp_mean_variation_reach(GP_MEAN_SPACE const MeanNode* n, float3 p, 
     do {
         float3 lo, hi;
         gp_cell_edge_ranges(w.s, &lo, &hi);
-        float rate = dot(run, fmax(fabs(lo), fabs(hi)));
+        float rate = dot(run, max(fabs(lo), fabs(hi)));
         float use = rate * (w.tout - w.t);
         if (use >= left) return w.t + left / rate;
         left -= use;
