@@ -349,8 +349,13 @@ inline float gp_grid_slope_on(GP_MEAN_SPACE const MeanNode* n, float3 lo, float3
     float3 cl = fmin(fmax(lo, (float3)(0.0f)), top), ch = fmin(fmax(hi, (float3)(0.0f)), top);
     int3 c0 = convert_int3(fmin(floor(cl), top - 1.0f));
     int3 c1 = convert_int3(fmin(floor(ch), top - 1.0f));
-    int3 b0 = c0 / B, b1 = c1 / B;
-    int3 nb = (convert_int3(dims) - 2) / B + 1;          /* ceil((n - 1) / B) */
+    /* a / B for the non-negative cell counts a: floor((a + 1/2) / B) in float, exact for
+     * a below 2^21 whatever the division's last ulps; PoCL ran each int3 division as
+     * three integer divisions, a sizeable part of a scan */
+    float Bf = (float)B;
+    int3 b0 = convert_int3(floor((convert_float3(c0) + 0.5f) / Bf));
+    int3 b1 = convert_int3(floor((convert_float3(c1) + 0.5f) / Bf));
+    int3 nb = convert_int3(floor((dims - 1.5f) / Bf)) + 1;   /* ceil((n - 1) / B) */
     int3 span = b1 - b0 + 1;
     if (span.x * span.y * span.z > 27) return 1.0f;
     int3 nd = convert_int3(dims) + (n->p0.y > 0.5f ? 2 : 0);   /* samples or coefficients */
@@ -362,7 +367,8 @@ inline float gp_grid_slope_on(GP_MEAN_SPACE const MeanNode* n, float3 lo, float3
             int q;                                   /* a run along z (gp_grid_run) */
             GP_MEAN_SPACE const float* f =
                 gp_grid_place(payload, first + (i * nb.y + j) * nb.z + b0.z, &q);
-            for (int k = b0.z; k <= b1.z; ++k) m = fmax(m, gp_grid_run(&f, &q));
+            /* max: the bounds are numbers (fmax's NaN test cost a compare a brick) */
+            for (int k = b0.z; k <= b1.z; ++k) m = max(m, gp_grid_run(&f, &q));
         }
     if (any(lo < (float3)(0.0f)) || any(hi > top)) m = sqrt(m * m + n->p0.x * n->p0.x);
     return fmin(m, 1.0f);
