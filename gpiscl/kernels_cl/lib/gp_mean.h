@@ -334,6 +334,15 @@ inline float gp_mean_value(GP_MEAN_SPACE const MeanNode* nodes, int count, float
     return gp_mean_eval(nodes, count, x, &g);
 }
 
+/* a / B for counts 0 <= a < 2^21 and B >= 1 (an integer): floor((a + 1/2) / B) in float,
+ * exact whatever the division's last ulps (a / B is a multiple of 1 / B, so the half keeps
+ * the quotient 1 / (2B) from every integer). PoCL ran an int3 division as three integer
+ * divisions, a sizeable part of a brick scan (gp_grid_slope_on). */
+inline int3 gp_div_small(int3 a, float B)
+{
+    return convert_int3(floor((convert_float3(a) + 0.5f) / B));
+}
+
 /* A grid leaf's slope bound over the index-space box [lo, hi], in the leaf's sample units
  * (<= 1; gp_mean_lipschitz's 1 is the whole grid): the largest brick bound over the
  * bricks holding the cells any point of the box evaluates in (cell = floor of the clamped
@@ -349,13 +358,9 @@ inline float gp_grid_slope_on(GP_MEAN_SPACE const MeanNode* n, float3 lo, float3
     float3 cl = fmin(fmax(lo, (float3)(0.0f)), top), ch = fmin(fmax(hi, (float3)(0.0f)), top);
     int3 c0 = convert_int3(fmin(floor(cl), top - 1.0f));
     int3 c1 = convert_int3(fmin(floor(ch), top - 1.0f));
-    /* a / B for the non-negative cell counts a: floor((a + 1/2) / B) in float, exact for
-     * a below 2^21 whatever the division's last ulps; PoCL ran each int3 division as
-     * three integer divisions, a sizeable part of a scan */
     float Bf = (float)B;
-    int3 b0 = convert_int3(floor((convert_float3(c0) + 0.5f) / Bf));
-    int3 b1 = convert_int3(floor((convert_float3(c1) + 0.5f) / Bf));
-    int3 nb = convert_int3(floor((dims - 1.5f) / Bf)) + 1;   /* ceil((n - 1) / B) */
+    int3 b0 = gp_div_small(c0, Bf), b1 = gp_div_small(c1, Bf);
+    int3 nb = gp_div_small(convert_int3(dims) - 2, Bf) + 1;   /* ceil((n - 1) / B) */
     int3 span = b1 - b0 + 1;
     if (span.x * span.y * span.z > 27) return 1.0f;
     int3 nd = convert_int3(dims) + (n->p0.y > 0.5f ? 2 : 0);   /* samples or coefficients */
