@@ -534,7 +534,9 @@ inline int gp_cell_walk_next(GpCellWalk* w)
 
 /* The ranges of a cell's four edge differences along x, y and z (samples s in
  * gp_grid_corners' order): each partial derivative of the trilinear interpolant, in index
- * units, is a bilinear blend of its axis's four. */
+ * units, is a bilinear blend of its axis's four. min / max, not fmin / fmax: the samples
+ * are numbers, and fmin's NaN rule was a compare and a blend per call on PoCL, a good
+ * part of a walk's time (docs/design/grid-means.md, "The knob against knob_no_csg"). */
 inline void gp_cell_edge_ranges(float8 s, float3* lo, float3* hi)
 {
     float4 ex = s.s4567 - s.s0123, ey = s.s2367 - s.s0145, ez = s.s1357 - s.s0246;
