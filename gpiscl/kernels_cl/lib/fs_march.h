@@ -470,9 +470,12 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
  * (the last sample; at the first step a fresh start's row or a vertex's value row) has
  * its own numbers (fs_row_prep), so neither the mean program nor the O(observations^2)
  * solve runs again: the same numbers as fs_mean_var's, bit for bit (the same operations
- * on the same point); else fs_mean_var (slot n as its work space). */
+ * on the same point); else fs_mean_var (slot n as its work space). sd_flat >= 0: the
+ * prior sd of a stationary kernel without a posterior, the same at every point (the
+ * kernel at lag 0), taken once a flight instead of once a step. */
 inline double fs_start_mean(GpKernel p, __global const MeanNode* mean, int mc, FsScratch S,
-                            int fixed, int n, double3 x, double3 dn, double* sd FS_PROF_PARAM)
+                            int fixed, int n, double3 x, double3 dn, double sd_flat,
+                            double* sd FS_PROF_PARAM)
 {
     int k = n - 1;
     if (n == fixed) {
@@ -486,6 +489,10 @@ inline double fs_start_mean(GpKernel p, __global const MeanNode* mean, int mc, F
         double var, m = fs_mean_var(p, mean, mc, S, x, dn, FS_OBS_VALUE, n, &var);
         *sd = sqrt(var);
         return m;
+    }
+    if (sd_flat >= 0.0) {
+        *sd = sd_flat;
+        return S.mu[k];
     }
     GpFieldsAt fx = gp_kernel_nonstationary(p) ? fs_row_fields(S, k) : fs_fields(p, mean, x);
     double var = gp_cov_at(p, x, dn, FS_OBS_VALUE, fx, x, dn, FS_OBS_VALUE, fx);
@@ -578,6 +585,14 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
                     && gp_mean_is_trilinear_grid(mean, mc)
         ? sqrt(gp_cov(p, o3, dn, 1, o3, dn, 1)) : 0.0;
     FS_PROF_ADD(LIP_SCANS, dt > 0.0 ? 0 : 1);
+    /* the prior sd where it is the same everywhere (fs_start_mean), else -1 */
+    double sd_flat = -1.0;
+    if (lip > 0.0 && !S.post.n && !gp_kernel_nonstationary(p)) {
+        double3 x0 = ray.o + ray.t0 * ray.d;
+        GpFieldsAt f0 = fs_fields(p, mean, x0);
+        sd_flat = sqrt(fmax(gp_cov_at(p, x0, dn, FS_OBS_VALUE, f0, x0, dn, FS_OBS_VALUE, f0),
+                            0.0));
+    }
     FsScratch R = fs_rule_scratch(S);
     int nr = 0, r_new = FS_RULE_SAMPLES + 1;   /* rows of R; samples since it was built */
     int step = 0;
@@ -595,8 +610,8 @@ inline FsResult fs_free_flight(GpKernel p, __global const MeanNode* mean, int mc
             /* the rule on its small system R (see "Step rule"): 1-2 nodes per try */
             /* the mean's cap; its numbers at ta are a row's (fs_start_mean) */
             double sd0 = 0.0, m0 = lip > 0.0
-                ? fs_start_mean(p, mean, mc, S, fixed, n, ray.o + ta * ray.d, dn, &sd0
-                                FS_PROF_PASS) : 0.0;
+                ? fs_start_mean(p, mean, mc, S, fixed, n, ray.o + ta * ray.d, dn, sd_flat,
+                                &sd0 FS_PROF_PASS) : 0.0;
             double hg = fmin(grow * h, FS_H_MAX * ell);
             int certified;
             h = fs_mean_step(p, mean, mc, S, ray, dn, ta, hg, m0, sd0, lip, grid, gslope,

@@ -267,9 +267,10 @@ inline double3 fs_dir(__global const FsObs* o) { return (double3)(o->ux, o->uy, 
 inline double fs_prior_mean(__global const MeanNode* mean, int mc, double3 x, double3 u,
                             int kind)
 {
+    if (kind != FS_OBS_DERIV) return (double)gp_mean_value(mean, mc, convert_float3(x));
     float3 g;
-    float v = gp_mean_eval(mean, mc, convert_float3(x), &g);
-    return kind == FS_OBS_DERIV ? dot(convert_double3(g), u) : (double)v;
+    gp_mean_eval(mean, mc, convert_float3(x), &g);
+    return dot(convert_double3(g), u);
 }
 
 inline __global double* fs_post_v(FsScratch S, int i) { return S.v + (size_t)i * S.post.n; }

@@ -298,10 +298,49 @@ inline float gp_mean_eval(GP_MEAN_SPACE const MeanNode* nodes, int count, float3
     return stack[0].w;
 }
 
+/* gp_grid_trilinear's value alone (the same operations on the same samples) */
+inline float gp_grid_trilinear_value(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* out)
+{
+    GpGridCell q = gp_grid_cell(n->p1.xyz, u);
+    float3 t = q.t;
+    float8 c = gp_grid_corners(n + 1, q.base, q.sx, q.sy);
+    float x0 = mix(mix(c.s0, c.s1, t.z), mix(c.s2, c.s3, t.z), t.y);
+    float x1 = mix(mix(c.s4, c.s5, t.z), mix(c.s6, c.s7, t.z), t.y);
+    *out = u - q.c;
+    return mix(x0, x1, t.x);
+}
+
+/* A program of one trilinear grid leaf (the baked means): gp_mean_eval's value without
+ * the gradient and the interpreter, the same operations (gp_mean_leaf, gp_mean_grid) */
+inline float gp_mean_trilinear_leaf_value(GP_MEAN_SPACE const MeanNode* n, float3 x)
+{
+    float3 r0 = n->row0.xyz, r1 = n->row1.xyz, r2 = n->row2.xyz, out;
+    float3 y = (float3)(dot(r0, x) + n->row0.w, dot(r1, x) + n->row1.w,
+                        dot(r2, x) + n->row2.w);
+    float v = gp_grid_trilinear_value(n, y, &out);
+    float d = n->p0.x * length(out);
+    if (d > 0.0f) v = v < 0.0f ? v + d : sqrt(v * v + d * d);
+    return n->scale * v;
+}
+
+/* The mean's value alone: the occupancy marches, the far balls and every value row
+ * evaluate it far more often than the gradient; a baked grid's takes the short way. */
 inline float gp_mean_value(GP_MEAN_SPACE const MeanNode* nodes, int count, float3 x)
 {
+    if (count > 0 && nodes[0].kind == GP_MEAN_GRID && nodes[0].p0.y < 0.5f
+        && count == 1 + nodes[0].flags)
+        return gp_mean_trilinear_leaf_value(nodes, x);
     float3 g;
     return gp_mean_eval(nodes, count, x, &g);
+}
+
+/* a / B for counts 0 <= a < 2^21 and B >= 1 (an integer): floor((a + 1/2) / B) in float,
+ * exact whatever the division's last ulps (a / B is a multiple of 1 / B, so the half keeps
+ * the quotient 1 / (2B) from every integer). PoCL ran an int3 division as three integer
+ * divisions, a sizeable part of a brick scan (gp_grid_slope_on). */
+inline int3 gp_div_small(int3 a, float B)
+{
+    return convert_int3(floor((convert_float3(a) + 0.5f) / B));
 }
 
 /* A grid leaf's slope bound over the index-space box [lo, hi], in the leaf's sample units
@@ -319,8 +358,9 @@ inline float gp_grid_slope_on(GP_MEAN_SPACE const MeanNode* n, float3 lo, float3
     float3 cl = fmin(fmax(lo, (float3)(0.0f)), top), ch = fmin(fmax(hi, (float3)(0.0f)), top);
     int3 c0 = convert_int3(fmin(floor(cl), top - 1.0f));
     int3 c1 = convert_int3(fmin(floor(ch), top - 1.0f));
-    int3 b0 = c0 / B, b1 = c1 / B;
-    int3 nb = (convert_int3(dims) - 2) / B + 1;          /* ceil((n - 1) / B) */
+    float Bf = (float)B;
+    int3 b0 = gp_div_small(c0, Bf), b1 = gp_div_small(c1, Bf);
+    int3 nb = gp_div_small(convert_int3(dims) - 2, Bf) + 1;   /* ceil((n - 1) / B) */
     int3 span = b1 - b0 + 1;
     if (span.x * span.y * span.z > 27) return 1.0f;
     int3 nd = convert_int3(dims) + (n->p0.y > 0.5f ? 2 : 0);   /* samples or coefficients */
@@ -332,7 +372,8 @@ inline float gp_grid_slope_on(GP_MEAN_SPACE const MeanNode* n, float3 lo, float3
             int q;                                   /* a run along z (gp_grid_run) */
             GP_MEAN_SPACE const float* f =
                 gp_grid_place(payload, first + (i * nb.y + j) * nb.z + b0.z, &q);
-            for (int k = b0.z; k <= b1.z; ++k) m = fmax(m, gp_grid_run(&f, &q));
+            /* max: the bounds are numbers (fmax's NaN test cost a compare a brick) */
+            for (int k = b0.z; k <= b1.z; ++k) m = max(m, gp_grid_run(&f, &q));
         }
     if (any(lo < (float3)(0.0f)) || any(hi > top)) m = sqrt(m * m + n->p0.x * n->p0.x);
     return fmin(m, 1.0f);
@@ -487,22 +528,24 @@ inline int gp_cell_walk_next(GpCellWalk* w)
         else { w->s.s1357 = w->s.s0246; w->s.s0246 = gp_grid_quad(payload, w->base, nz, sx); }
     }
     w->t = w->tout;
-    w->tout = fmin(fmin(w->tnext.x, fmin(w->tnext.y, w->tnext.z)), w->tend);
+    w->tout = min(min(w->tnext.x, min(w->tnext.y, w->tnext.z)), w->tend);
     return 1;
 }
 
 /* The ranges of a cell's four edge differences along x, y and z (samples s in
  * gp_grid_corners' order): each partial derivative of the trilinear interpolant, in index
- * units, is a bilinear blend of its axis's four. */
+ * units, is a bilinear blend of its axis's four. min / max, not fmin / fmax: the samples
+ * are numbers, and fmin's NaN rule was a compare and a blend per call on PoCL, a good
+ * part of a walk's time (docs/design/grid-means.md, "The knob against knob_no_csg"). */
 inline void gp_cell_edge_ranges(float8 s, float3* lo, float3* hi)
 {
     float4 ex = s.s4567 - s.s0123, ey = s.s2367 - s.s0145, ez = s.s1357 - s.s0246;
-    *lo = (float3)(fmin(fmin(ex.x, ex.y), fmin(ex.z, ex.w)),
-                   fmin(fmin(ey.x, ey.y), fmin(ey.z, ey.w)),
-                   fmin(fmin(ez.x, ez.y), fmin(ez.z, ez.w)));
-    *hi = (float3)(fmax(fmax(ex.x, ex.y), fmax(ex.z, ex.w)),
-                   fmax(fmax(ey.x, ey.y), fmax(ey.z, ey.w)),
-                   fmax(fmax(ez.x, ez.y), fmax(ez.z, ez.w)));
+    *lo = (float3)(min(min(ex.x, ex.y), min(ex.z, ex.w)),
+                   min(min(ey.x, ey.y), min(ey.z, ey.w)),
+                   min(min(ez.x, ez.y), min(ez.z, ez.w)));
+    *hi = (float3)(max(max(ex.x, ex.y), max(ex.z, ex.w)),
+                   max(max(ey.x, ey.y), max(ey.z, ey.w)),
+                   max(max(ez.x, ez.y), max(ez.z, ez.w)));
 }
 
 /* How far along the segment [p, q] (a fraction in [0, 1]) a one-trilinear-grid-leaf mean
@@ -530,7 +573,7 @@ inline float gp_mean_monotone_reach(GP_MEAN_SPACE const MeanNode* n, float3 p, f
         float3 lo, hi;
         gp_cell_edge_ranges(w.s, &lo, &hi);
         float3 s0 = u * lo, s1 = u * hi;
-        float smin = dot(fmin(s0, s1), (float3)(1.0f)), smax = dot(fmax(s0, s1), (float3)(1.0f));
+        float smin = dot(min(s0, s1), (float3)(1.0f)), smax = dot(max(s0, s1), (float3)(1.0f));
         if (sign == 0) sign = smin >= thr ? 1 : (smax <= -thr ? -1 : 0);
         if (!(sign > 0 ? smin >= thr : (sign < 0 && smax <= -thr))) return w.t;
         /* the bound of the mean at the cell's exit: the least change, in the slope's sign */
@@ -558,7 +601,7 @@ inline float gp_mean_variation_reach(GP_MEAN_SPACE const MeanNode* n, float3 p, 
     do {
         float3 lo, hi;
         gp_cell_edge_ranges(w.s, &lo, &hi);
-        float rate = dot(run, fmax(fabs(lo), fabs(hi)));
+        float rate = dot(run, max(fabs(lo), fabs(hi)));
         float use = rate * (w.tout - w.t);
         if (use >= left) return w.t + left / rate;
         left -= use;
