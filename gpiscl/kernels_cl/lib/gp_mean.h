@@ -502,6 +502,11 @@ inline int gp_cell_walk_begin(GP_MEAN_SPACE const MeanNode* n, float3 p, float3 
     return 1;
 }
 
+/* The lesser of two numbers, infinities included (a crossing time along an axis the ray
+ * does not move on is INFINITY): OpenCL's min leaves infinite arguments undefined, and fmin
+ * pays for a NaN rule these times never need. */
+inline float gp_lesser(float a, float b) { return b < a ? b : a; }
+
 /* On to the next cell, across the nearest face; 0 at the segment's or the box's end. */
 inline int gp_cell_walk_next(GpCellWalk* w)
 {
@@ -528,7 +533,7 @@ inline int gp_cell_walk_next(GpCellWalk* w)
         else { w->s.s1357 = w->s.s0246; w->s.s0246 = gp_grid_quad(payload, w->base, nz, sx); }
     }
     w->t = w->tout;
-    w->tout = min(min(w->tnext.x, min(w->tnext.y, w->tnext.z)), w->tend);
+    w->tout = gp_lesser(gp_lesser(w->tnext.x, gp_lesser(w->tnext.y, w->tnext.z)), w->tend);
     return 1;
 }
 
