@@ -139,6 +139,7 @@ def render(device, scene, caustic_nee):
 GOLD = {"type": "mirror", "material": "Au"}
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("sphere_bsdf,blocker", [
     ({"type": "mirror", "albedo": 0.9}, None),
     (GOLD, {"type": "weight_space"}),
