@@ -166,8 +166,10 @@ __kernel void scatter(SCATTER_PARAMS)
             shadow_path[k] = shadow_path[k + 1] = p;
             shadow_grad[k] = shadow_grad[k + 1] = (float4)(0.0f);
         }
-    } else if (hp >= 0 && path_caustic[p] == CAUSTIC_VERTEX
+    } else if (hp >= 0 && path_caustic[p] == CAUSTIC_VERTEX && dot(wo, ng) < 0.0f
                && caustic_listed(caustic_spheres, params->num_caustic_spheres, hp)) {
+        /* from outside only: a vertex inside a sphere (concave side, several roots) has no
+         * manifold sample there, so its paths stay with BSDF sampling */
         caustic = CAUSTIC_REFLECTED;
     }
     /* --- BSDF sampling --- */
