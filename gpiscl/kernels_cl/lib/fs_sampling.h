@@ -280,8 +280,7 @@ inline __global double* fs_post_v(FsScratch S, int i) { return S.v + (size_t)i *
 inline double fs_grid_field(__global const MeanNode* n, double3 x, double3* grad)
 {
     float3 xf = convert_float3(x), gu, out;
-    float3 u = (float3)(dot(n->row0.xyz, xf) + n->row0.w, dot(n->row1.xyz, xf) + n->row1.w,
-                        dot(n->row2.xyz, xf) + n->row2.w);
+    float3 u = gp_leaf_local(n, xf);
     float m = gp_grid_trilinear(n, u, &gu, &out);
     *grad = convert_double3(gu.x * n->row0.xyz + gu.y * n->row1.xyz + gu.z * n->row2.xyz);
     return (double)m;
@@ -307,10 +306,7 @@ inline GpFieldsAt fs_fields(GpKernel p, __global const MeanNode* mean, double3 x
 inline void fs_grid_box(__global const MeanNode* n, double3 a, double3 b, int3* c0, int3* c1)
 {
     float3 fa = convert_float3(a), fb = convert_float3(b);
-    float3 ua = (float3)(dot(n->row0.xyz, fa) + n->row0.w, dot(n->row1.xyz, fa) + n->row1.w,
-                         dot(n->row2.xyz, fa) + n->row2.w);
-    float3 ub = (float3)(dot(n->row0.xyz, fb) + n->row0.w, dot(n->row1.xyz, fb) + n->row1.w,
-                         dot(n->row2.xyz, fb) + n->row2.w);
+    float3 ua = gp_leaf_local(n, fa), ub = gp_leaf_local(n, fb);
     float3 pad = 2e-3f + 4.0f * FLT_EPSILON * fmax(fabs(ua), fabs(ub));
     float3 top = n->p1.xyz - 1.0f;
     *c0 = convert_int3(fmin(floor(fmin(fmax(fmin(ua, ub) - pad, 0.0f), top)), top - 1.0f));

@@ -239,6 +239,15 @@ inline float gp_mean_grid(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* g)
     return r;
 }
 
+/* A leaf's affine map from world points to its own coordinates (a grid's: index space),
+ * rows row0..row2 of the inverse transform; every reader of a leaf or a grid record maps
+ * through it. */
+inline float3 gp_leaf_local(GP_MEAN_SPACE const MeanNode* n, float3 x)
+{
+    return (float3)(dot(n->row0.xyz, x) + n->row0.w, dot(n->row1.xyz, x) + n->row1.w,
+                    dot(n->row2.xyz, x) + n->row2.w);
+}
+
 /* Each primitive's value and local gradient (lib/gp_means/<name>.h, declared in
  * gpiscl/host/kinds/means.py): generated. */
 /* @kinds gp_means leaves */
@@ -246,8 +255,7 @@ inline float gp_mean_grid(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* g)
 inline float gp_mean_leaf(GP_MEAN_SPACE const MeanNode* n, float3 x, float3* grad)
 {
     float3 r0 = n->row0.xyz, r1 = n->row1.xyz, r2 = n->row2.xyz;
-    float3 y = (float3)(dot(r0, x) + n->row0.w, dot(r1, x) + n->row1.w,
-                        dot(r2, x) + n->row2.w);
+    float3 y = gp_leaf_local(n, x);
     float4 p0 = n->p0, p1 = n->p1;
     float3 g = (float3)(0.0f);
     float v = gp_mean_leaf_of(n->kind, n, y, p0, p1, &g);
@@ -314,21 +322,26 @@ inline float gp_grid_trilinear_value(GP_MEAN_SPACE const MeanNode* n, float3 u, 
  * the gradient and the interpreter, the same operations (gp_mean_leaf, gp_mean_grid) */
 inline float gp_mean_trilinear_leaf_value(GP_MEAN_SPACE const MeanNode* n, float3 x)
 {
-    float3 r0 = n->row0.xyz, r1 = n->row1.xyz, r2 = n->row2.xyz, out;
-    float3 y = (float3)(dot(r0, x) + n->row0.w, dot(r1, x) + n->row1.w,
-                        dot(r2, x) + n->row2.w);
-    float v = gp_grid_trilinear_value(n, y, &out);
+    float3 out;
+    float v = gp_grid_trilinear_value(n, gp_leaf_local(n, x), &out);
     float d = n->p0.x * length(out);
     if (d > 0.0f) v = v < 0.0f ? v + d : sqrt(v * v + d * d);
     return n->scale * v;
+}
+
+/* Whether a mean program is one trilinear grid leaf (the baked means: gp_mean_value's short way,
+ * gp_mean_monotone_reach's case). */
+inline int gp_mean_is_trilinear_grid(GP_MEAN_SPACE const MeanNode* nodes, int count)
+{
+    return count > 0 && nodes[0].kind == GP_MEAN_GRID && nodes[0].p0.y < 0.5f
+        && count == 1 + nodes[0].flags && nodes[0].scale > 0.0f;
 }
 
 /* The mean's value alone: the occupancy marches, the far balls and every value row
  * evaluate it far more often than the gradient; a baked grid's takes the short way. */
 inline float gp_mean_value(GP_MEAN_SPACE const MeanNode* nodes, int count, float3 x)
 {
-    if (count > 0 && nodes[0].kind == GP_MEAN_GRID && nodes[0].p0.y < 0.5f
-        && count == 1 + nodes[0].flags)
+    if (gp_mean_is_trilinear_grid(nodes, count))
         return gp_mean_trilinear_leaf_value(nodes, x);
     float3 g;
     return gp_mean_eval(nodes, count, x, &g);
@@ -434,10 +447,7 @@ inline float gp_mean_lipschitz_on(GP_MEAN_SPACE const MeanNode* nodes, int count
         if (n->kind >= GP_MEAN_FIRST_OP) continue;
         float prim = gp_leaf_prim_lipschitz(n);
         if (n->kind == GP_MEAN_GRID) {
-            float3 up = (float3)(dot(n->row0.xyz, p) + n->row0.w, dot(n->row1.xyz, p) + n->row1.w,
-                                 dot(n->row2.xyz, p) + n->row2.w);
-            float3 uq = (float3)(dot(n->row0.xyz, q) + n->row0.w, dot(n->row1.xyz, q) + n->row1.w,
-                                 dot(n->row2.xyz, q) + n->row2.w);
+            float3 up = gp_leaf_local(n, p), uq = gp_leaf_local(n, q);
             float3 pad = 1e-3f + 4.0f * FLT_EPSILON * fmax(fabs(up), fabs(uq));
             prim = gp_grid_slope_on(n, fmin(up, uq) - pad, fmax(up, uq) + pad);
             i += n->flags;
@@ -447,13 +457,6 @@ inline float gp_mean_lipschitz_on(GP_MEAN_SPACE const MeanNode* nodes, int count
     return lip;
 }
 
-
-/* Whether a mean program is one trilinear grid leaf (gp_mean_monotone_reach's case). */
-inline int gp_mean_is_trilinear_grid(GP_MEAN_SPACE const MeanNode* nodes, int count)
-{
-    return count > 0 && nodes[0].kind == GP_MEAN_GRID && nodes[0].p0.y < 0.5f
-        && count == 1 + nodes[0].flags && nodes[0].scale > 0.0f;
-}
 
 /* The trilinear cells a segment crosses, in order (Amanatides and Woo), of a
  * one-trilinear-grid-leaf mean program (gp_mean_is_trilinear_grid), in index space:
@@ -475,9 +478,7 @@ typedef struct {
 inline int gp_cell_walk_begin(GP_MEAN_SPACE const MeanNode* n, float3 p, float3 q,
                               GpCellWalk* w)
 {
-    float3 r0 = n->row0.xyz, r1 = n->row1.xyz, r2 = n->row2.xyz;
-    float3 a = (float3)(dot(r0, p) + n->row0.w, dot(r1, p) + n->row1.w, dot(r2, p) + n->row2.w);
-    float3 b = (float3)(dot(r0, q) + n->row0.w, dot(r1, q) + n->row1.w, dot(r2, q) + n->row2.w);
+    float3 a = gp_leaf_local(n, p), b = gp_leaf_local(n, q);
     float3 top = n->p1.xyz - 1.0f, d = b - a;
     if (any(a < (float3)(0.0f)) || any(a > top)) return 0;
     float3 face = select((float3)(0.0f), top, d > (float3)(0.0f));

@@ -42,8 +42,7 @@ inline float3 gpis_field_eval(__global const MeanNode* nodes, int f, float3 x, f
 {
     if (f <= 0) return (float3)(none);
     __global const MeanNode* n = nodes + f;
-    float3 y = (float3)(dot(n->row0.xyz, x) + n->row0.w, dot(n->row1.xyz, x) + n->row1.w,
-                        dot(n->row2.xyz, x) + n->row2.w);
+    float3 y = gp_leaf_local(n, x);
     switch (n->kind) {
     case GPIS_FIELD_CONSTANT:
         return n->p0.xyz;
