@@ -325,7 +325,10 @@ inline int fs_grid_box_samples(__global const MeanNode* n, double3 a, double3 b)
 /* One pass over the samples of fs_grid_box's cells for the segment [a, b] (at most
  * FS_SD_BOX_SAMPLES; callers check fs_grid_box_samples, a larger box gives NaN): their
  * smallest and largest, and per index axis the range [dlo, dhi] of the differences of
- * neighbouring samples (each read once, into the box's own array). */
+ * neighbouring samples (each read once, into the box's own array). gp_lesser / gp_greater,
+ * not fmin / fmax: the same results here (a NaN sample is passed over as fmin does, since
+ * the running values start at +-INFINITY and never become NaN), and fmin's NaN rule was a
+ * third of the scan's time (docs/design/grid-means.md, "Sigma grids' box scans"). */
 inline double2 fs_grid_box_scan(__global const MeanNode* n, double3 a, double3 b,
                                 float3* dlo, float3* dhi)
 {
@@ -346,11 +349,11 @@ inline double2 fs_grid_box_scan(__global const MeanNode* n, double3 a, double3 b
             for (int q = 0; q < wd.z; ++q, ++at) {
                 float v = gp_grid_run(&f, &k);
                 box[at] = v;
-                lo = fmin(lo, v);
-                hi = fmax(hi, v);
-                if (i) { float e = v - box[at - wd.y * wd.z]; dlo->x = fmin(dlo->x, e); dhi->x = fmax(dhi->x, e); }
-                if (j) { float e = v - box[at - wd.z]; dlo->y = fmin(dlo->y, e); dhi->y = fmax(dhi->y, e); }
-                if (q) { float e = v - box[at - 1]; dlo->z = fmin(dlo->z, e); dhi->z = fmax(dhi->z, e); }
+                lo = gp_lesser(lo, v);
+                hi = gp_greater(hi, v);
+                if (i) { float e = v - box[at - wd.y * wd.z]; dlo->x = gp_lesser(dlo->x, e); dhi->x = gp_greater(dhi->x, e); }
+                if (j) { float e = v - box[at - wd.z]; dlo->y = gp_lesser(dlo->y, e); dhi->y = gp_greater(dhi->y, e); }
+                if (q) { float e = v - box[at - 1]; dlo->z = gp_lesser(dlo->z, e); dhi->z = gp_greater(dhi->z, e); }
             }
         }
     return (double2)(lo, hi);

@@ -503,10 +503,12 @@ inline int gp_cell_walk_begin(GP_MEAN_SPACE const MeanNode* n, float3 p, float3 
     return 1;
 }
 
-/* The lesser of two numbers, infinities included (a crossing time along an axis the ray
- * does not move on is INFINITY): OpenCL's min leaves infinite arguments undefined, and fmin
- * pays for a NaN rule these times never need. */
+/* The lesser and the greater of two numbers, infinities included (a crossing time along an
+ * axis the ray does not move on is INFINITY; a running range starts at +-INFINITY): OpenCL's
+ * min and max leave infinite arguments undefined, and fmin / fmax pay for a NaN rule these
+ * numbers never need (a compare and a blend each on PoCL). */
 inline float gp_lesser(float a, float b) { return b < a ? b : a; }
+inline float gp_greater(float a, float b) { return b > a ? b : a; }
 
 /* On to the next cell, across the nearest face; 0 at the segment's or the box's end. */
 inline int gp_cell_walk_next(GpCellWalk* w)
