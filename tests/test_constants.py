@@ -16,7 +16,8 @@ _NUMBER = re.compile(r"(?<![\w.])(0[xX][0-9a-fA-F]+|(?:\d+\.\d*|\.\d+|\d+)(?:[eE
 _DEFINE = re.compile(r"^\s*#\s*define\s+(\w+)", re.M)
 
 # Literals equal to a host constant that mean something else (checked by hand, 2026-12):
-ANYWHERE = {0.0, 0.5, 1.0, 2.0, 3.0, 4.0, 8.0}   # indices, small counts, formula coefficients
+# indices, small counts, formula coefficients (6: 3!, the cubic B-spline weights' 1/6)
+ANYWHERE = {0.0, 0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0}
 IN_FILE = {
     (16.0, "fs_march.h"): "a squared distance cut-off, 4 length scales",
     (16.0, "fs_markov.h"): "series coefficients and a loop over 4-term groups",

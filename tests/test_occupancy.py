@@ -229,6 +229,7 @@ def test06_scenes_get_the_bound_by_default():
         assert obj["occupancy_step"] == pytest.approx(0.1 * 0.15)
 
 
+
 # --- renders -----------------------------------------------------------------------------
 
 def scene(sampler, bsdf="diffuse", albedo=0.8, lights=None, occupancy=1e-4, spp=16):
@@ -252,6 +253,18 @@ def scene(sampler, bsdf="diffuse", albedo=0.8, lights=None, occupancy=1e-4, spp=
             "lights": lights}
 
 
+THIN_SIGMA, THIN_L = 0.004, 0.6     # sigma / l as the knob's order: its marches' floor is sigma's
+
+
+def thin_scene(sampler, occupancy=1e-4, spp=16):
+    """scene()'s, with sigma << l: a smooth surface whose function-space marches clip to
+    a few sd of the mean's zero set."""
+    sc = scene(sampler, occupancy=occupancy, spp=spp)
+    sc["shapes"][0]["kernel"] = {"type": "squared_exponential", "sigma": THIN_SIGMA,
+                                 "length_scale": THIN_L}
+    return sc
+
+
 SAMPLERS = {"weight_space": {"type": "weight_space", "features": 128},
             "function_space": {"type": "function_space",
                                "memory": "renewal_plus"}}
@@ -265,11 +278,27 @@ def run(sc, device):
 
 
 @pytest.mark.parametrize("sampler", sorted(SAMPLERS))
-def test07_render_with_bounds_equals_render_without(device, sampler):
+def test06b_thin_sigma_marches_on_to_the_far_balls(sampler):
+    """Where sigma << l a function-space object's marches go on until (FS_MEAN_Z - z)
+    sigma_max is left to the far balls of its flights (compile/gpis.py occupancy_step),
+    not 0.1 l; weight space keeps 0.1 l."""
+    from gpiscl.host.scene.loading import load_scene
+    from gpiscl.host.compile.scene import compile_scene
+    obj = compile_scene(load_scene(thin_scene(SAMPLERS[sampler])).data).gpis.objects[0]
+    level = 3.719016 * THIN_SIGMA
+    far = (6.0 - 3.719016) * THIN_SIGMA if sampler == "function_space" else 1.0
+    assert obj["occupancy_level"] == pytest.approx(level, rel=1e-5)
+    assert obj["occupancy_step"] == pytest.approx(min(0.1 * THIN_L, far), rel=1e-5)
+
+@pytest.mark.parametrize("sampler,make", [("function_space", scene), ("weight_space", scene),
+                                           ("function_space", thin_scene)],
+                         ids=["function_space", "weight_space", "function_space-thin"])
+def test07_render_with_bounds_equals_render_without(device, sampler, make):
     """Per-pixel z-test between renders with and without occupancy bounds (different
-    random streams: the seeds differ, so the test sees the law, not the same samples)."""
-    on = run(scene(SAMPLERS[sampler], spp=64), device).image
-    off_sc = scene(SAMPLERS[sampler], occupancy=None, spp=64)
+    random streams: the seeds differ, so the test sees the law, not the same samples).
+    The thin case clips to ~6 sd of the zero set (test06b)."""
+    on = run(make(SAMPLERS[sampler], spp=64), device).image
+    off_sc = make(SAMPLERS[sampler], occupancy=None, spp=64)
     off_sc["render"]["seed"] = 6
     off = run(off_sc, device).image
     assert_agree(on.mean, on.stderr, off.mean, off.stderr, what=f"{sampler} on/off")

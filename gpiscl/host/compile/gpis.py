@@ -24,6 +24,7 @@ from .posterior import build_posterior, pack_posterior
 from ..kinds.memory_models import MEMORY_MODELS
 from .proxy_cut import cut_extent
 from ..layout import function_space_records as FSL
+from ..layout.constants import FS_MEAN_Z
 from ..kinds.gp_kernels import GP_KERNELS
 from ..kinds.means import MEAN_OPS, MEAN_PRIMITIVES
 
@@ -112,6 +113,22 @@ def kernel_length_scale(k: dict) -> float:
 # The occupancy bound's marches stop at steps below this fraction of the length scale:
 # finer clipping saves less sampling than the march costs (tools/bench_occupancy.py).
 OCCUPANCY_MIN_STEP = 0.1
+
+
+def occupancy_step(g: dict, level: float) -> float:
+    """The world length below which the occupancy bound's marches stop (gpis_proxy.h):
+    OCCUPANCY_MIN_STEP l, and for a function-space object at most (FS_MEAN_Z - z)
+    sigma_max, where level = z sigma_max. A flight sphere-traces the same mean on from
+    there, with dearer evaluations, down to FS_MEAN_Z sd (fs_mean_step's far balls): where
+    sigma << l (the knob: sigma / l = 0.007) the march stopped ~18 sd from the zero set
+    and left the balls ~3.5 hops a flight (docs/design/grid-means.md, "Where the occupancy
+    marches stop"). Any floor keeps the bound: a march stopped early only clips less."""
+    step = OCCUPANCY_MIN_STEP * kernel_length_scale(g["kernel"])
+    if g["sampler"]["type"] == "function_space" and level > 0.0:
+        near = FS_MEAN_Z * sigma_max(g) - level
+        if near > 0.0:
+            step = min(step, near)
+    return step
 
 
 def occupancy_level(g: dict, kernel: K.Kernel | None = None) -> float:
@@ -204,7 +221,6 @@ def _object_fields(o, g: dict, material_of) -> None:
         o["window"] = sampler_window(g["kernel"])
     o["material"] = material_of(g["bsdf"])
     o["tolerance"] = ROOT_TOLERANCE * kernel_length_scale(g["kernel"])
-    o["occupancy_step"] = OCCUPANCY_MIN_STEP * kernel_length_scale(g["kernel"])
 
 
 def compile_object(g: dict, o, kernel_record: np.ndarray, source: str, key: str,
@@ -226,6 +242,7 @@ def compile_object(g: dict, o, kernel_record: np.ndarray, source: str, key: str,
     mean = None                     # its grids live on in records alone
     # the bound follows the prior mean, not the posterior's
     o["occupancy_level"] = 0.0 if len(posterior[0]) else occupancy_level(g, kernel)
+    o["occupancy_step"] = occupancy_step(g, float(o["occupancy_level"]))
     count = sum(len(part) for part in records)
     # grid fields of sigma(x) and l(x): the kernel holds their offsets from the object's
     # mean program (fs_sampling.h fs_fields)

@@ -74,6 +74,13 @@ FS_RULE_NODE1 = _const("FS_RULE_NODE1", 0.3550510257216822, "(6 - sqrt 6) / 10",
 FS_RULE_WEIGHT1 = _const("FS_RULE_WEIGHT1", 0.5124858261884216, "(16 + sqrt 6) / 36", "double")
 FS_RULE = ((FS_RULE_NODE0, FS_RULE_WEIGHT0), (FS_RULE_NODE1, FS_RULE_WEIGHT1))
 
+# Far from its zero set a flight's steps are the prior mean's: where |mean| >= FS_MEAN_Z sd
+# a crossing needs a residual of that size (rate ~ e^(-Z^2 / 2) / l, far below any
+# tolerance), so fs_mean_step sphere-traces the mean to that level (its far balls), and the
+# occupancy marches hand function-space flights over near it (compile/gpis.py
+# occupancy_step).
+FS_MEAN_Z = _const("FS_MEAN_Z", 6.0, "the far zone's |mean|, prior sds", "double")
+
 # A stretch over which the prior mean's slope along the ray keeps one sign with
 # |dm/dt| >= FS_MONO_R g (g the prior slope's sd along the ray) takes the growth ladder's
 # step, not the mean cap's: its expected crossings missed are <= psi(r) / r with

@@ -33,7 +33,6 @@
 #ifndef FS_MEAN_KAPPA
 #define FS_MEAN_KAPPA 6.0          /* fs_mean_step */
 #endif
-#define FS_MEAN_Z 6.0
 #define FS_MEAN_HOPS 8             /* fs_mean_step */
 /* Work counters (FsResult.prof, layout/records.py FS_PROFILE_COUNTERS), compiled in only
  * with FS_PROFILE (tools/profile_grid_scenes.py): off, no code and no argument at all. */

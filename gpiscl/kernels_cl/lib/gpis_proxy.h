@@ -57,9 +57,11 @@ inline int gpis_proxy_clip(__global const GpisObject* g, __global const float4* 
  * towards the other on g(t) = mu(x(t)) - level: mu is L-Lipschitz (gp_mean_lipschitz), so
  * g stays >= 0 over a step of g / (L |d|), and no point with occupancy >= eps is ever
  * skipped; rounding of the float mean is taken off each step (allowance as ws_tents).
- * A march stops at a step below g->occupancy_step (world length, a fraction of the
- * length scale: clipping finer saves less sampling than the march costs) or after
- * OCC_MAX_STEPS steps: clipping less is always allowed.
+ * A march stops at a step below g->occupancy_step (world length, compile/gpis.py
+ * occupancy_step: a fraction of the length scale, where clipping finer saves less
+ * sampling than the march costs, and for function space no more than the far balls of
+ * fs_mean_step would trace after it) or after OCC_MAX_STEPS steps: clipping less is always
+ * allowed.
  * Bias: a realization with f < 0 only where the occupancy is < eps (a skipped end) is not
  * seen. Per length l of skipped ray (SE) Rice's rate of crossings below z sigma bounds
  * that probability by about z eps / sqrt(2 pi) = 1.5 eps at the default eps = 1e-4
