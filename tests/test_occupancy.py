@@ -84,6 +84,17 @@ def test02_union_of_independent_objects():
 GRID = M.GridMean(values=np.fromfunction(
     lambda i, j, k: np.sqrt((i - 4.0) ** 2 + (j - 3.5) ** 2 + (k - 4.5) ** 2) * 0.2 - 0.6,
     (9, 8, 10)), origin=(-0.8, -0.7, -0.9), voxel_size=0.2)
+
+def _spiked_grid():
+    """A sphere's distances at 0.1 with one sample raised by 2 inside one brick: its global
+    slope bound (~20) is loose against nine bricks in ten (~1), so the marches scan bricks
+    (layout/gp_records.py loose_slope_bound)."""
+    values = np.fromfunction(lambda i, j, k: np.sqrt((i - 8.0) ** 2 + (j - 7.5) ** 2
+                                                     + (k - 8.5) ** 2) * 0.1 - 0.6, (17, 16, 18))
+    values[2, 2, 2] += 2.0
+    return M.GridMean(values=values, origin=(-0.8, -0.7, -0.9), voxel_size=0.1)
+
+
 RIGID = np.concatenate([ROT, [[0.1], [0.0], [-0.2]]], 1)
 MEANS = {
     "sphere_rigid": Transform(Sphere(radius=0.6), RIGID),
@@ -92,7 +103,15 @@ MEANS = {
                         k=0.1),
     "difference": M.Difference(Sphere(radius=0.8), Box(half_extents=(0.3, 0.3, 1.0)), k=0.05),
     "grid": GRID,
+    "grid_loose": _spiked_grid(),
 }
+
+
+def test03a_only_a_loose_grid_bound_makes_the_marches_scan():
+    """The smooth grid's marches step by its global bound, the spiked one's by brick
+    bounds: test03 then runs the clip both ways."""
+    flags = {name: float(pack_mean(MEANS[name])[0]["p0"][3]) for name in ("grid", "grid_loose")}
+    assert flags == {"grid": 0.0, "grid_loose": 1.0}, flags
 KERNEL_DICTS = {
     "se": {"type": "squared_exponential", "sigma": 0.08, "length_scale": 0.2},
     "sigma_field": {"type": "squared_exponential", "sigma": 0.05, "length_scale": 0.2,

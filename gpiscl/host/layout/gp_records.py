@@ -62,6 +62,7 @@ GP_KERNEL = Struct("GpKernel", (
 #             instead of the samples; p0.z = B: after the samples (C order), the slope
 #             bound of each brick of B^3 cells (means.brick_slope_bounds / S, <= 1, bricks
 #             in C order), which gp_mean_lipschitz_on reads for a segment's bound;
+#             p0.w = 1 where that global bound is loose (loose_slope_bound);
 #             p0.x = 1 / S, S = GridMean.lipschitz
 #             (world units), the weight of the outside distance (in voxels); flags =
 #             number of payload records that follow the leaf.
@@ -96,6 +97,12 @@ GRID_PAYLOAD_FLOATS = 20    # the float4 fields row0..p1; kind must stay a valid
 # Cells per brick edge of a grid leaf's slope-bound table: 4^3 cells share one bound, so a
 # table costs 1/64 of the samples and a ray interval of a few cells reads a few bricks.
 GRID_BRICK = 4
+# A grid leaf whose global slope bound exceeds this many times the bound of nine bricks
+# in ten is flagged (p0.w = 1) for the occupancy marches' brick scans: on the example
+# grids (ratios 1.2-2.0) the scans cost more than the longer steps saved (paths per CPU s
+# 1.09-1.15x without them, csg_baked 0.99x: docs/design/grid-means.md, "The marches'
+# brick scans"); a grid whose bound is set by a few steep cells still needs them.
+LOOSE_SLOPE_BOUND = 2.0
 STRUCTS = (GP_KERNEL, MEAN_NODE)
 
 
@@ -286,6 +293,13 @@ def pack_kernel_grids(kernel: K.Kernel, record: np.ndarray, offset: int) -> list
 _PACK_LAYERS = 8   # x layers of a grid's samples per write_floats
 
 
+def loose_slope_bound(bricks: np.ndarray) -> bool:
+    """Whether a grid's global slope bound is loose: more than LOOSE_SLOPE_BOUND times the
+    bound of nine bricks in ten. Only there do the occupancy marches pay for a brick scan
+    a step (gp_mean_march_scans)."""
+    return bool(np.percentile(bricks, 90) * LOOSE_SLOPE_BOUND < 1.0)
+
+
 def _grid_leaf(node: M.GridMean, m, scale):
     """The grid leaf record followed by its payload records."""
     h = float(node.voxel_size)
@@ -308,7 +322,7 @@ def _grid_leaf(node: M.GridMean, m, scale):
     rec["kind"] = MEAN_KINDS["grid"]
     rec["flags"] = len(out) - 1
     rec["row0"], rec["row1"], rec["row2"] = _compose(m, to_index)
-    rec["p0"] = (h / s_index, 1.0 if cubic else 0.0, GRID_BRICK, 0.0)
+    rec["p0"] = (h / s_index, 1.0 if cubic else 0.0, GRID_BRICK, float(loose_slope_bound(bricks)))
     rec["p1"] = (*np.shape(node.values), 0.0)
     rec["scale"] = scale * s_index
     return out

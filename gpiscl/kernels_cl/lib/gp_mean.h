@@ -434,6 +434,21 @@ inline int gp_mean_has_grid(GP_MEAN_SPACE const MeanNode* nodes, int count)
     return 0;
 }
 
+/* Whether the occupancy marches take a brick scan (gp_mean_lipschitz_on) a step: only for
+ * a grid leaf whose global slope bound is loose (p0.w, layout/gp_records.py
+ * loose_slope_bound); elsewhere the scan costs more than its longer steps save. */
+inline int gp_mean_march_scans(GP_MEAN_SPACE const MeanNode* nodes, int count)
+{
+    for (int i = 0; i < count; ++i) {
+        GP_MEAN_SPACE const MeanNode* n = nodes + i;
+        if (n->kind == GP_MEAN_GRID) {
+            if (n->p0.w > 0.5f) return 1;
+            i += n->flags;                       /* past its payload */
+        }
+    }
+    return 0;
+}
+
 /* gp_mean_lipschitz over the segment [p, q] only: grid leaves contribute their bound
  * over the segment's cells (gp_grid_slope_on; an affine map takes the segment to a
  * segment, so the end points' index box holds it, padded for rounding). Any interval

@@ -77,7 +77,7 @@ inline float gpis_occupancy_march(__global const MeanNode* mean, int count, floa
                                   float t, float t_stop, float level, float lt, float min_step)
 {
     float dir = t_stop >= t ? 1.0f : -1.0f, dl = length(d), lip = lt / dl;
-    int local_lip = gp_mean_has_grid(mean, count);
+    int local_lip = gp_mean_march_scans(mean, count);
     for (int s = 0; s < OCC_MAX_STEPS; ++s) {
         float3 x = o + t * d;
         float mu = gp_mean_value(mean, count, x);
