@@ -115,7 +115,7 @@ def kernel_length_scale(k: dict) -> float:
 OCCUPANCY_MIN_STEP = 0.1
 
 
-def occupancy_step(g: dict, level: float) -> float:
+def occupancy_step(g: dict, level: float, kernel: K.Kernel | None = None) -> float:
     """The world length below which the occupancy bound's marches stop (gpis_proxy.h):
     OCCUPANCY_MIN_STEP l, and for a function-space object at most (FS_MEAN_Z - z)
     sigma_max, where level = z sigma_max. A flight sphere-traces the same mean on from
@@ -125,7 +125,7 @@ def occupancy_step(g: dict, level: float) -> float:
     marches stop"). Any floor keeps the bound: a march stopped early only clips less."""
     step = OCCUPANCY_MIN_STEP * kernel_length_scale(g["kernel"])
     if g["sampler"]["type"] == "function_space" and level > 0.0:
-        near = FS_MEAN_Z * sigma_max(g) - level
+        near = FS_MEAN_Z * sigma_max(g, kernel) - level
         if near > 0.0:
             step = min(step, near)
     return step
@@ -242,7 +242,7 @@ def compile_object(g: dict, o, kernel_record: np.ndarray, source: str, key: str,
     mean = None                     # its grids live on in records alone
     # the bound follows the prior mean, not the posterior's
     o["occupancy_level"] = 0.0 if len(posterior[0]) else occupancy_level(g, kernel)
-    o["occupancy_step"] = occupancy_step(g, float(o["occupancy_level"]))
+    o["occupancy_step"] = occupancy_step(g, float(o["occupancy_level"]), kernel)
     count = sum(len(part) for part in records)
     # grid fields of sigma(x) and l(x): the kernel holds their offsets from the object's
     # mean program (fs_sampling.h fs_fields)
