@@ -32,7 +32,7 @@ from typing import Callable
 from ..gp import kernels as K
 from ..io.grids import load_field_grid, problem_of
 from ..schema import Field, File, Nullable, Number, Record, Tagged, Vector
-from .table import KERNELS_CL, Kind, KindTable
+from .table import KERNELS_CL, Kind, KindTable, device_text
 
 VEC3 = Vector()
 POSITIVE3 = Vector(broadcast=True, item=Number(gt=0))
@@ -184,7 +184,7 @@ def device_source(part: str, table: KindTable = GP_KERNELS) -> str:
     out = [f"#define {flag} 1"]
     for kind in table:
         out.append(f'#line 1 "{kind.device_file}"')
-        out.append((KERNELS_CL / kind.device_file).read_text())
+        out.append(device_text(KERNELS_CL / kind.device_file))
     out.append(f"#undef {flag}")
     for fn, returns, params, args, default, trait in _PARTS[part]:
         out.append(table.c_dispatch(fn, returns, params, args, default,

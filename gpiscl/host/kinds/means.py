@@ -23,7 +23,7 @@ import numpy as np
 
 from ..gp import means as M
 from ..schema import Field, Number, Record, Vector
-from .table import KERNELS_CL, Kind, KindTable
+from .table import KERNELS_CL, Kind, KindTable, device_text
 
 VEC3 = Vector()
 DIRECTION = Vector(normalize=True)
@@ -124,7 +124,7 @@ def device_source(part: str = "leaves") -> str:
     out = []
     for kind in MEAN_PRIMITIVES:
         out.append(f'#line 1 "{kind.device_file}"')
-        out.append((KERNELS_CL / kind.device_file).read_text())
+        out.append(device_text(KERNELS_CL / kind.device_file))
     out.append(MEAN_PRIMITIVES.c_dispatch(
         "mean", "float", "GP_MEAN_SPACE const MeanNode* n, float3 y, float4 p0, float4 p1, "
         "float3* g", "n, y, p0, p1, g", "NAN", name="gp_mean_leaf_of"))

@@ -14,6 +14,7 @@ from pathlib import Path
 import pyopencl as cl
 
 from ..kinds import gp_kernels, lights, materials, means
+from ..kinds.table import device_text
 from ..layout import records, stages
 from ..layout.function_space_records import c_declarations, defines
 
@@ -50,8 +51,11 @@ _KIND_LINE = re.compile(r"^/\* @kinds (\w+) (\w+) \*/$", re.M)
 
 def kernel_source(name: str) -> str:
     """The text of one device source file: lib/ for headers, stages/ for stages, with
-    its kinds' device code joined in."""
-    text = (KERNEL_DIR / ("lib" if name.endswith(".h") else "stages") / name).read_text()
+    its kinds' device code joined in (the kinds' tables may change between calls: a
+    test's own kind)."""
+    text = device_text(KERNEL_DIR / ("lib" if name.endswith(".h") else "stages") / name)
+    if "@kinds" not in text:
+        return text
 
     def expand(m):
         line = text.count("\n", 0, m.end()) + 2   # of the line after the marker
