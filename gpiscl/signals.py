@@ -155,6 +155,16 @@ def _excepthook(kind, value, tb):
     sys.__excepthook__(kind, value, tb)
 
 
+def _unraisablehook(unraisable):
+    """An exception in a finalizer after a stop signal: an object whose __init__ the
+    Interrupted cut short (pyopencl's cache dict, whose __del__ then misses its mutex)
+    fails when it is collected. The process is already ending with its one line, so the
+    interpreter's traceback of it is not printed."""
+    if _state.signum is not None:
+        return
+    sys.__unraisablehook__(unraisable)
+
+
 def startup_message(signum: int) -> str:
     return f"interrupted by {name(signum)} during start-up: nothing rendered, nothing written"
 
@@ -167,6 +177,7 @@ def install() -> None:
     for sig in SIGNALS:
         signal.signal(sig, _handle)
     sys.excepthook = _excepthook
+    sys.unraisablehook = _unraisablehook
     r, w = os.pipe()
     os.set_blocking(w, False)
     signal.set_wakeup_fd(w, warn_on_full_buffer=False)
