@@ -16,8 +16,7 @@ _NUMBER = re.compile(r"(?<![\w.])(0[xX][0-9a-fA-F]+|(?:\d+\.\d*|\.\d+|\d+)(?:[eE
 _DEFINE = re.compile(r"^\s*#\s*define\s+(\w+)", re.M)
 
 # Literals equal to a host constant that mean something else (checked by hand, 2026-12):
-# indices, small counts, formula coefficients (6: 3!, the cubic B-spline weights' 1/6)
-ANYWHERE = {0.0, 0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0}
+ANYWHERE = {0.0, 0.5, 1.0, 2.0, 3.0, 4.0, 8.0}   # indices, small counts, formula coefficients
 IN_FILE = {
     (16.0, "fs_march.h"): "a squared distance cut-off, 4 length scales",
     (16.0, "fs_markov.h"): "series coefficients and a loop over 4-term groups",
@@ -28,6 +27,11 @@ IN_FILE = {
     (1024.0, "ws_features.h"): "WS_CACHE_FEATURES, a cache size",
     (0.001, "gp_mean.h"): "a float pad in index units",
     (66.0, "gpis_fields.h"): "a colour-field kind",
+    (6.0, "fs_markov.h"): "1 / 3!",
+    (6.0, "gp_mean.h"): "the cubic B-spline weights' 1 / 6",
+    (6.0, "thin_plate.h"): "the thin-plate kernel's derivative coefficients",
+    (6.0, "ws_features.h"): "a lane index",
+    (6.0, "ws_posterior.h"): "six jet components",
 }
 
 

@@ -14,6 +14,7 @@ from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, join_sources
 from gpiscl.host.gp import Box, Sphere, SquaredExponential, Torus, Transform, Union
 from gpiscl.host.gp import kernels as K
 from gpiscl.host.gp import means as M
+from gpiscl.host.layout.constants import FS_MEAN_Z
 from gpiscl.host.layout.gp_records import pack_mean
 from gpiscl.host.gp.spectral import RandomFeatures
 from gpiscl.host.compile.gpis import build_kernel, occupancy_level
@@ -305,7 +306,7 @@ def test06b_thin_sigma_marches_on_to_the_far_balls(sampler):
     from gpiscl.host.compile.scene import compile_scene
     obj = compile_scene(load_scene(thin_scene(SAMPLERS[sampler])).data).gpis.objects[0]
     level = 3.719016 * THIN_SIGMA
-    far = (6.0 - 3.719016) * THIN_SIGMA if sampler == "function_space" else 1.0
+    far = (FS_MEAN_Z - 3.719016) * THIN_SIGMA if sampler == "function_space" else 1.0
     assert obj["occupancy_level"] == pytest.approx(level, rel=1e-5)
     assert obj["occupancy_step"] == pytest.approx(min(0.1 * THIN_L, far), rel=1e-5)
 

@@ -80,6 +80,11 @@ FS_RULE = ((FS_RULE_NODE0, FS_RULE_WEIGHT0), (FS_RULE_NODE1, FS_RULE_WEIGHT1))
 # occupancy marches hand function-space flights over near it (compile/gpis.py
 # occupancy_step).
 FS_MEAN_Z = _const("FS_MEAN_Z", 6.0, "the far zone's |mean|, prior sds", "double")
+# Near its zero set the prior mean may move by at most FS_MEAN_KAPPA sd over a step: the
+# rule sees it only at its nodes (paired renders chose 6: docs/design/function-space-march.md,
+# "The mean cap").
+FS_MEAN_KAPPA = _const("FS_MEAN_KAPPA", 6.0, "the mean cap's move near the zero set, prior sds",
+                       "double")
 
 # A stretch over which the prior mean's slope along the ray keeps one sign with
 # |dm/dt| >= FS_MONO_R g (g the prior slope's sd along the ray) takes the growth ladder's

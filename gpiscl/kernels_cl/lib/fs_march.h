@@ -30,9 +30,6 @@
  *  - Random numbers: the step index is fs_uniform2's segment (16 bits, hence
  *    FS_MAX_STEPS; a longer ray is counted as failed); fixed slots per draw. */
 #define FS_MAX_STEPS 65535
-#ifndef FS_MEAN_KAPPA
-#define FS_MEAN_KAPPA 6.0          /* fs_mean_step */
-#endif
 #define FS_MEAN_HOPS 8             /* fs_mean_step */
 /* Work counters (FsResult.prof, layout/records.py FS_PROFILE_COUNTERS), compiled in only
  * with FS_PROFILE (tools/profile_grid_scenes.py): off, no code and no argument at all. */
