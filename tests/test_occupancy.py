@@ -10,6 +10,8 @@ import pytest
 
 from gpiscl import render_result
 from gpiscl.host.layout import records as layouts
+from gpiscl.host.render.integrator import stage_program
+from gpiscl.host.render.occupancy_boxes import CELLS as OCCUPANCY_CELLS, with_occupancy_boxes
 from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, join_sources
 from gpiscl.host.gp import Box, Sphere, SquaredExponential, Torus, Transform, Union
 from gpiscl.host.gp import kernels as K
@@ -143,7 +145,14 @@ def clip_prg(device):
     return program(device.ctx, src, [f"-I{PYOPENCL_CL_DIR}"])["occ_clip_k"]
 
 
-def device_clip(device, kern, mean, level, o, d, clip_start=1, step=0.0):
+@pytest.fixture(scope="module")
+def stages_prg(device):
+    return stage_program(device)
+
+
+def device_clip(device, kern, mean, level, o, d, clip_start=1, step=0.0, boxes=None):
+    """gpis_proxy.h's clips of rays o + t d; boxes: the stage program that sets the
+    object's occupancy box first (render/occupancy_boxes.py), None: no box."""
     nodes = pack_mean(mean)
     g = layouts.GPIS_OBJECT.zeros(1)
     g["proxy_kind"] = layouts.GPIS_PROXIES["box"]
@@ -151,6 +160,11 @@ def device_clip(device, kern, mean, level, o, d, clip_start=1, step=0.0):
     g["mean_first"], g["mean_count"], g["occupancy_level"] = 0, len(nodes), level
     g["occupancy_step"] = step
     mf = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+    if boxes is not None:
+        buffers = {name: cl.Buffer(device.ctx, mf, hostbuf=np.ascontiguousarray(a))
+                   for name, a in (("gpis", g), ("mean_nodes", nodes))}
+        g = with_occupancy_boxes(boxes, buffers, g)
+        assert g["occ_p0"][0, 3] == 1.0
     bufs = [cl.Buffer(device.ctx, mf, hostbuf=np.ascontiguousarray(a))
             for a in (g, nodes, np.zeros((1, 4), np.float32), o.astype(np.float32),
                       d.astype(np.float32))]
@@ -161,15 +175,16 @@ def device_clip(device, kern, mean, level, o, d, clip_start=1, step=0.0):
     return out.astype(np.float64)
 
 
-@pytest.mark.parametrize("step", [0.0, 0.02])
+@pytest.mark.parametrize("step, box", [(0.0, False), (0.02, False), (0.02, True)])
 @pytest.mark.parametrize("kname", sorted(KERNEL_DICTS))
 @pytest.mark.parametrize("mname", sorted(MEANS))
-def test03_clip_never_cuts_an_occupied_point(device, clip_prg, mname, kname, step,
-                                             eps=1e-3):
+def test03_clip_never_cuts_an_occupied_point(device, clip_prg, stages_prg, mname, kname,
+                                             step, box, eps=1e-3):
     """Random rays through the proxy (some from inside it, unnormalised directions): mu
     evaluated densely (float64) along the proxy chord; every point with Phi(-mu/sigma(x))
     >= eps lies inside the clipped interval, and the clip removes a good part of the
-    chords (it is not vacuous). step: the marches' floor (0.1 l as compiled, or none)."""
+    chords (it is not vacuous). step: the marches' floor (0.1 l as compiled, or none);
+    box: the occupancy box clips first (as in renders)."""
     mean, kd = MEANS[mname], resolved_kernel(KERNEL_DICTS[kname])
     g = {"kernel": kd, "proxy": PROXY, "bounds": {"occupancy": eps}}
     level = occupancy_level(g)
@@ -180,7 +195,8 @@ def test03_clip_never_cuts_an_occupied_point(device, clip_prg, mname, kname, ste
     o[: n // 4] = rng.uniform(-1.0, 1.0, (n // 4, 3))   # rays starting inside the proxy
     aim = rng.uniform(-0.6, 0.6, (n, 3))
     d = (aim - o) * rng.uniform(0.3, 3.0, (n, 1))
-    res = device_clip(device, clip_prg, mean, level, o, d, step=step)
+    res = device_clip(device, clip_prg, mean, level, o, d, step=step,
+                      boxes=stages_prg if box else None)
     hit = np.isfinite(res[:, 0])
     assert hit.sum() > n // 2
     rows = np.flatnonzero(hit)
@@ -208,6 +224,36 @@ def test03_clip_never_cuts_an_occupied_point(device, clip_prg, mname, kname, ste
     kept = float(np.sum((t1 - t0)[ok]))
     removed = float(np.sum((p1 - p0)[clipped_away]) + np.sum(((p1 - p0) - (t1 - t0))[ok]))
     assert removed > 0.2 * (kept + removed), (kept, removed)
+
+
+@pytest.mark.parametrize("mname", sorted(MEANS))
+def test03b_occupancy_box_holds_every_point_at_or_below_the_level(device, stages_prg, mname):
+    """render/occupancy_boxes.py: every one of 2e5 random points of the proxy whose mean
+    (float64) is at or below the level lies in the object's occupancy box, and the box
+    is within 3 lattice cells of those points' own bounding box wherever the mean's
+    slope bound is that of a distance (it clips, and not only at the proxy)."""
+    mean = MEANS[mname]
+    level = 0.15
+    nodes = pack_mean(mean)
+    g = layouts.GPIS_OBJECT.zeros(1)
+    g["proxy_kind"] = layouts.GPIS_PROXIES["box"]
+    g["proxy_p0"][0, :3], g["proxy_p1"][0, :3] = PROXY["min"], PROXY["max"]
+    g["mean_first"], g["mean_count"], g["occupancy_level"] = 0, len(nodes), level
+    mf = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+    buffers = {name: cl.Buffer(device.ctx, mf, hostbuf=np.ascontiguousarray(a))
+               for name, a in (("gpis", g), ("mean_nodes", nodes))}
+    box = with_occupancy_boxes(stages_prg, buffers, g)[0]
+    lo, hi = box["occ_p0"][:3].astype(float), box["occ_p1"][:3].astype(float)
+    x = np.random.default_rng(zlib.crc32(mname.encode())).uniform(
+        PROXY["min"], PROXY["max"], (200_000, 3))
+    inside = x[mean.value_and_gradient(x)[0] <= level]
+    assert len(inside) > 100
+    assert np.all(inside >= lo) and np.all(inside <= hi), (lo, hi, inside.min(0), inside.max(0))
+    cell = (np.array(PROXY["max"]) - PROXY["min"]) / OCCUPANCY_CELLS
+    if mname != "grid_loose":
+        assert np.all(np.isinf(lo) | (inside.min(0) - lo <= 3.0 * cell)), (lo, inside.min(0))
+        assert np.all(np.isinf(hi) | (hi - inside.max(0) <= 3.0 * cell)), (hi, inside.max(0))
+        assert np.isfinite(lo).any() or np.isfinite(hi).any()
 
 
 def test04_sigma_field_sampled_sigma_is_below_sigma_max():

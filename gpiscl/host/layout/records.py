@@ -109,6 +109,10 @@ GPIS_OBJECT = Struct("GpisObject", (
     ("int", "posterior_first"),
     ("int", "posterior_count"),
     ("int", "posterior_doubles"),
+    # the occupancy box (render/occupancy_boxes.py): outside [occ_p0, occ_p1].xyz the
+    # prior mean exceeds occupancy_level; occ_p0.w = 1 when set (0: no box, clip nothing)
+    ("float4", "occ_p0"),
+    ("float4", "occ_p1"),
 ))
 
 # Per-launch constants of the integrator.

@@ -175,6 +175,12 @@ SHADOW_RAYS = Stage("shadow_rays", (
     PARAMS, queue("path", PATH_STATE), queue("shadow", SHADOW_QUEUE), COUNTERS, NODES,
     PRIMS, MATERIALS))
 ACCUMULATE = Stage("accumulate", (PARAMS, queue("path", PATH_STATE), COUNTERS, FILM))
+# Render preparation (render/occupancy_boxes.py): per object, the cells of a lattice over
+# its proxy where the mean may reach its occupancy level, as index ranges (int8: s012 the
+# lowest, s345 the highest)
+GPIS_OCCUPANCY_BOXES = Stage("gpis_occupancy_boxes", (
+    GPIS, MEAN_NODES, Param("num_gpis", "int"), Param("cells", "int"),
+    Param("boxes", "__global int8*")))
 
 # Scene preparation (render/device_bakes.py): grid sizes and the sample axes or samples
 _GRID = tuple(Param(n, "int") for n in ("nx", "ny", "nz"))
@@ -188,7 +194,7 @@ BAKE_GRID_SLOPES = Stage("bake_grid_slopes", (
 
 STAGES = (GENERATE_CAMERA_RAYS, INTERSECT, GPIS_WEIGHT_SPACE, GPIS_FUNCTION_SPACE, QUEUE_HITS,
           ESCAPED_RAYS, EMISSION, SCATTER, GPIS_SHADOW_WEIGHT_SPACE, GPIS_SHADOW_FUNCTION_SPACE,
-          SHADOW_RAYS, ACCUMULATE, BAKE_PROCEDURAL, BAKE_GRID_SLOPES)
+          SHADOW_RAYS, ACCUMULATE, GPIS_OCCUPANCY_BOXES, BAKE_PROCEDURAL, BAKE_GRID_SLOPES)
 
 
 def c_declarations() -> str:

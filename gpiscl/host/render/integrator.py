@@ -16,6 +16,7 @@ import pyopencl as cl
 
 from . import function_space_stages
 from . import kriging_cache, memory
+from .occupancy_boxes import with_occupancy_boxes
 from ..layout import records as layouts
 from ..layout.constants import WS_MAX_LANES
 from ..layout import stages
@@ -149,9 +150,13 @@ class WavefrontIntegrator:
                                  aov=aov, shadow_per_path=self.shadow_per_hit)
         self.program = stage_program(device)
         # the scene's buffers, by the kernels' parameter names
-        self.scene_buffers = {name: to_device(device, array)
-                              for name, array in scene.device_arrays().items()}
+        arrays = scene.device_arrays()
+        self.scene_buffers = {name: to_device(device, array) for name, array in arrays.items()}
         gpis = scene.gpis
+        # the occupancy marches' boxes, found with the uploaded mean programs (the
+        # compiled scene's own records stay as they are)
+        self.scene_buffers[stages.GPIS.name] = to_device(
+            device, self.gpis_occupancy_boxes(arrays[stages.GPIS.name]))
         self.weight_space = gpis.uses("weight_space")
         if self.weight_space:   # a posterior's kept weights fit their budget
             self.batch = min(self.batch, kriging_cache.max_batch(gpis.objects, device))
@@ -237,6 +242,10 @@ class WavefrontIntegrator:
 
     def _launch(self, stage: stages.Stage, n: int, **queues):
         launch(self.program, stage, n, **self._stage_arguments(stage), **queues)
+
+    def gpis_occupancy_boxes(self, objects):
+        """A copy of the GPIS records with their occupancy boxes (occupancy_boxes.py)."""
+        return with_occupancy_boxes(self.program, self.scene_buffers, objects)
 
     def generate_camera_rays(self, n):
         self._launch(stages.GENERATE_CAMERA_RAYS, n, path=self.paths, out=self.rays[0])

@@ -28,7 +28,8 @@ SHARED_HEADERS = ("compat.h", "rng.h", "geometry.h", "bvh.h", "lights.h", lights
 # The path tracer's stages, and the weight-space GPIS library they need.
 STAGE_FILES = ("generate_camera_rays.cl", "intersect.cl", "gpis_weight_space.cl",
                "queue_hits.cl", "escaped_rays.cl", "emission.cl", "scatter.cl",
-               "gpis_shadow_weight_space.cl", "shadow_rays.cl", "accumulate.cl")
+               "gpis_shadow_weight_space.cl", "shadow_rays.cl", "accumulate.cl",
+               "gpis_occupancy_boxes.cl")
 GPIS_HEADERS = ("gpis_proxy.h", "ws_features.h", "ws_posterior.h", "ws_intersect.h",
                 "ws_objects.h", "gpis_fields.h", "fs_normal_pdf.h", "fs_random_normal.h")
 # The function-space stages (a second program, built only for scenes that use them).

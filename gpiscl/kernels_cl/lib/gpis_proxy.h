@@ -57,6 +57,9 @@ inline int gpis_proxy_clip(__global const GpisObject* g, __global const float4* 
  * towards the other on g(t) = mu(x(t)) - level: mu is L-Lipschitz (gp_mean_lipschitz), so
  * g stays >= 0 over a step of g / (L |d|), and no point with occupancy >= eps is ever
  * skipped; rounding of the float mean is taken off each step (allowance as ws_tents).
+ * First the object's occupancy box, where the render has set one (GpisObject occ_p0.w,
+ * render/occupancy_boxes.py), clips both ends at once: outside it the mean exceeds the
+ * level, which a march through a loose proxy's empty part proved step by step.
  * A march stops at a step below g->occupancy_step (world length, compile/gpis.py
  * occupancy_step: a fraction of the length scale, where clipping finer saves less
  * sampling than the march costs, and for function space no more than the far balls of
@@ -107,6 +110,17 @@ inline int gpis_occupancy_clip(__global const GpisObject* g, __global const Mean
                                float3 o, float3 d, float* t0, float* t1, int clip_start)
 {
     if (!(g->occupancy_level > 0.0f)) return 1;
+    if (g->occ_p0.w > 0.0f) {
+        /* the occupancy box (render/occupancy_boxes.py): the mean exceeds the level
+         * outside it, so its slab clips as the marches would (t0 only where they may) */
+        float3 inv = 1.0f / d;
+        float3 a = (g->occ_p0.xyz - o) * inv, b = (g->occ_p1.xyz - o) * inv;
+        float3 lo = fmin(a, b), hi = fmax(a, b);
+        float enter = max3(lo), leave = fmin(hi.x, fmin(hi.y, hi.z));
+        if (clip_start) *t0 = fmax(*t0, enter);
+        *t1 = fmin(*t1, leave);
+        if (!(*t0 < *t1) || !(enter < leave)) return 0;
+    }
     __global const MeanNode* mean = means + g->mean_first;
     float dl = length(d), lt = gp_mean_lipschitz(mean, g->mean_count) * dl;
     float level = g->occupancy_level, min_step = g->occupancy_step / dl;
