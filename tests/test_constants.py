@@ -26,6 +26,7 @@ IN_FILE = {
     (10.0, "ws_features.h"): "Philox's 10 rounds; lane indices",
     (1024.0, "ws_features.h"): "WS_CACHE_FEATURES, a cache size",
     (0.001, "gp_mean.h"): "a float pad in index units",
+    (32.0, "gpis_proxy.h"): "OCC_MAX_STEPS, the occupancy marches' own budget",
     (66.0, "gpis_fields.h"): "a colour-field kind",
     (6.0, "fs_markov.h"): "1 / 3!",
     (6.0, "gp_mean.h"): "the cubic B-spline weights' 1 / 6",

@@ -56,8 +56,8 @@ def test_device_clip_is_the_slab_interval_of_the_rotated_box(device, tmp_path):
     kern = program(device.ctx, src, [f"-I{PYOPENCL_CL_DIR}"])["occ_clip_k"]
     mf = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
     bufs = [cl.Buffer(device.ctx, mf, hostbuf=np.ascontiguousarray(a))
-            for a in (g, np.zeros(1, np.float32), planes.astype(np.float32),
-                      o.astype(np.float32), d.astype(np.float32))]
+            for a in (g, np.zeros(1, np.float32), np.zeros(1, np.uint32),
+                      planes.astype(np.float32), o.astype(np.float32), d.astype(np.float32))]
     out = np.empty((n, 4), np.float32)
     ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
     kern(device.queue, (n,), None, *bufs, np.int32(1), ob)

@@ -11,7 +11,8 @@ import pytest
 from gpiscl import render_result
 from gpiscl.host.layout import records as layouts
 from gpiscl.host.render.integrator import stage_program
-from gpiscl.host.render.occupancy_boxes import CELLS as OCCUPANCY_CELLS, with_occupancy_boxes
+from gpiscl.host.layout.constants import OCC_CELLS
+from gpiscl.host.render.occupancy_boxes import occupancy_cells
 from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, join_sources
 from gpiscl.host.gp import Box, Sphere, SquaredExponential, Torus, Transform, Union
 from gpiscl.host.gp import kernels as K
@@ -160,13 +161,14 @@ def device_clip(device, kern, mean, level, o, d, clip_start=1, step=0.0, boxes=N
     g["mean_first"], g["mean_count"], g["occupancy_level"] = 0, len(nodes), level
     g["occupancy_step"] = step
     mf = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+    cells = np.zeros(1, np.uint32)
     if boxes is not None:
         buffers = {name: cl.Buffer(device.ctx, mf, hostbuf=np.ascontiguousarray(a))
                    for name, a in (("gpis", g), ("mean_nodes", nodes))}
-        g = with_occupancy_boxes(boxes, buffers, g)
+        g, cells = occupancy_cells(boxes, buffers, g)
         assert g["occ_p0"][0, 3] == 1.0
     bufs = [cl.Buffer(device.ctx, mf, hostbuf=np.ascontiguousarray(a))
-            for a in (g, nodes, np.zeros((1, 4), np.float32), o.astype(np.float32),
+            for a in (g, nodes, cells, np.zeros((1, 4), np.float32), o.astype(np.float32),
                       d.astype(np.float32))]
     out = np.empty((len(o), 4), np.float32)
     ob = cl.Buffer(device.ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
@@ -229,9 +231,10 @@ def test03_clip_never_cuts_an_occupied_point(device, clip_prg, stages_prg, mname
 @pytest.mark.parametrize("mname", sorted(MEANS))
 def test03b_occupancy_box_holds_every_point_at_or_below_the_level(device, stages_prg, mname):
     """render/occupancy_boxes.py: every one of 2e5 random points of the proxy whose mean
-    (float64) is at or below the level lies in the object's occupancy box, and the box
-    is within 3 lattice cells of those points' own bounding box wherever the mean's
-    slope bound is that of a distance (it clips, and not only at the proxy)."""
+    (float64) is at or below the level lies in the object's occupancy box and in a set
+    cell of its mask, and the box is within 3 lattice cells of those points' own
+    bounding box wherever the mean's slope bound is that of a distance (it clips, and not
+    only at the proxy)."""
     mean = MEANS[mname]
     level = 0.15
     nodes = pack_mean(mean)
@@ -242,18 +245,25 @@ def test03b_occupancy_box_holds_every_point_at_or_below_the_level(device, stages
     mf = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
     buffers = {name: cl.Buffer(device.ctx, mf, hostbuf=np.ascontiguousarray(a))
                for name, a in (("gpis", g), ("mean_nodes", nodes))}
-    box = with_occupancy_boxes(stages_prg, buffers, g)[0]
+    records, mask = occupancy_cells(stages_prg, buffers, g)
+    box = records[0]
     lo, hi = box["occ_p0"][:3].astype(float), box["occ_p1"][:3].astype(float)
     x = np.random.default_rng(zlib.crc32(mname.encode())).uniform(
         PROXY["min"], PROXY["max"], (200_000, 3))
     inside = x[mean.value_and_gradient(x)[0] <= level]
     assert len(inside) > 100
     assert np.all(inside >= lo) and np.all(inside <= hi), (lo, hi, inside.min(0), inside.max(0))
-    cell = (np.array(PROXY["max"]) - PROXY["min"]) / OCCUPANCY_CELLS
+    # the cell mask: every such point's cell is set (and below, most cells are clear)
+    bits = np.unpackbits(mask.view(np.uint8), bitorder="little").astype(bool)
+    cell = np.floor((inside - PROXY["min"]) / ((np.array(PROXY["max"]) - PROXY["min"])
+                                                / OCC_CELLS)).astype(int)
+    assert np.all(bits[(cell[:, 0] * OCC_CELLS + cell[:, 1]) * OCC_CELLS + cell[:, 2]])
+    cell = (np.array(PROXY["max"]) - PROXY["min"]) / OCC_CELLS
     if mname != "grid_loose":
         assert np.all(np.isinf(lo) | (inside.min(0) - lo <= 3.0 * cell)), (lo, inside.min(0))
         assert np.all(np.isinf(hi) | (hi - inside.max(0) <= 3.0 * cell)), (hi, inside.max(0))
         assert np.isfinite(lo).any() or np.isfinite(hi).any()
+        assert bits.mean() < 0.6, bits.mean()
 
 
 def test04_sigma_field_sampled_sigma_is_below_sigma_max():

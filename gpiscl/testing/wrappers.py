@@ -71,7 +71,8 @@ __kernel void mean_eval(__global const MeanNode* nodes, int count, __global cons
 # gpis_proxy.h's proxy clip and occupancy clip of one ray per item
 OCCUPANCY_CLIP_WRAPPER = r"""
 __kernel void occ_clip_k(__global const GpisObject* g, __global const MeanNode* means,
-                         __global const float4* planes, __global const float* o,
+                         __global const uint* cells, __global const float4* planes,
+                         __global const float* o,
                          __global const float* d, int clip_start, __global float4* out)
 {
     int r = get_global_id(0);
@@ -79,7 +80,7 @@ __kernel void occ_clip_k(__global const GpisObject* g, __global const MeanNode* 
     float t0 = 0.0f, t1 = 1e30f;
     int in_proxy = gpis_proxy_clip(g, planes, O, D, &t0, &t1);
     float p0 = t0, p1 = t1;
-    int keep = in_proxy && gpis_occupancy_clip(g, means, O, D, &t0, &t1, clip_start);
+    int keep = in_proxy && gpis_occupancy_clip(g, means, cells, O, D, &t0, &t1, clip_start);
     out[r] = (float4)(p0, p1, keep ? t0 : NAN, keep ? t1 : NAN);
     if (!in_proxy) out[r] = (float4)(NAN);
 }

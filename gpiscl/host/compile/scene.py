@@ -52,6 +52,7 @@ class CompiledScene:
                  (stages.KERNELS, self.gpis.kernels), (stages.MEAN_NODES, self.gpis.mean_nodes),
                  (stages.ORDER_TABLE, self.gpis.order_table),
                  (stages.FIELD_NODES, self.gpis.field_nodes),
+                 # the last table, the occupancy cells, is the render's (occupancy_boxes.py)
                  *zip(stages.GPIS_TABLES, (self.gpis.proxy_planes, self.gpis.posterior_obs,
                                            self.gpis.posterior_doubles)),
                  *zip(stages.ENV_MAP, (self.env_texels, self.env_marginal,

@@ -55,6 +55,11 @@ KNOB_FUNCTIONS = {"knob": 0, "knob_inner": 1, "knob_outer": 2}
 for _name, _id in KNOB_FUNCTIONS.items():
     _const(f"KNOB_FUNCTION_{_name.upper()}", _id, f"bake_procedural's function {_name}")
 
+# --- occupancy cells (render/occupancy_boxes.py, gpis_proxy.h) ------------------------------
+
+OCC_CELLS = _const("OCC_CELLS", 32, "occupancy lattice cells per axis over a proxy's bounds")
+OCC_WORDS = _const("OCC_WORDS", OCC_CELLS ** 3 // 32, "uint words of one object's cell mask")
+
 # --- function-space step rule (fs_march.h) ------------------------------------------------
 
 FS_WINDOW = _const("FS_WINDOW", 16, "samples conditioned on besides the memory, by default")

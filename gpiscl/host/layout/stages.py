@@ -117,7 +117,9 @@ ORDER_TABLE = Param("order_table", "__global const float*")
 # proxies' face planes, posteriors' observations and their solve (compile/gpis.py)
 GPIS_TABLES = (Param("proxy_planes", "__global const float4*"),
                Param("posterior_obs", "__global const FsObs*"),
-               Param("posterior_doubles", "__global const double*"))
+               Param("posterior_doubles", "__global const double*"),
+               # per object OCC_WORDS bits: its occupancy cells (render/occupancy_boxes.py)
+               Param("occupancy_cells", "__global const uint*"))
 # Colour and emission fields, which GpisObject's color_field / emission_field index (0: none)
 FIELD_NODES = Param("field_nodes", "__global const MeanNode*")
 # The batch's kept weight-space posterior weights (render/kriging_cache.py, ws_objects.h)
@@ -176,11 +178,11 @@ SHADOW_RAYS = Stage("shadow_rays", (
     PRIMS, MATERIALS))
 ACCUMULATE = Stage("accumulate", (PARAMS, queue("path", PATH_STATE), COUNTERS, FILM))
 # Render preparation (render/occupancy_boxes.py): per object, the cells of a lattice over
-# its proxy where the mean may reach its occupancy level, as index ranges (int8: s012 the
-# lowest, s345 the highest)
+# its proxy where the mean may reach its occupancy level, as a bit mask (OCC_WORDS uints)
+# and index ranges (int8: s012 the lowest, s345 the highest)
 GPIS_OCCUPANCY_BOXES = Stage("gpis_occupancy_boxes", (
-    GPIS, MEAN_NODES, Param("num_gpis", "int"), Param("cells", "int"),
-    Param("boxes", "__global int8*")))
+    GPIS, MEAN_NODES, Param("num_gpis", "int"), Param("boxes", "__global int8*"),
+    Param("cells", "__global uint*")))
 
 # Scene preparation (render/device_bakes.py): grid sizes and the sample axes or samples
 _GRID = tuple(Param(n, "int") for n in ("nx", "ny", "nz"))

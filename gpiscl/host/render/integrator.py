@@ -16,7 +16,7 @@ import pyopencl as cl
 
 from . import function_space_stages
 from . import kriging_cache, memory
-from .occupancy_boxes import with_occupancy_boxes
+from .occupancy_boxes import occupancy_cells
 from ..layout import records as layouts
 from ..layout.constants import WS_MAX_LANES
 from ..layout import stages
@@ -153,10 +153,11 @@ class WavefrontIntegrator:
         arrays = scene.device_arrays()
         self.scene_buffers = {name: to_device(device, array) for name, array in arrays.items()}
         gpis = scene.gpis
-        # the occupancy marches' boxes, found with the uploaded mean programs (the
+        # the occupancy clip's boxes and cells, found with the uploaded mean programs (the
         # compiled scene's own records stay as they are)
-        self.scene_buffers[stages.GPIS.name] = to_device(
-            device, self.gpis_occupancy_boxes(arrays[stages.GPIS.name]))
+        records, cells = self.gpis_occupancy_boxes(arrays[stages.GPIS.name])
+        self.scene_buffers[stages.GPIS.name] = to_device(device, records)
+        self.scene_buffers[stages.GPIS_TABLES[-1].name] = to_device(device, cells)
         self.weight_space = gpis.uses("weight_space")
         if self.weight_space:   # a posterior's kept weights fit their budget
             self.batch = min(self.batch, kriging_cache.max_batch(gpis.objects, device))
@@ -244,8 +245,8 @@ class WavefrontIntegrator:
         launch(self.program, stage, n, **self._stage_arguments(stage), **queues)
 
     def gpis_occupancy_boxes(self, objects):
-        """A copy of the GPIS records with their occupancy boxes (occupancy_boxes.py)."""
-        return with_occupancy_boxes(self.program, self.scene_buffers, objects)
+        """(records, cell masks): occupancy_boxes.occupancy_cells of the GPIS records."""
+        return occupancy_cells(self.program, self.scene_buffers, objects)
 
     def generate_camera_rays(self, n):
         self._launch(stages.GENERATE_CAMERA_RAYS, n, path=self.paths, out=self.rays[0])

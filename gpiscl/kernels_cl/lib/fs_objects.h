@@ -26,7 +26,8 @@ inline FsResult fs_object_flight(__constant RenderParams* params,
     float t0 = o.w;
     if (g->sampler != GPIS_SAMPLER_FUNCTION_SPACE
         || !gpis_proxy_clip(g, T.planes, o.xyz, d.xyz, &t0, &t1)
-        || !gpis_occupancy_clip(g, means, o.xyz, d.xyz, &t0, &t1, !v.valid))
+        || !gpis_occupancy_clip(g, means, T.occ_cells + (size_t)k * OCC_WORDS, o.xyz, d.xyz,
+                                &t0, &t1, !v.valid))
         return none;
     FsParams pr = {g->window, g->memory, g->memory_cap, g->refine, (double)g->step_corr,
                    (double)g->miss_tolerance};

@@ -6,10 +6,11 @@ typedef struct {
     __global const float4* planes;      /* mesh proxies' face planes */
     __global const FsObs* obs;          /* posteriors' observations */
     __global const double* doubles;     /* posteriors' alpha, factor and noise */
+    __global const uint* occ_cells;     /* occupancy cell masks, OCC_WORDS an object */
 } GpisTables;
 
 /* The struct made of the tables' stage kernel parameters */
-#define GPIS_TABLES {proxy_planes, posterior_obs, posterior_doubles}
+#define GPIS_TABLES {proxy_planes, posterior_obs, posterior_doubles, occupancy_cells}
 
 /* Clip [t0, t1] to the part of the ray inside the proxy; false if empty. A mesh proxy's
  * face planes (n, w: inside where n.x <= w) are all_planes[g->proxy_first] on
@@ -57,9 +58,9 @@ inline int gpis_proxy_clip(__global const GpisObject* g, __global const float4* 
  * towards the other on g(t) = mu(x(t)) - level: mu is L-Lipschitz (gp_mean_lipschitz), so
  * g stays >= 0 over a step of g / (L |d|), and no point with occupancy >= eps is ever
  * skipped; rounding of the float mean is taken off each step (allowance as ws_tents).
- * First the object's occupancy box, where the render has set one (GpisObject occ_p0.w,
- * render/occupancy_boxes.py), clips both ends at once: outside it the mean exceeds the
- * level, which a march through a loose proxy's empty part proved step by step.
+ * First, where the render has set them (GpisObject occ_p0.w, render/occupancy_boxes.py),
+ * the object's occupancy box and cells clip both ends: outside the set cells the mean
+ * exceeds the level, which a march through a loose proxy's empty part proved step by step.
  * A march stops at a step below g->occupancy_step (world length, compile/gpis.py
  * occupancy_step: a fraction of the length scale, where clipping finer saves less
  * sampling than the march costs, and for function space no more than the far balls of
@@ -104,15 +105,71 @@ inline float gpis_occupancy_march(__global const MeanNode* mean, int count, floa
     return t;
 }
 
+/* The occupancy lattice of an object: OCC_CELLS^3 cells of size h from lo over its
+ * proxy's bounds (a mesh proxy's p0 / p1 are its bounding box). */
+inline void gpis_occ_lattice(__global const GpisObject* g, float3* lo, float3* h)
+{
+    float3 a = g->proxy_p0.xyz, b = g->proxy_p1.xyz;
+    if (g->proxy_kind == GPIS_PROXY_SPHERE) {
+        a = g->proxy_p0.xyz - g->proxy_p0.w;
+        b = g->proxy_p0.xyz + g->proxy_p0.w;
+    }
+    *lo = a;
+    *h = (b - a) / (float)OCC_CELLS;
+}
+
+/* s (>= 0) where x(s) = p + s dd crosses the next face of cell index c along one axis */
+inline float gpis_occ_face(float p, float dd, float lo, float h, int c)
+{
+    if (dd > 0.0f) return (lo + (float)(c + 1) * h - p) / dd;
+    if (dd < 0.0f) return (lo + (float)c * h - p) / dd;
+    return INFINITY;
+}
+
+/* Walk the lattice from *ta towards tb (dir = +1: tb > *ta; -1: tb < *ta) to the first
+ * cell set in the mask (gpis_occupancy_boxes.cl) and move *ta to where the walk enters
+ * it, less 0.2% of the shortest cell crossing (the faces' float sums drift by ~1e-5 of
+ * the walk, and the mask covers what lies that close to a set cell). 0: no set cell up
+ * to tb or the lattice's edge. A walk longer than it can be keeps *ta. */
+inline int gpis_occ_walk(__global const uint* mask, float3 lo, float3 h, float3 o, float3 d,
+                         float* ta, float tb, float dir)
+{
+    float3 dd = dir * d, p = o + *ta * d;
+    int3 i = clamp(convert_int3(floor((p - lo) / h)), 0, OCC_CELLS - 1);
+    int3 st = (int3)(dd.x > 0.0f ? 1 : -1, dd.y > 0.0f ? 1 : -1, dd.z > 0.0f ? 1 : -1);
+    float3 cross = h / fabs(dd);                /* s per cell along each axis */
+    float3 next = (float3)(gpis_occ_face(p.x, dd.x, lo.x, h.x, i.x),
+                           gpis_occ_face(p.y, dd.y, lo.y, h.y, i.y),
+                           gpis_occ_face(p.z, dd.z, lo.z, h.z, i.z));
+    float len = dir * (tb - *ta), s = 0.0f, pad = 2e-3f * fmin(cross.x, fmin(cross.y, cross.z));
+    for (int n = 0; n < 3 * OCC_CELLS + 3; ++n) {
+        int c = (i.x * OCC_CELLS + i.y) * OCC_CELLS + i.z;
+        if ((mask[c >> 5] >> (c & 31)) & 1u) {
+            *ta += dir * fmax(s - pad, 0.0f);
+            return 1;
+        }
+        s = fmin(next.x, fmin(next.y, next.z));
+        if (!(s < len)) return 0;
+        if (next.x == s) { i.x += st.x; next.x += cross.x; }
+        else if (next.y == s) { i.y += st.y; next.y += cross.y; }
+        else { i.z += st.z; next.z += cross.z; }
+        if (any(i < 0) || any(i >= OCC_CELLS)) return 0;
+    }
+    return 1;
+}
+
 /* Clip [t0, t1] (inside the proxy) to the stretch where the occupancy can reach eps;
- * false if none. */
+ * false if none. mask: the object's occupancy cells (GpisTables.occ_cells + its index
+ * times OCC_WORDS), read only where occ_p0.w is set. */
 inline int gpis_occupancy_clip(__global const GpisObject* g, __global const MeanNode* means,
-                               float3 o, float3 d, float* t0, float* t1, int clip_start)
+                               __global const uint* mask, float3 o, float3 d, float* t0,
+                               float* t1, int clip_start)
 {
     if (!(g->occupancy_level > 0.0f)) return 1;
     if (g->occ_p0.w > 0.0f) {
-        /* the occupancy box (render/occupancy_boxes.py): the mean exceeds the level
-         * outside it, so its slab clips as the marches would (t0 only where they may) */
+        /* the occupancy box and cells (render/occupancy_boxes.py): the mean exceeds the
+         * level outside the set cells, so the box's slab, then walks from either end to
+         * the first set cell, clip as the marches would (t0 only where they may) */
         float3 inv = 1.0f / d;
         float3 a = (g->occ_p0.xyz - o) * inv, b = (g->occ_p1.xyz - o) * inv;
         float3 lo = fmin(a, b), hi = fmax(a, b);
@@ -120,6 +177,11 @@ inline int gpis_occupancy_clip(__global const GpisObject* g, __global const Mean
         if (clip_start) *t0 = fmax(*t0, enter);
         *t1 = fmin(*t1, leave);
         if (!(*t0 < *t1) || !(enter < leave)) return 0;
+        float3 cl, ch;
+        gpis_occ_lattice(g, &cl, &ch);
+        if (clip_start && !gpis_occ_walk(mask, cl, ch, o, d, t0, *t1, 1.0f)) return 0;
+        if (!gpis_occ_walk(mask, cl, ch, o, d, t1, *t0, -1.0f)) return 0;
+        if (!(*t0 < *t1)) return 0;
     }
     __global const MeanNode* mean = means + g->mean_first;
     float dl = length(d), lt = gp_mean_lipschitz(mean, g->mean_count) * dl;

@@ -1,32 +1,31 @@
-/* Render preparation (host: render/occupancy_boxes.py): the occupancy box of every GPIS
- * object with an occupancy bound, as the index range of the lattice cells (cells^3 over
- * the proxy's bounding box) where the prior mean may reach occupancy_level: the lowest
- * indices in .s012, the highest in .s345. A cell is left out when its centre's mean,
- * less the march's rounding allowance (gpis_proxy.h) and the global slope bound times
- * the half diagonal, is above the level: then so is every point of the cell, and the
- * occupancy marches would skip all of it. One work item per (object, cell). */
+/* Render preparation (host: render/occupancy_boxes.py): the occupancy cells of every GPIS
+ * object with an occupancy bound, on a lattice of OCC_CELLS^3 cells over its proxy's
+ * bounds (gpis_occ_lattice): a bit per cell in `cells` (OCC_WORDS words an object), and
+ * the index range of the cells set in `boxes` (the lowest in .s012, the highest in
+ * .s345). A cell is left clear when its centre's mean, less the march's rounding
+ * allowance (gpis_proxy.h) and the global slope bound times 1.001 half diagonals, is
+ * above the level: then so is every point within that distance of the centre, which
+ * takes in the whole cell and whatever the traversal's float arithmetic may place in it
+ * (gpis_occupancy_cells). One work item per (object, cell). */
 
 __kernel void gpis_occupancy_boxes(GPIS_OCCUPANCY_BOXES_PARAMS)
 {
-    int n3 = cells * cells * cells, id = get_global_id(0);
+    int n3 = OCC_CELLS * OCC_CELLS * OCC_CELLS, id = get_global_id(0);
     if (id >= num_gpis * n3) return;
     int k = id / n3, c = id % n3;
     __global const GpisObject* g = gpis + k;
     if (!(g->occupancy_level > 0.0f)) return;
-    float3 lo = g->proxy_p0.xyz, hi = g->proxy_p1.xyz;
-    if (g->proxy_kind == GPIS_PROXY_SPHERE) {
-        lo = g->proxy_p0.xyz - g->proxy_p0.w;
-        hi = g->proxy_p0.xyz + g->proxy_p0.w;
-    }
-    int3 i = (int3)(c / (cells * cells), (c / cells) % cells, c % cells);
-    float3 h = (hi - lo) / (float)cells;
+    float3 lo, h;
+    gpis_occ_lattice(g, &lo, &h);
+    int3 i = (int3)(c / (OCC_CELLS * OCC_CELLS), (c / OCC_CELLS) % OCC_CELLS, c % OCC_CELLS);
     float3 x = lo + (convert_float3(i) + 0.5f) * h;
     __global const MeanNode* mean = mean_nodes + g->mean_first;
     float mu = gp_mean_value(mean, g->mean_count, x);
     float lip = gp_mean_lipschitz(mean, g->mean_count);
     float round = 8.0f * FLT_EPSILON * (fabs(mu) + lip * (fabs(x.x) + fabs(x.y) + fabs(x.z)));
-    /* NaN: kept (clip nothing there), as the march stops at a NaN */
-    if (mu - g->occupancy_level - round - lip * 0.5f * length(h) > 0.0f) return;
+    /* NaN: set (clip nothing there), as the march stops at a NaN */
+    if (mu - g->occupancy_level - round - lip * 0.5005f * length(h) > 0.0f) return;
+    atomic_or(cells + (size_t)k * OCC_WORDS + (c >> 5), 1u << (c & 31));   /* 32 bits a word */
     __global int* b = (__global int*)(boxes + k);
     atomic_min(b + 0, i.x);
     atomic_min(b + 1, i.y);
