@@ -52,3 +52,9 @@ def test_profile_counters_change_nothing_and_add_up(device, monkeypatch, name):
     # plus the starts whose mean was no row's
     assert c["fs_mean_evals"] >= prof.stats.fs_evals + c["fs_steps"]
     assert c["fs_mean_evals"] <= prof.stats.fs_evals + prof.stats.fs_samples + prof.stats.fs_flights
+    # the occupancy clip (gpis_proxy.h): every flight came through a proxy entry that the
+    # clip kept, most after a march, and every march evaluated the mean at least once;
+    # the occupancy cells leave some entries without a march (rays that miss every set cell)
+    assert c["fs_occ_entries"] >= prof.stats.fs_flights
+    assert c["fs_occ_entries"] > c["fs_occ_marches"] > 0
+    assert c["fs_occ_evals"] >= c["fs_occ_marches"]

@@ -1,7 +1,7 @@
 """Where the function-space march spends its work on grid-mean scenes (issue 33): per
 scene, stage times, bounces, shadow rays, flights, and fs_march.h's work counters (steps,
 rule tries and evaluations, mean-program evaluations, what set each step's first try,
-how often the monotone stretch lifted the mean cap),
+how often the monotone stretch lifted the mean cap, the occupancy clip's marches),
 then paths per CPU second of the exact default against the uniform 0.99 / 0.9 steps.
 
     python tools/profile_grid_scenes.py [SCENE ...] [--resolution 32] [--spp 4]
@@ -91,6 +91,9 @@ def report(name, st, c, stages, sec):
     print(f"  monotone stretch (fs_mean_step): {c['fs_mono_scans'] / fl:.2f} slope-range "
           f"scans a flight, cap lifted on {c['fs_mono_steps'] / steps:.1%} of the steps, "
           f"steps certified by the mean alone (no rule) {c['fs_cert_steps'] / steps:.1%}")
+    print(f"  occupancy clip (gpis_proxy.h): {c['fs_occ_entries'] / fl:.2f} proxy entries a "
+          f"flight, {c['fs_occ_marches'] / fl:.2f} that march, {c['fs_occ_evals'] / fl:.2f} "
+          f"march mean evaluations")
     print("  stage device seconds: " + ", ".join(
         f"{k} {v:.2f} ({v / total:.0%})" for k, v in sorted(stages.items(), key=lambda kv: -kv[1])
         if v / total >= 0.02))

@@ -219,7 +219,7 @@ COUNTERS = {"rays_out": 0, "hits": 1, "escaped": 2, "shadow": 3, "nan_paths": 4,
 FS_PROFILE_COUNTERS = ("fs_steps", "fs_tries", "fs_cap_mean", "fs_cap_hmax", "fs_cap_grow",
                        "fs_cap_end", "fs_hops", "fs_lip_scans", "fs_mean_evals",
                        "fs_near_steps", "fs_mono_scans", "fs_mono_steps", "fs_cert_steps",
-                       "fs_var_walks", "fs_occ_marched")
+                       "fs_var_walks", "fs_occ_entries", "fs_occ_marches", "fs_occ_evals")
 COUNTERS.update({name: len(COUNTERS) + k for k, name in enumerate(FS_PROFILE_COUNTERS)})
 NUM_COUNTERS = len(COUNTERS)
 # Counters the host adds up into Python ints after each bounce and zeroes on the device, so

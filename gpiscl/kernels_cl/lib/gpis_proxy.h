@@ -76,15 +76,28 @@ inline int gpis_proxy_clip(__global const GpisObject* g, __global const float4* 
  * weight space: a ray starting inside must first come out), but where the occupancy is
  * < eps, so the truncation changes the law by < eps there, unlike at the proxy. */
 #define OCC_MAX_STEPS 32
+/* The marches' mean evaluations, counted only in the function-space program's FS_PROFILE
+ * build (fs_objects.h; tools/profile_grid_scenes.py): no argument at all otherwise. */
+#ifdef FS_PROFILE
+#define OCC_PROF_PARAM , int* occ_evals
+#define OCC_PROF_FWD , occ_evals
+#define OCC_PROF_COUNT (++*occ_evals)
+#else
+#define OCC_PROF_PARAM
+#define OCC_PROF_FWD
+#define OCC_PROF_COUNT
+#endif
 
 inline float gpis_occupancy_march(__global const MeanNode* mean, int count, float3 o, float3 d,
-                                  float t, float t_stop, float level, float lt, float min_step)
+                                  float t, float t_stop, float level, float lt, float min_step
+                                  OCC_PROF_PARAM)
 {
     float dir = t_stop >= t ? 1.0f : -1.0f, dl = length(d), lip = lt / dl;
     int local_lip = gp_mean_march_scans(mean, count);
     for (int s = 0; s < OCC_MAX_STEPS; ++s) {
         float3 x = o + t * d;
         float mu = gp_mean_value(mean, count, x);
+        OCC_PROF_COUNT;
         float round = 8.0f * FLT_EPSILON * (fabs(mu) + lip * (fabs(x.x) + fabs(x.y) + fabs(x.z)));
         float g = mu - level - round;
         if (!(g > 0.0f)) break;              /* also NaN: stop, clip nothing more */
@@ -163,7 +176,7 @@ inline int gpis_occ_walk(__global const uint* mask, float3 lo, float3 h, float3 
  * times OCC_WORDS), read only where occ_p0.w is set. */
 inline int gpis_occupancy_clip(__global const GpisObject* g, __global const MeanNode* means,
                                __global const uint* mask, float3 o, float3 d, float* t0,
-                               float* t1, int clip_start)
+                               float* t1, int clip_start OCC_PROF_PARAM)
 {
     if (!(g->occupancy_level > 0.0f)) return 1;
     if (g->occ_p0.w > 0.0f) {
@@ -187,10 +200,12 @@ inline int gpis_occupancy_clip(__global const GpisObject* g, __global const Mean
     float dl = length(d), lt = gp_mean_lipschitz(mean, g->mean_count) * dl;
     float level = g->occupancy_level, min_step = g->occupancy_step / dl;
     if (clip_start) {
-        *t0 = gpis_occupancy_march(mean, g->mean_count, o, d, *t0, *t1, level, lt, min_step);
+        *t0 = gpis_occupancy_march(mean, g->mean_count, o, d, *t0, *t1, level, lt, min_step
+                                   OCC_PROF_FWD);
         if (!(*t0 < *t1)) return 0;
     }
-    *t1 = gpis_occupancy_march(mean, g->mean_count, o, d, *t1, *t0, level, lt, min_step);
+    *t1 = gpis_occupancy_march(mean, g->mean_count, o, d, *t1, *t0, level, lt, min_step
+                                   OCC_PROF_FWD);
     return *t0 < *t1;
 }
 
