@@ -12,7 +12,7 @@ from gpiscl import render_result
 from gpiscl.host.layout import records as layouts
 from gpiscl.host.render.integrator import stage_program
 from gpiscl.host.layout.constants import OCC_CELLS
-from gpiscl.host.render.occupancy_boxes import occupancy_cells
+from gpiscl.host.render.occupancy_boxes import occupancy_cells, proxy_bounds
 from gpiscl.host.render.program_sources import PYOPENCL_CL_DIR, join_sources
 from gpiscl.host.gp import Box, Sphere, SquaredExponential, Torus, Transform, Union
 from gpiscl.host.gp import kernels as K
@@ -264,6 +264,42 @@ def test03b_occupancy_box_holds_every_point_at_or_below_the_level(device, stages
         assert np.all(np.isinf(hi) | (hi - inside.max(0) <= 3.0 * cell)), (hi, inside.max(0))
         assert np.isfinite(lo).any() or np.isfinite(hi).any()
         assert bits.mean() < 0.6, bits.mean()
+
+
+LATTICE_WRAPPER = r"""
+__kernel void occ_lattice_k(__global const GpisObject* g, __global float* out)
+{
+    int k = get_global_id(0);
+    float3 lo, h;
+    gpis_occ_lattice(g + k, &lo, &h);
+    vstore3(lo, 2 * k, out);
+    vstore3(lo + (float)OCC_CELLS * h, 2 * k + 1, out);
+}
+"""
+
+
+def test03c_host_and_device_lay_the_same_lattice(device):
+    """occupancy_boxes.proxy_bounds (the host's corners of the boxes) and gpis_occ_lattice
+    (the device's cells) are two forms of one rule: box, mesh (its bounding box) and
+    sphere proxies give the same bounds, to float rounding far below the boxes' quarter
+    cell of padding."""
+    g = layouts.GPIS_OBJECT.zeros(3)
+    g["proxy_kind"] = [layouts.GPIS_PROXIES[k] for k in ("box", "mesh", "sphere")]
+    g["proxy_p0"][:2, :3], g["proxy_p1"][:2, :3] = PROXY["min"], PROXY["max"]
+    g["proxy_p0"][2] = (0.3, -0.2, 0.7, 1.3)
+    mf = cl.mem_flags
+    gb = cl.Buffer(device.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=g)
+    out = np.empty((3, 2, 3), np.float32)
+    ob = cl.Buffer(device.ctx, mf.WRITE_ONLY, out.nbytes)
+    src = join_sources((), ("gpis_proxy.h",)) + LATTICE_WRAPPER
+    program(device.ctx, src, [f"-I{PYOPENCL_CL_DIR}"])["occ_lattice_k"](
+        device.queue, (3,), None, gb, ob)
+    cl.enqueue_copy(device.queue, out, ob)
+    lo, hi = proxy_bounds(g)
+    cell = (hi - lo) / OCC_CELLS
+    np.testing.assert_allclose(out[:, 0], lo, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(out[:, 1], hi, rtol=0, atol=1e-5)
+    assert np.all(cell > 0.05)       # so 1e-5 is a 2e-4 part of a cell, the pad a 0.25
 
 
 def test04_sigma_field_sampled_sigma_is_below_sigma_max():

@@ -25,23 +25,20 @@ inline FsResult fs_object_flight(__constant RenderParams* params,
     __global const GpisObject* g = &gpis[k];
     float t0 = o.w;
 #ifdef FS_PROFILE
-    int occ_evals = 0, in_proxy = g->sampler == GPIS_SAMPLER_FUNCTION_SPACE
+    int occ_evals = 0;
+#endif
+    int in_proxy = g->sampler == GPIS_SAMPLER_FUNCTION_SPACE
         && gpis_proxy_clip(g, T.planes, o.xyz, d.xyz, &t0, &t1);
-    int occupied = in_proxy && gpis_occupancy_clip(g, means, T.occ_cells + (size_t)k * OCC_WORDS,
-                                                   o.xyz, d.xyz, &t0, &t1, !v.valid, &occ_evals);
+    int occupied = in_proxy && gpis_occupancy_clip(g, means, gpis_occ_mask(T, k), o.xyz, d.xyz,
+                                                   &t0, &t1, !v.valid OCC_PROF_ARG(&occ_evals));
+#ifdef FS_PROFILE
     /* the occupancy clip's work (gpis_proxy.h): proxy entries, those that march, and the
      * marches' mean evaluations */
     atomic_add(&counters[COUNT_FS_STEPS + FS_PROF_OCC_ENTRIES], in_proxy);
     atomic_add(&counters[COUNT_FS_STEPS + FS_PROF_OCC_MARCHES], occ_evals > 0);
     atomic_add(&counters[COUNT_FS_STEPS + FS_PROF_OCC_EVALS], occ_evals);
-    if (!occupied) return none;
-#else
-    if (g->sampler != GPIS_SAMPLER_FUNCTION_SPACE
-        || !gpis_proxy_clip(g, T.planes, o.xyz, d.xyz, &t0, &t1)
-        || !gpis_occupancy_clip(g, means, T.occ_cells + (size_t)k * OCC_WORDS, o.xyz, d.xyz,
-                                &t0, &t1, !v.valid))
-        return none;
 #endif
+    if (!occupied) return none;
     FsParams pr = {g->window, g->memory, g->memory_cap, g->refine, (double)g->step_corr,
                    (double)g->miss_tolerance};
     FsRay r = {convert_double3(o.xyz), convert_double3(d.xyz), (double)t0, (double)t1};

@@ -12,6 +12,17 @@ typedef struct {
 /* The struct made of the tables' stage kernel parameters */
 #define GPIS_TABLES {proxy_planes, posterior_obs, posterior_doubles, occupancy_cells}
 
+/* Where the ray o + t d enters and leaves the box [lo, hi] (slabs; either may be
+ * infinite): the box proxies and the occupancy boxes. */
+inline void gpis_slab(float3 lo, float3 hi, float3 o, float3 d, float* enter, float* leave)
+{
+    float3 inv = 1.0f / d;
+    float3 a = (lo - o) * inv, b = (hi - o) * inv;
+    float3 near = fmin(a, b), far = fmax(a, b);
+    *enter = max3(near);
+    *leave = fmin(far.x, fmin(far.y, far.z));
+}
+
 /* Clip [t0, t1] to the part of the ray inside the proxy; false if empty. A mesh proxy's
  * face planes (n, w: inside where n.x <= w) are all_planes[g->proxy_first] on
  * (scene/proxies.py). */
@@ -31,11 +42,7 @@ inline int gpis_proxy_clip(__global const GpisObject* g, __global const float4* 
             else if (gap < 0.0f) return 0;     /* parallel to a face, outside it */
         }
     } else if (g->proxy_kind == GPIS_PROXY_BOX) {
-        float3 inv = 1.0f / d;
-        float3 a = (g->proxy_p0.xyz - o) * inv, b = (g->proxy_p1.xyz - o) * inv;
-        float3 lo = fmin(a, b), hi = fmax(a, b);
-        enter = max3(lo);
-        leave = fmin(hi.x, fmin(hi.y, hi.z));
+        gpis_slab(g->proxy_p0.xyz, g->proxy_p1.xyz, o, d, &enter, &leave);
     } else {
         float3 oc = o - g->proxy_p0.xyz;
         float r = g->proxy_p0.w;
@@ -80,11 +87,11 @@ inline int gpis_proxy_clip(__global const GpisObject* g, __global const float4* 
  * build (fs_objects.h; tools/profile_grid_scenes.py): no argument at all otherwise. */
 #ifdef FS_PROFILE
 #define OCC_PROF_PARAM , int* occ_evals
-#define OCC_PROF_FWD , occ_evals
+#define OCC_PROF_ARG(p) , p
 #define OCC_PROF_COUNT (++*occ_evals)
 #else
 #define OCC_PROF_PARAM
-#define OCC_PROF_FWD
+#define OCC_PROF_ARG(p)
 #define OCC_PROF_COUNT
 #endif
 
@@ -171,9 +178,15 @@ inline int gpis_occ_walk(__global const uint* mask, float3 lo, float3 h, float3 
     return 1;
 }
 
+/* Object k's occupancy cells in the side table (OCC_WORDS words an object) */
+inline __global const uint* gpis_occ_mask(GpisTables T, int k)
+{
+    return T.occ_cells + (size_t)k * OCC_WORDS;
+}
+
 /* Clip [t0, t1] (inside the proxy) to the stretch where the occupancy can reach eps;
- * false if none. mask: the object's occupancy cells (GpisTables.occ_cells + its index
- * times OCC_WORDS), read only where occ_p0.w is set. */
+ * false if none. mask: the object's occupancy cells (gpis_occ_mask), read only where
+ * occ_p0.w is set. */
 inline int gpis_occupancy_clip(__global const GpisObject* g, __global const MeanNode* means,
                                __global const uint* mask, float3 o, float3 d, float* t0,
                                float* t1, int clip_start OCC_PROF_PARAM)
@@ -183,10 +196,8 @@ inline int gpis_occupancy_clip(__global const GpisObject* g, __global const Mean
         /* the occupancy box and cells (render/occupancy_boxes.py): the mean exceeds the
          * level outside the set cells, so the box's slab, then walks from either end to
          * the first set cell, clip as the marches would (t0 only where they may) */
-        float3 inv = 1.0f / d;
-        float3 a = (g->occ_p0.xyz - o) * inv, b = (g->occ_p1.xyz - o) * inv;
-        float3 lo = fmin(a, b), hi = fmax(a, b);
-        float enter = max3(lo), leave = fmin(hi.x, fmin(hi.y, hi.z));
+        float enter, leave;
+        gpis_slab(g->occ_p0.xyz, g->occ_p1.xyz, o, d, &enter, &leave);
         if (clip_start) *t0 = fmax(*t0, enter);
         *t1 = fmin(*t1, leave);
         if (!(*t0 < *t1) || !(enter < leave)) return 0;
@@ -201,11 +212,11 @@ inline int gpis_occupancy_clip(__global const GpisObject* g, __global const Mean
     float level = g->occupancy_level, min_step = g->occupancy_step / dl;
     if (clip_start) {
         *t0 = gpis_occupancy_march(mean, g->mean_count, o, d, *t0, *t1, level, lt, min_step
-                                   OCC_PROF_FWD);
+                                   OCC_PROF_ARG(occ_evals));
         if (!(*t0 < *t1)) return 0;
     }
     *t1 = gpis_occupancy_march(mean, g->mean_count, o, d, *t1, *t0, level, lt, min_step
-                                   OCC_PROF_FWD);
+                                   OCC_PROF_ARG(occ_evals));
     return *t0 < *t1;
 }
 

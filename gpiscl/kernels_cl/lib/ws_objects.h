@@ -41,8 +41,7 @@ inline float ws_object_first_root(__global const GpisObject* gpis, int k,
 {
     __global const GpisObject* g = &gpis[k];
     if (g->sampler != GPIS_SAMPLER_WEIGHT_SPACE || !gpis_proxy_clip(g, T.planes, o, d, &t0, &t1)
-        || !gpis_occupancy_clip(g, means, T.occ_cells + (size_t)k * OCC_WORDS, o, d, &t0,
-                                &t1, 1))
+        || !gpis_occupancy_clip(g, means, gpis_occ_mask(T, k), o, d, &t0, &t1, 1))
         return T_INFINITY;
     int status = 0, evaluations;
     WsPostBlock B = ws_posterior_block(g, T.obs, T.doubles);
