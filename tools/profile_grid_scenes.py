@@ -84,7 +84,8 @@ def report(name, st, c, stages, sec):
           f"{c['fs_mean_evals'] / fl:.2f} mean evaluations (+{c['fs_hops'] / fl:.2f} "
           f"sphere-tracing hops), {c['fs_lip_scans'] / fl:.2f} brick-bound scans, "
           f"{c['fs_var_walks'] / fl:.2f} variation walks")
-    print(f"  first try set by: mean cap {c['fs_cap_mean'] / steps:.1%}, FS_H_MAX "
+    print(f"  first try set by: mean cap {c['fs_cap_mean'] / steps:.1%} (the sigma field's "
+          f"{c['fs_cap_field'] / steps:.1%}), FS_H_MAX "
           f"{c['fs_cap_hmax'] / steps:.1%}, growth {c['fs_cap_grow'] / steps:.1%}, ray end "
           f"{c['fs_cap_end'] / steps:.1%}; near the zero set (|m| < (Z + kappa) sd) "
           f"{c['fs_near_steps'] / steps:.1%}")

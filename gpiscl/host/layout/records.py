@@ -216,8 +216,8 @@ COUNTERS = {"rays_out": 0, "hits": 1, "escaped": 2, "shadow": 3, "nan_paths": 4,
             "fs_flights": 8, "fs_samples": 9, "fs_evals": 10}
 # fs_march.h's profile (built with FS_PROFILE only, tools/profile_grid_scenes.py): whole
 # render, int32
-FS_PROFILE_COUNTERS = ("fs_steps", "fs_tries", "fs_cap_mean", "fs_cap_hmax", "fs_cap_grow",
-                       "fs_cap_end", "fs_hops", "fs_lip_scans", "fs_mean_evals",
+FS_PROFILE_COUNTERS = ("fs_steps", "fs_tries", "fs_cap_mean", "fs_cap_field", "fs_cap_hmax",
+                       "fs_cap_grow", "fs_cap_end", "fs_hops", "fs_lip_scans", "fs_mean_evals",
                        "fs_near_steps", "fs_mono_scans", "fs_mono_steps", "fs_cert_steps",
                        "fs_var_walks", "fs_occ_entries", "fs_occ_marches", "fs_occ_evals")
 COUNTERS.update({name: len(COUNTERS) + k for k, name in enumerate(FS_PROFILE_COUNTERS)})

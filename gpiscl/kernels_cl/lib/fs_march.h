@@ -421,9 +421,11 @@ inline double fs_mean_cap(GpKernel p, __global const MeanNode* mean, int mc, FsS
  * threshold toward 0 by at most half of |mu| / sigma, which is within FS_MEAN_KAPPA of
  * where it was (|mu| / sd <= 2 kappa) or leaves it past FS_MEAN_Z (the far zone); a fall
  * moves it away from 0, and the floor keeps the mean cap's FS_MEAN_KAPPA sd (taken at
- * x(ta)) within 2 kappa of the sd at the try's end. fs_field_slope bounds the field's
- * rates of fall and rise on the try (a grid's over at most FS_SD_BOX_SAMPLES samples, the
- * try halved until it fits). Without it a rise of sigma thinner than the step hid its
+ * x(ta)) within 2 kappa of the sd at the try's end. A grid's rise and fall are bounded
+ * along the cells the try crosses (fs_grid_field_reach); elsewhere, and for a try that
+ * leaves the grid's sample box, fs_field_slope bounds the field's rates of fall and rise
+ * on the try (a grid's over at most FS_SD_BOX_SAMPLES samples, the try halved until it
+ * fits). Without it a rise of sigma thinner than the step hid its
  * crossings from the rule's nodes (docs/design/grid-means.md, "Sigma fields"). Never
  * below FS_H_MIN l_d, the rule's own floor; INFINITY without a sigma field. */
 inline double fs_field_cap(GpKernel p, __global const MeanNode* mean, FsScratch S,
@@ -434,6 +436,13 @@ inline double fs_field_cap(GpKernel p, __global const MeanNode* mean, FsScratch 
     double3 a = ray.o + ta * ray.d;
     /* sigma's multiplier at x(ta): the prior sd over sigma, or evaluated (a posterior) */
     double ms = S.post.n ? fs_fields(p, mean, a).ms : sd / sqrt((double)p.sigma2);
+    if (p.sigma_field == GP_FIELD_GRID) {       /* along the ray's cells */
+        float f = fs_grid_field_reach(grid, convert_float3(a),
+                                      convert_float3(ray.o + (ta + he) * ray.d),
+                                      (float)fabs(ms), (float)(0.5 * fabs(ms)));
+        if (f >= 1.0f) return INFINITY;
+        if (f >= 0.0f) return fmax((double)f * he, FS_H_MIN * ell);
+    }
     double seg = 2.0 * he;
     double2 rate = (double2)(INFINITY);       /* (fall, rise) per unit t */
     for (int k = 0; k < 16 && isinf(rate.x); ++k) {
@@ -459,6 +468,7 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
                            &far FS_PROF_FWD);
     if (*certified || !p.sigma_field) return h;
     double fcap = fs_field_cap(p, mean, S, ray, ta, fmin(h, ray.t1 - ta), sd, ell);
+    FS_PROF_ADD(CAP_FIELD, fcap < fmin(h, ray.t1 - ta) && fcap > far);
     return fmax(far, fmin(h, fcap));
 }
 
