@@ -1,7 +1,7 @@
 """gp_mean.h's short ways for baked grids, checked against the long ones they replace.
 
-gp_mean_value takes a program of one trilinear grid leaf without the gradient and the
-interpreter: its value must be gp_mean_eval's, bit for bit (the images depend on it), inside
+gp_mean_value takes a program of one grid leaf (trilinear or cubic) without the gradient
+and the interpreter: its value must be gp_mean_eval's, bit for bit (the images depend on it), inside
 and outside the sample box, under a transform, and programs that do not qualify must fall
 back. gp_div_small (gp_grid_slope_on's brick indices) must be integer division."""
 import numpy as np
@@ -63,7 +63,7 @@ def device_values(device, prg, mean, x):
 def test_the_value_alone_is_the_programs_value(device, prg, name):
     """20000 points, a fifth of them outside the sample box (the outside continuation):
     gp_mean_value equals gp_mean_eval's value exactly, shortcut (one trilinear leaf,
-    transformed or not) or fallback (a cubic leaf, a union)."""
+    transformed or not, and a cubic one) or fallback (a union)."""
     g = grid()
     mean = {"grid": g, "affine": Transform(g, AFFINE), "cubic": grid("cubic"),
             "union": Union(g, Sphere(radius=0.3))}[name]

@@ -318,12 +318,46 @@ inline float gp_grid_trilinear_value(GP_MEAN_SPACE const MeanNode* n, float3 u, 
     return mix(x0, x1, t.x);
 }
 
-/* A program of one trilinear grid leaf (the baked means): gp_mean_eval's value without
- * the gradient and the interpreter, the same operations (gp_mean_leaf, gp_mean_grid) */
-inline float gp_mean_trilinear_leaf_value(GP_MEAN_SPACE const MeanNode* n, float3 x)
+/* gp_grid_cubic's value alone: the same weights and sums in the same order (the images
+ * depend on the bits), without the derivative weights and the gradient's sums */
+inline float gp_grid_cubic_value(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* out)
 {
-    float3 out;
-    float v = gp_grid_trilinear_value(n, gp_leaf_local(n, x), &out);
+    GP_MEAN_SPACE const MeanNode* payload = n + 1;
+    float3 hi = n->p1.xyz - 1.0f;
+    float3 c = fmin(fmax(u, (float3)(0.0f)), hi);
+    float3 cell = fmin(floor(c), hi - 1.0f), t = c - cell;
+    float wx[4], wy[4], wz[4], dw[4];
+    gp_bspline(t.x, wx, dw);
+    gp_bspline(t.y, wy, dw);
+    gp_bspline(t.z, wz, dw);
+    int sy = (int)n->p1.z + 2, sx = ((int)n->p1.y + 2) * sy;
+    int base = (int)cell.x * sx + (int)cell.y * sy + (int)cell.z;
+    float v = 0.0f;
+    for (int a = 0; a < 4; ++a) {
+        float va = 0.0f;
+        for (int b = 0; b < 4; ++b) {
+            float vb = 0.0f;
+            float4 q = gp_grid_sample4(payload, base + a * sx + b * sy);
+            vb += wz[0] * q.x;
+            vb += wz[1] * q.y;
+            vb += wz[2] * q.z;
+            vb += wz[3] * q.w;
+            va += wy[b] * vb;
+        }
+        v += wx[a] * va;
+    }
+    *out = u - c;
+    return v;
+}
+
+/* A program of one grid leaf (the baked means, trilinear or cubic): gp_mean_eval's value
+ * without the gradient and the interpreter, the same operations (gp_mean_leaf,
+ * gp_mean_grid) */
+inline float gp_mean_grid_leaf_value(GP_MEAN_SPACE const MeanNode* n, float3 x)
+{
+    float3 out, u = gp_leaf_local(n, x);
+    float v = n->p0.y > 0.5f ? gp_grid_cubic_value(n, u, &out)
+                             : gp_grid_trilinear_value(n, u, &out);
     float d = n->p0.x * length(out);
     if (d > 0.0f) v = v < 0.0f ? v + d : sqrt(v * v + d * d);
     return n->scale * v;
@@ -337,12 +371,19 @@ inline int gp_mean_is_trilinear_grid(GP_MEAN_SPACE const MeanNode* nodes, int co
         && count == 1 + nodes[0].flags && nodes[0].scale > 0.0f;
 }
 
+/* Whether a mean program is one grid leaf, trilinear or cubic (gp_mean_value's short way) */
+inline int gp_mean_is_grid_leaf(GP_MEAN_SPACE const MeanNode* nodes, int count)
+{
+    return count > 0 && nodes[0].kind == GP_MEAN_GRID && count == 1 + nodes[0].flags
+        && nodes[0].scale > 0.0f;
+}
+
 /* The mean's value alone: the occupancy marches, the far balls and every value row
  * evaluate it far more often than the gradient; a baked grid's takes the short way. */
 inline float gp_mean_value(GP_MEAN_SPACE const MeanNode* nodes, int count, float3 x)
 {
-    if (gp_mean_is_trilinear_grid(nodes, count))
-        return gp_mean_trilinear_leaf_value(nodes, x);
+    if (gp_mean_is_grid_leaf(nodes, count))
+        return gp_mean_grid_leaf_value(nodes, x);
     float3 g;
     return gp_mean_eval(nodes, count, x, &g);
 }
