@@ -421,12 +421,15 @@ inline double fs_mean_cap(GpKernel p, __global const MeanNode* mean, int mc, FsS
  * threshold toward 0 by at most half of |mu| / sigma, which is within FS_MEAN_KAPPA of
  * where it was (|mu| / sd <= 2 kappa) or leaves it past FS_MEAN_Z (the far zone); a fall
  * moves it away from 0, and the floor keeps the mean cap's FS_MEAN_KAPPA sd (taken at
- * x(ta)) within 2 kappa of the sd at the try's end. A grid's rise and fall are bounded
- * along the cells the try crosses (fs_grid_field_reach); elsewhere, and for a try that
- * leaves the grid's sample box, fs_field_slope bounds the field's rates of fall and rise
- * on the try (a grid's over at most FS_SD_BOX_SAMPLES samples, the try halved until it
- * fits). Without it a rise of sigma thinner than the step hid its
- * crossings from the rule's nodes (docs/design/grid-means.md, "Sigma fields"). Never
+ * x(ta)) within 2 kappa of the sd at the try's end. The budgets are spent at the field's
+ * largest rates of fall and rise on the try, never faster, so sigma moves no more than
+ * linearly at those rates: fs_field_slope's bounds (a grid's over at most
+ * FS_SD_BOX_SAMPLES samples of the try's index box, the try halved until it fits), or for
+ * a grid the largest rates over the cells the try crosses (fs_grid_field_reach). A cap
+ * that let a grid's whole rise fall in the try's last cell missed 5% of test13's hits
+ * (docs/design/grid-means.md, "Sigma fields along the ray"). Without any cap a rise of
+ * sigma thinner than the step hid its crossings from the rule's nodes
+ * (docs/design/grid-means.md, "Sigma fields"). Never
  * below FS_H_MIN l_d, the rule's own floor; INFINITY without a sigma field. */
 inline double fs_field_cap(GpKernel p, __global const MeanNode* mean, FsScratch S,
                            FsRay ray, double ta, double he, double sd, double ell)

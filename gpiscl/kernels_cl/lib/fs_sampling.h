@@ -422,14 +422,16 @@ inline double2 fs_field_slope(int kind, float4 p0, float4 p1, __global const Mea
                      fmax(top.x + top.y + top.z, 0.0));
 }
 
-/* How far along the segment [a, b] (a fraction in [0, 1]) a grid field is certified to
- * rise by less than `rise` and fall by less than `fall` from its value at a: cell by cell
- * (GpCellWalk), its slope along the segment lies in sum_i d_i [lo_i, hi_i] of the cell's
- * edge differences (d the segment in index units), and the rises and falls add up. The
- * bound fs_field_slope takes over the segment's index box, but along the cells the
- * segment crosses: never shorter, and longer wherever the box holds a steeper cell than the
- * ray meets (bunny_grid: 0.46 of the tries were set by the box's bound, none by this;
- * docs/design/grid-means.md, "Sigma fields along the ray"). -1 where the segment starts
+/* How far along the segment [a, b] (a fraction c in [0, 1]) a grid field's largest rates
+ * of rise and fall, over the cells the segment crosses up to c, keep it within `rise` and
+ * `fall` of its value at a: c times the largest rate is at most the budget (or c is the
+ * face of the cell that raised the rate past it). Per cell (GpCellWalk) the field's slope
+ * along the segment lies in sum_i d_i [lo_i, hi_i] of the cell's edge differences (d the
+ * segment in index units). fs_field_slope's bound over the segment's index box, but over
+ * the cells the segment crosses: never shorter, longer wherever the box holds a steeper
+ * cell than the ray meets before c. Rates, not the sum of the rises: fs_field_cap needs
+ * sigma to move no faster than linearly at its largest rate over the try
+ * (docs/design/grid-means.md, "Sigma fields along the ray"). -1 where the segment starts
  * or ends outside the sample box: the caller takes the box's bound. */
 inline float fs_grid_field_reach(__global const MeanNode* n, float3 a, float3 b, float rise,
                                  float fall)
@@ -437,18 +439,15 @@ inline float fs_grid_field_reach(__global const MeanNode* n, float3 a, float3 b,
     GpCellWalk w;
     if (!gp_cell_walk_begin(n, a, b, &w)) return -1.0f;
     float3 d = gp_leaf_local(n, b) - gp_leaf_local(n, a);
+    float up = 0.0f, down = 0.0f;       /* the largest rates so far, per unit fraction */
     do {
         float3 lo, hi;
         gp_cell_edge_ranges(w.s, &lo, &hi);
         float3 s0 = d * lo, s1 = d * hi;
-        float up = max(dot(max(s0, s1), (float3)(1.0f)), 0.0f);
-        float down = max(-dot(min(s0, s1), (float3)(1.0f)), 0.0f);
-        float len = w.tout - w.t;
-        if (up * len >= rise || down * len >= fall)
-            return w.t + gp_lesser(up > 0.0f ? rise / up : INFINITY,
-                                   down > 0.0f ? fall / down : INFINITY);
-        rise -= up * len;
-        fall -= down * len;
+        up = max(up, dot(max(s0, s1), (float3)(1.0f)));
+        down = max(down, -dot(min(s0, s1), (float3)(1.0f)));
+        float c = gp_lesser(up > 0.0f ? rise / up : INFINITY, down > 0.0f ? fall / down : INFINITY);
+        if (c < w.tout) return max(c, w.t);
     } while (gp_cell_walk_next(&w));
     return w.tend >= 1.0f ? 1.0f : -1.0f;
 }
