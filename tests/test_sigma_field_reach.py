@@ -98,7 +98,8 @@ def test_the_field_moves_no_faster_than_its_budgets_spread_over_the_reach(device
 def test_the_reach_is_never_shorter_than_the_box_bound(device, prg):
     """Against fs_field_slope's rates over the segment's index box (fs_field_cap's bound
     before): the walk reaches at least as far on every segment whose box it could scan,
-    and further on most where the box's bound stops short of the end."""
+    unless it stopped at a kink (a cell face, FS_FIELD_KINK), and more than 1.2x as far
+    on many where the box's bound stops short of the end."""
     gf, rng = field(), np.random.default_rng(12)
     a, b = segments(3000, rng)
     va = gf.eval(a.astype(np.float32).astype(float))[0]
@@ -109,9 +110,12 @@ def test_the_reach_is_never_shorter_than_the_box_bound(device, prg):
     with np.errstate(divide="ignore"):
         box = np.minimum(np.minimum(budget[:, 1] / fall, budget[:, 0] / rise), 1.0)
     assert scanned.sum() > 1000
-    assert np.all(f[scanned] >= box[scanned] * (1 - 1e-5) - 1e-6)
+    u = (a + f[:, None] * (b - a) - ORIGIN) / VOXEL      # where the walk stopped, in cells
+    at_face = np.any(np.abs(u - np.round(u)) < 1e-3, axis=1)
+    assert np.all((f >= box * (1 - 1e-5) - 1e-6) | at_face)
+    assert 0.02 < np.mean((f < box * (1 - 1e-5) - 1e-6)[scanned]) < 0.5    # kinks stop some
     short = scanned & (box < 1.0)
-    assert np.mean(f[short] > 1.2 * box[short]) > 0.5
+    assert np.mean(f[short] > 1.2 * box[short]) > 0.3      # 0.41 on this noisy field
 
 
 def test_a_segment_leaving_the_sample_box_is_left_to_the_box_bound(device, prg):
@@ -121,3 +125,22 @@ def test_a_segment_leaving_the_sample_box_is_left_to_the_box_bound(device, prg):
     b = np.array([[0.0, 0.0, 0.9], [0.0, 0.0, 0.0]])
     f = device_reach(device, prg, field(), a, b, np.full((2, 2), 1e6))[:, 0]
     assert np.all(f == -1.0)
+
+
+def test_a_try_ends_at_a_kink_of_the_field(device, prg):
+    """sigma rising at 4.95 a unit to x = 3 and flat after (0.05 voxels): a segment from
+    x = 2.96 to 3.5 with fs_field_cap's budgets (sigma at its start, 0.81) would reach
+    0.30 of the way at that rate, but the slope's jump at x = 3 (4.95 x 0.54 = 2.7, above
+    FS_FIELD_KINK x 0.81) ends it at that face, 0.074 of the way. Along the flat part
+    alone nothing stops it."""
+    vs = 0.05
+    x = np.arange(0.0, 6.0 + vs / 2, vs)
+    v = 0.01 + 0.99 * np.clip((x - 2.8) / 0.2, 0.0, 1.0)
+    gf = GridField(np.repeat(np.repeat(v[:, None, None], 3, 1), 3, 2).astype(np.float32),
+                   (0.0, -vs, -vs), vs)
+    a = np.array([[2.96, 0.01, 0.0], [3.1, 0.01, 0.0]])
+    b = np.array([[3.5, 0.01, 0.0], [3.9, 0.01, 0.0]])
+    va = gf.eval(a)[0]
+    f = device_reach(device, prg, gf, a, b, np.stack([va, 0.5 * va], 1))[:, 0]
+    assert abs(f[0] - 0.04 / 0.54) < 1e-4
+    assert f[1] == 1.0

@@ -98,6 +98,15 @@ FS_MEAN_KAPPA = _const("FS_MEAN_KAPPA", 6.0, "the mean cap's move near the zero 
 # slope's mean by 2 g). docs/design/grid-means.md, "The monotone stretch".
 FS_MONO_R = _const("FS_MONO_R", 8.0, "the monotone stretch's slope, prior slope sds", "double")
 
+# A trilinear sigma grid's slope jumps at cell faces, and f = mean + sigma e bends there by
+# the jump times e: a dip to 0 and back at a face between the rule's nodes went unseen
+# (one-cell sigma ramps lost 2% of their hits). A try ends at a face where the jump of
+# sigma's slope along the ray, times the try's length, is at least FS_FIELD_KINK times
+# sigma at its start (fs_grid_field_reach): the bend stays below ~0.4 sd for |e| <= 3.
+# 1 missed the ramp's kinks. docs/design/grid-means.md, "Sigma fields along the ray".
+FS_FIELD_KINK = _const("FS_FIELD_KINK", 0.5, "a sigma grid's slope jump that ends a try, "
+                       "start sigmas per try length", "double")
+
 # --- function-space root search (fs_root_point) ----------------------------------------
 
 FS_ROOT_WIDTH = _const("FS_ROOT_WIDTH", 1e-2, "final bracket, l_d", "double")

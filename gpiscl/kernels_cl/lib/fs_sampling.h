@@ -430,9 +430,11 @@ inline double2 fs_field_slope(int kind, float4 p0, float4 p1, __global const Mea
  * segment in index units). fs_field_slope's bound over the segment's index box, but over
  * the cells the segment crosses: never shorter, longer wherever the box holds a steeper
  * cell than the ray meets before c. Rates, not the sum of the rises: fs_field_cap needs
- * sigma to move no faster than linearly at its largest rate over the try
- * (docs/design/grid-means.md, "Sigma fields along the ray"). -1 where the segment starts
- * or ends outside the sample box: the caller takes the box's bound. */
+ * sigma to move no faster than linearly at its largest rate over the try. c is also the
+ * first face past a where the slope along the segment (the midpoint of a cell's range)
+ * jumps by FS_FIELD_KINK `rise` or more: a kink there would bend f between the rule's
+ * nodes (docs/design/grid-means.md, "Sigma fields along the ray"). -1 where the segment
+ * starts or ends outside the sample box: the caller takes the box's bound. */
 inline float fs_grid_field_reach(__global const MeanNode* n, float3 a, float3 b, float rise,
                                  float fall)
 {
@@ -440,12 +442,18 @@ inline float fs_grid_field_reach(__global const MeanNode* n, float3 a, float3 b,
     if (!gp_cell_walk_begin(n, a, b, &w)) return -1.0f;
     float3 d = gp_leaf_local(n, b) - gp_leaf_local(n, a);
     float up = 0.0f, down = 0.0f;       /* the largest rates so far, per unit fraction */
+    float mid = NAN;                    /* the last cell's slope (its range's midpoint) */
     do {
         float3 lo, hi;
         gp_cell_edge_ranges(w.s, &lo, &hi);
         float3 s0 = d * lo, s1 = d * hi;
-        up = max(up, dot(max(s0, s1), (float3)(1.0f)));
-        down = max(down, -dot(min(s0, s1), (float3)(1.0f)));
+        float a0 = dot(max(s0, s1), (float3)(1.0f)), a1 = dot(min(s0, s1), (float3)(1.0f));
+        float m = 0.5f * (a0 + a1);
+        /* a kink: the slope's jump at this face bends f by up to jump x e (FS_FIELD_KINK) */
+        if (w.t > 0.0f && fabs(m - mid) >= (float)FS_FIELD_KINK * rise) return w.t;
+        mid = m;
+        up = max(up, a0);
+        down = max(down, -a1);
         float c = gp_lesser(up > 0.0f ? rise / up : INFINITY, down > 0.0f ? fall / down : INFINITY);
         if (c < w.tout) return max(c, w.t);
     } while (gp_cell_walk_next(&w));
