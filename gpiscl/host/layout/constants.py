@@ -98,10 +98,18 @@ FS_MEAN_KAPPA = _const("FS_MEAN_KAPPA", 6.0, "the mean cap's move near the zero 
 # slope's mean by 2 g). docs/design/grid-means.md, "The monotone stretch".
 FS_MONO_R = _const("FS_MONO_R", 8.0, "the monotone stretch's slope, prior slope sds", "double")
 
-# A trilinear sigma grid's slope jumps at cell faces, and f = mean + sigma e bends there by
-# the jump times e: a dip to 0 and back at a face between the rule's nodes went unseen
-# (one-cell sigma ramps lost 2% of their hits). A try ends at a face where the jump of
-# sigma's slope along the ray, times the try's length, is at least FS_FIELD_KINK times
+# A trilinear grid mean's slope jumps at cell faces: a minimum of the mean near its zero
+# set sits at a face, sharper than the rule's nodes see (a 0.05-voxel parabola 2 sd above
+# 0 lost 18% of its hits). A try past the certified stretch ends at a face where the jump
+# times the try's length is at least FS_MEAN_KINK prior sds (gp_mean_kink_reach): the
+# bend is then at most ~0.4 sd; 3 missed it. docs/design/grid-means.md, "Kinks of a
+# trilinear mean".
+FS_MEAN_KINK = _const("FS_MEAN_KINK", 1.5, "a trilinear mean's slope jump that ends a try, "
+                      "prior sds per try length", "double")
+# A trilinear sigma grid's slope jumps at cell faces too, and f = mean + sigma e bends there
+# by the jump times e: a dip to 0 and back at a face between the rule's nodes went unseen
+# (sigma ramps of a few cells lost 2% of their hits). A try ends at a face where the jump
+# of sigma's slope along the ray, times the try's length, is at least FS_FIELD_KINK times
 # sigma at its start (fs_grid_field_reach): the bend stays below ~0.4 sd for |e| <= 3.
 # 1 missed the ramp's kinks. docs/design/grid-means.md, "Sigma fields along the ray".
 FS_FIELD_KINK = _const("FS_FIELD_KINK", 0.5, "a sigma grid's slope jump that ends a try, "

@@ -411,6 +411,7 @@ inline double fs_mean_cap(GpKernel p, __global const MeanNode* mean, int mc, FsS
         FS_PROF_ADD(MONO_STEPS, end > cap);
         *certified = end >= cap && end > 0.0;
         cap = fmax(cap, end);
+        *far_out = fmax(far, end);     /* certified too: fs_mean_step's kinks start past it */
     }
     return cap;
 }
@@ -469,7 +470,18 @@ inline double fs_mean_step(GpKernel p, __global const MeanNode* mean, int mc, Fs
     double far;
     double h = fs_mean_cap(p, mean, mc, S, ray, dn, ta, hg, m, sd, lip, grid, g, certified,
                            &far FS_PROF_FWD);
-    if (*certified || !p.sigma_field) return h;
+    if (*certified) return h;
+    /* a trilinear mean's kinks: a try past the certified stretch (far balls, monotone
+     * stretch: no dip fits there) ends at a face where the mean's slope jumps by
+     * FS_MEAN_KINK sd over the try (gp_mean_kink_reach) */
+    double e = fmin(h, ray.t1 - ta);
+    if (grid && e > far && gp_mean_is_trilinear_grid(mean, mc)) {
+        float k = gp_mean_kink_reach(mean, convert_float3(ray.o + (ta + far) * ray.d),
+                                     convert_float3(ray.o + (ta + e) * ray.d),
+                                     (float)(FS_MEAN_KINK * sd));
+        if (k < 1.0f) h = fmax(far + (double)k * (e - far), FS_H_MIN * ell);
+    }
+    if (!p.sigma_field) return h;
     double fcap = fs_field_cap(p, mean, S, ray, ta, fmin(h, ray.t1 - ta), sd, ell);
     FS_PROF_ADD(CAP_FIELD, fcap < fmin(h, ray.t1 - ta) && fcap > far);
     return fmax(far, fmin(h, fcap));

@@ -647,6 +647,31 @@ inline float gp_mean_monotone_reach(GP_MEAN_SPACE const MeanNode* n, float3 p, f
     return w.tend;
 }
 
+/* The first face (a fraction of the segment [p, q] in (0, 1]; 1: none) where the slope
+ * along the segment of a one-trilinear-grid-leaf mean program jumps by `jump` (world
+ * units per segment) or more: the midpoint of each cell's slope range (gp_cell_edge_ranges)
+ * against the last cell's. fs_mean_step ends a try there (FS_MEAN_KINK). Past the sample
+ * box nothing stops it. */
+inline float gp_mean_kink_reach(GP_MEAN_SPACE const MeanNode* n, float3 p, float3 q,
+                                float jump)
+{
+    GpCellWalk w;
+    if (!gp_cell_walk_begin(n, p, q, &w)) return 1.0f;
+    float3 r0 = n->row0.xyz, r1 = n->row1.xyz, r2 = n->row2.xyz;
+    float3 u = (float3)(dot(r0, q - p), dot(r1, q - p), dot(r2, q - p));
+    jump /= n->scale;
+    float mid = NAN;
+    do {
+        float3 lo, hi;
+        gp_cell_edge_ranges(w.s, &lo, &hi);
+        float3 s0 = u * lo, s1 = u * hi;
+        float m = 0.5f * (dot(max(s0, s1), (float3)(1.0f)) + dot(min(s0, s1), (float3)(1.0f)));
+        if (w.t > 0.0f && fabs(m - mid) >= jump) return w.t;
+        mid = m;
+    } while (gp_cell_walk_next(&w));
+    return 1.0f;
+}
+
 /* How far along the segment [p, q] (a fraction in [0, 1]) a one-trilinear-grid-leaf mean
  * program is certified to change by less than `budget` (world units): its total variation
  * there, bounded cell by cell (GpCellWalk) by the largest |edge difference| along each axis
