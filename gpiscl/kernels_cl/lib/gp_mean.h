@@ -184,19 +184,30 @@ inline void gp_bspline(float t, float* w, float* dw)
  * (n + 2)^3 coefficients, sample i at coefficient i + 1) at index coordinates u clamped
  * to the sample box, with its gradient in index units (0 along clamped axes) and
  * *out = u - clamped u, as gp_grid_trilinear; means.cubic_eval is the reference. */
+/* The cubic leaf's cell for index coordinates u: u clamped to the sample box (*c), the
+ * fraction t in the cell, the strides of its coefficients and the first one's index */
+inline int gp_cubic_cell(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* c, float3* t,
+                         int* sx, int* sy)
+{
+    float3 hi = n->p1.xyz - 1.0f;
+    *c = fmin(fmax(u, (float3)(0.0f)), hi);
+    float3 cell = fmin(floor(*c), hi - 1.0f);
+    *t = *c - cell;
+    *sy = (int)n->p1.z + 2;
+    *sx = ((int)n->p1.y + 2) * *sy;
+    return (int)cell.x * *sx + (int)cell.y * *sy + (int)cell.z;
+}
+
 inline float gp_grid_cubic(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* grad,
                            float3* out)
 {
     GP_MEAN_SPACE const MeanNode* payload = n + 1;
-    float3 hi = n->p1.xyz - 1.0f;
-    float3 c = fmin(fmax(u, (float3)(0.0f)), hi);
-    float3 cell = fmin(floor(c), hi - 1.0f), t = c - cell;
+    float3 c, t;
+    int sx, sy, base = gp_cubic_cell(n, u, &c, &t, &sx, &sy);
     float wx[4], wy[4], wz[4], dx[4], dy[4], dz[4];
     gp_bspline(t.x, wx, dx);
     gp_bspline(t.y, wy, dy);
     gp_bspline(t.z, wz, dz);
-    int sy = (int)n->p1.z + 2, sx = ((int)n->p1.y + 2) * sy;
-    int base = (int)cell.x * sx + (int)cell.y * sy + (int)cell.z;
     float v = 0.0f;
     float3 g = (float3)(0.0f);
     for (int a = 0; a < 4; ++a) {
@@ -323,15 +334,12 @@ inline float gp_grid_trilinear_value(GP_MEAN_SPACE const MeanNode* n, float3 u, 
 inline float gp_grid_cubic_value(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* out)
 {
     GP_MEAN_SPACE const MeanNode* payload = n + 1;
-    float3 hi = n->p1.xyz - 1.0f;
-    float3 c = fmin(fmax(u, (float3)(0.0f)), hi);
-    float3 cell = fmin(floor(c), hi - 1.0f), t = c - cell;
+    float3 c, t;
+    int sx, sy, base = gp_cubic_cell(n, u, &c, &t, &sx, &sy);
     float wx[4], wy[4], wz[4], dw[4];
     gp_bspline(t.x, wx, dw);
     gp_bspline(t.y, wy, dw);
     gp_bspline(t.z, wz, dw);
-    int sy = (int)n->p1.z + 2, sx = ((int)n->p1.y + 2) * sy;
-    int base = (int)cell.x * sx + (int)cell.y * sy + (int)cell.z;
     float v = 0.0f;
     for (int a = 0; a < 4; ++a) {
         float va = 0.0f;
