@@ -444,10 +444,8 @@ inline float fs_grid_field_reach(__global const MeanNode* n, float3 a, float3 b,
     float up = 0.0f, down = 0.0f;       /* the largest rates so far, per unit fraction */
     float mid = NAN;                    /* the last cell's slope (its range's midpoint) */
     do {
-        float3 lo, hi;
-        gp_cell_edge_ranges(w.s, &lo, &hi);
-        float3 s0 = d * lo, s1 = d * hi;
-        float a0 = dot(max(s0, s1), (float3)(1.0f)), a1 = dot(min(s0, s1), (float3)(1.0f));
+        float2 r = gp_cell_slope_range(w.s, d);
+        float a0 = r.y, a1 = r.x;
         float m = 0.5f * (a0 + a1);
         /* a kink: the slope's jump at this face bends f by up to jump x e (FS_FIELD_KINK) */
         if (w.t > 0.0f && fabs(m - mid) >= (float)FS_FIELD_KINK * rise) return w.t;

@@ -180,10 +180,6 @@ inline void gp_bspline(float t, float* w, float* dw)
     dw[3] = 0.5f * t2;
 }
 
-/* The interpolating tricubic B-spline (a cubic grid leaf: its payload holds the
- * (n + 2)^3 coefficients, sample i at coefficient i + 1) at index coordinates u clamped
- * to the sample box, with its gradient in index units (0 along clamped axes) and
- * *out = u - clamped u, as gp_grid_trilinear; means.cubic_eval is the reference. */
 /* The cubic leaf's cell for index coordinates u: u clamped to the sample box (*c), the
  * fraction t in the cell, the strides of its coefficients and the first one's index */
 inline int gp_cubic_cell(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* c, float3* t,
@@ -198,6 +194,10 @@ inline int gp_cubic_cell(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* c, f
     return (int)cell.x * *sx + (int)cell.y * *sy + (int)cell.z;
 }
 
+/* The interpolating tricubic B-spline (a cubic grid leaf: its payload holds the
+ * (n + 2)^3 coefficients, sample i at coefficient i + 1) at index coordinates u clamped
+ * to the sample box, with its gradient in index units (0 along clamped axes) and
+ * *out = u - clamped u, as gp_grid_trilinear; means.cubic_eval is the reference. */
 inline float gp_grid_cubic(GP_MEAN_SPACE const MeanNode* n, float3 u, float3* grad,
                            float3* out)
 {
@@ -371,19 +371,17 @@ inline float gp_mean_grid_leaf_value(GP_MEAN_SPACE const MeanNode* n, float3 x)
     return n->scale * v;
 }
 
-/* Whether a mean program is one trilinear grid leaf (the baked means: gp_mean_value's short way,
- * gp_mean_monotone_reach's case). */
-inline int gp_mean_is_trilinear_grid(GP_MEAN_SPACE const MeanNode* nodes, int count)
-{
-    return count > 0 && nodes[0].kind == GP_MEAN_GRID && nodes[0].p0.y < 0.5f
-        && count == 1 + nodes[0].flags && nodes[0].scale > 0.0f;
-}
-
 /* Whether a mean program is one grid leaf, trilinear or cubic (gp_mean_value's short way) */
 inline int gp_mean_is_grid_leaf(GP_MEAN_SPACE const MeanNode* nodes, int count)
 {
     return count > 0 && nodes[0].kind == GP_MEAN_GRID && count == 1 + nodes[0].flags
         && nodes[0].scale > 0.0f;
+}
+
+/* ... and trilinear (the cell walks' case: monotone stretch, variation, kinks) */
+inline int gp_mean_is_trilinear_grid(GP_MEAN_SPACE const MeanNode* nodes, int count)
+{
+    return gp_mean_is_grid_leaf(nodes, count) && nodes[0].p0.y < 0.5f;
 }
 
 /* The mean's value alone: the occupancy marches, the far balls and every value row
@@ -620,6 +618,17 @@ inline void gp_cell_edge_ranges(float8 s, float3* lo, float3* hi)
                    max(max(ez.x, ez.y), max(ez.z, ez.w)));
 }
 
+/* The range (min, max) of a trilinear cell's slope along d (index units per unit of a
+ * segment; samples s in gp_grid_corners' order): sum_i d_i [lo_i, hi_i] of its edge
+ * differences. The cell walks' certificates (monotone stretch, kinks, sigma's rates). */
+inline float2 gp_cell_slope_range(float8 s, float3 d)
+{
+    float3 lo, hi;
+    gp_cell_edge_ranges(s, &lo, &hi);
+    float3 s0 = d * lo, s1 = d * hi;
+    return (float2)(dot(min(s0, s1), (float3)(1.0f)), dot(max(s0, s1), (float3)(1.0f)));
+}
+
 /* How far along the segment [p, q] (a fraction in [0, 1]) a one-trilinear-grid-leaf mean
  * program is certified monotone with a slope along `dir` (per unit of dir) of one sign and
  * magnitude >= thr: cell by cell (GpCellWalk), the slope lies in sum_i dir_i [min, max]
@@ -642,10 +651,8 @@ inline float gp_mean_monotone_reach(GP_MEAN_SPACE const MeanNode* n, float3 p, f
     band *= inv;
     int sign = 0;
     do {
-        float3 lo, hi;
-        gp_cell_edge_ranges(w.s, &lo, &hi);
-        float3 s0 = u * lo, s1 = u * hi;
-        float smin = dot(min(s0, s1), (float3)(1.0f)), smax = dot(max(s0, s1), (float3)(1.0f));
+        float2 r = gp_cell_slope_range(w.s, u);
+        float smin = r.x, smax = r.y;
         if (sign == 0) sign = smin >= thr ? 1 : (smax <= -thr ? -1 : 0);
         if (!(sign > 0 ? smin >= thr : (sign < 0 && smax <= -thr))) return w.t;
         /* the bound of the mean at the cell's exit: the least change, in the slope's sign */
@@ -670,10 +677,8 @@ inline float gp_mean_kink_reach(GP_MEAN_SPACE const MeanNode* n, float3 p, float
     jump /= n->scale;
     float mid = NAN;
     do {
-        float3 lo, hi;
-        gp_cell_edge_ranges(w.s, &lo, &hi);
-        float3 s0 = u * lo, s1 = u * hi;
-        float m = 0.5f * (dot(max(s0, s1), (float3)(1.0f)) + dot(min(s0, s1), (float3)(1.0f)));
+        float2 r = gp_cell_slope_range(w.s, u);
+        float m = 0.5f * (r.y + r.x);
         if (w.t > 0.0f && fabs(m - mid) >= jump) return w.t;
         mid = m;
     } while (gp_cell_walk_next(&w));
